@@ -1,0 +1,260 @@
+"""FEniCSx (dolfinx 0.5, Debian bookworm) behind the common assembly interface.
+
+UFL forms are JIT-compiled by FFCx on first use (cached in ``~/.cache/fenics``)
+and assembled with ``dolfinx.fem.petsc`` into PETSc objects; meshes are
+distributed over MPI ranks by dolfinx, with named boundaries carried as facet
+tags.  Nothing physical lives here.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+import ufl
+
+from primordia.core.backend import Backend, BoundaryCondition, DofLayout
+from primordia.core.mesh import MeshData
+
+import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
+import dolfinx.fem.petsc as fem_petsc
+from dolfinx import cpp as _cpp
+from dolfinx import fem
+from petsc4py import PETSc
+
+
+class _QuietBuild(logging.Filter):
+    """Drop the compiler chatter setuptools logs at INFO while FFCx JIT-compiles."""
+
+    def filter(self, record):
+        return record.levelno >= logging.WARNING
+
+
+def _silence_jit_logging():
+    root = logging.getLogger()
+    for handler in root.handlers:
+        if not any(isinstance(f, _QuietBuild) for f in handler.filters):
+            handler.addFilter(_QuietBuild())
+
+
+class FenicsxBackend(Backend):
+    """dolfinx 0.5.2: MPI-parallel assembly of UFL forms into PETSc objects."""
+
+    name = "fenicsx"
+    parallel = True
+
+    def __init__(self, comm=None):
+        from mpi4py import MPI
+
+        super().__init__(comm if comm is not None else MPI.COMM_WORLD)
+        self._compiled: dict[int, tuple[ufl.Form, object]] = {}
+        self._vertex_maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._p1_spaces: dict[tuple, object] = {}
+        _silence_jit_logging()
+
+    # -- mesh, spaces, fields -----------------------------------------------------------
+    def create_mesh(self, data: MeshData):
+        gdim = data.gdim
+        cell = ufl.triangle if gdim == 2 else ufl.tetrahedron
+        domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
+        on_root = self.comm.rank == 0
+        cells = data.cells if on_root else np.empty((0, gdim + 1), dtype=np.int64)
+        points = data.points if on_root else np.empty((0, gdim))
+        mesh = dolfinx.mesh.create_mesh(self.comm, cells, points, domain)
+        mesh.mesh_data = data
+        mesh.facet_tags = self._facet_tags(mesh, data)
+        return mesh
+
+    def _facet_tags(self, mesh, data: MeshData):
+        tdim = mesh.topology.dim
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        if self.comm.rank == 0 and data.boundaries:
+            facets = np.vstack(list(data.boundaries.values()))
+            values = np.concatenate(
+                [np.full(len(f), data.boundary_ids[name], dtype=np.int32) for name, f in data.boundaries.items()]
+            )
+        else:
+            facets = np.empty((0, tdim), dtype=np.int64)
+            values = np.empty((0,), dtype=np.int32)
+        local_facets, local_values = _cpp.io.distribute_entity_data(mesh._mesh, tdim - 1, facets, values)
+        adjacency = _cpp.graph.AdjacencyList_int32(local_facets)
+        return dolfinx.mesh.meshtags_from_entities(mesh, tdim - 1, adjacency, local_values.astype(np.int32))
+
+    def function_space(self, mesh, element):
+        return fem.FunctionSpace(mesh, element)
+
+    def function(self, space, name: str):
+        return fem.Function(space, name=name)
+
+    def constant(self, mesh, value):
+        return fem.Constant(mesh, PETSc.ScalarType(value) if np.isscalar(value) else np.asarray(value, float))
+
+    def measure(self, integral_type: str, mesh, metadata=None):
+        subdomain_data = mesh.facet_tags if integral_type == "ds" else None
+        return ufl.Measure(integral_type, domain=mesh, subdomain_data=subdomain_data, metadata=metadata or {})
+
+    # -- assembly -----------------------------------------------------------------------
+    def _form(self, form: ufl.Form):
+        key = id(form)
+        hit = self._compiled.get(key)
+        if hit is None or hit[0] is not form:
+            hit = (form, fem.form(form))
+            self._compiled[key] = hit
+        return hit[1]
+
+    def assemble_matrix(self, form, bcs: Sequence[BoundaryCondition] = (), A=None, diagonal: float = 1.0):
+        compiled = self._form(form)
+        handles = [bc.handle for bc in bcs]
+        if A is None:
+            A = fem_petsc.assemble_matrix(compiled, bcs=handles, diagonal=diagonal)
+        else:
+            A.zeroEntries()
+            fem_petsc.assemble_matrix(A, compiled, bcs=handles, diagonal=diagonal)
+        A.assemble()
+        return A
+
+    def assemble_vector(self, form, b=None):
+        compiled = self._form(form)
+        if b is None:
+            b = fem_petsc.assemble_vector(compiled)
+        else:
+            with b.localForm() as local:
+                local.set(0.0)
+            fem_petsc.assemble_vector(b, compiled)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return b
+
+    def assemble_scalar(self, form) -> float:
+        return self.comm.allreduce(fem.assemble_scalar(self._form(form)))
+
+    def assemble_residual(self, residual, jacobian, bcs, state, b=None):
+        compiled = self._form(residual)
+        if b is None:
+            b = fem_petsc.create_vector(compiled)
+        with b.localForm() as local:
+            local.set(0.0)
+        fem_petsc.assemble_vector(b, compiled)
+        handles = [bc.handle for bc in bcs]
+        if handles:
+            fem_petsc.apply_lifting(b, [self._form(jacobian)], bcs=[handles], x0=[state.vector], scale=-1.0)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if handles:
+            fem_petsc.set_bc(b, handles, state.vector, -1.0)
+        return b
+
+    def dirichlet_bc(self, space, boundary: str, value, component=None):
+        mesh = space.mesh
+        tdim = mesh.topology.dim
+        facets = mesh.facet_tags.indices[mesh.facet_tags.values == mesh.mesh_data.boundary_id(boundary)]
+        target = space if component is None else space.sub(component)
+        collapsed = target.collapse()[0] if component is not None else space
+        prescribed = fem.Function(collapsed)
+        self._set_value(prescribed, value)
+        if component is None:
+            dofs = fem.locate_dofs_topological(space, tdim - 1, facets)
+            handle = fem.dirichletbc(prescribed, dofs)
+        else:
+            dofs = fem.locate_dofs_topological((target, collapsed), tdim - 1, facets)
+            handle = fem.dirichletbc(prescribed, dofs, target)
+        bc = BoundaryCondition(handle=handle, space=space, boundary=boundary)
+        object.__setattr__(bc, "_prescribed", prescribed)
+        return bc
+
+    def update_dirichlet_bc(self, bc: BoundaryCondition, value) -> None:
+        self._set_value(bc._prescribed, value)
+
+    def _set_value(self, function, value):
+        if callable(value):
+            self.interpolate(function, value)
+        else:
+            value = np.atleast_1d(np.asarray(value, dtype=float))
+            bs = function.function_space.dofmap.index_map_bs
+            function.x.array.reshape(-1, bs)[:] = value if value.size == bs else value[0]
+
+    # -- DOF values ---------------------------------------------------------------------
+    def petsc_vector(self, function):
+        return function.vector
+
+    def local_array(self, function) -> np.ndarray:
+        return function.x.array
+
+    def update_ghosts(self, function) -> None:
+        function.x.scatter_forward()
+
+    def dof_layout(self, space) -> DofLayout:
+        index_map = space.dofmap.index_map
+        bs = space.dofmap.index_map_bs
+        start, stop = index_map.local_range
+        ghosts = index_map.ghosts
+        if bs > 1:
+            ghosts = (ghosts[:, None] * bs + np.arange(bs)).ravel()
+        return DofLayout(owned_range=(start * bs, stop * bs), ghosts=np.asarray(ghosts, dtype=np.int64))
+
+    def interpolate(self, function, values) -> None:
+        if callable(values):
+            gdim = function.function_space.mesh.geometry.dim
+            function.interpolate(lambda x: values(x[:gdim]))
+        else:
+            self._set_value(function, values)
+        function.x.scatter_forward()
+
+    def _vertex_map(self, space):
+        """(local P1 DOF -> original MeshData vertex index) for a P1 space."""
+        key = id(space)
+        if key not in self._vertex_maps:
+            mesh = space.mesh
+            nodes_per_cell = mesh.geometry.dofmap.links(0).size
+            cell_dofs = space.dofmap.list.array.reshape(-1, nodes_per_cell)
+            cell_nodes = mesh.geometry.dofmap.array.reshape(-1, nodes_per_cell)
+            dof_to_node = np.empty(space.dofmap.index_map.size_local + space.dofmap.index_map.num_ghosts,
+                                   dtype=np.int64)
+            dof_to_node[cell_dofs.ravel()] = cell_nodes.ravel()
+            original = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)[dof_to_node]
+            self._vertex_maps[key] = (space, original)
+        return self._vertex_maps[key][1]
+
+    def _p1_space(self, space):
+        """The P1 space of the same value shape (for vertex output of P2/mixed fields)."""
+        element = space.ufl_element()
+        if element.family() in ("Lagrange", "Q", "P") and element.degree() == 1:
+            return space
+        shape = element.value_shape()
+        key = (id(space.mesh), shape)
+        if key not in self._p1_spaces:
+            cell = space.mesh.ufl_cell()
+            p1 = (ufl.FiniteElement("Lagrange", cell, 1) if shape == ()
+                  else ufl.VectorElement("Lagrange", cell, 1, dim=shape[0]))
+            self._p1_spaces[key] = fem.FunctionSpace(space.mesh, p1)
+        return self._p1_spaces[key]
+
+    def set_vertex_values(self, function, values: np.ndarray) -> None:
+        original = self._vertex_map(function.function_space)
+        bs = function.function_space.dofmap.index_map_bs
+        function.x.array.reshape(-1, bs)[:] = np.asarray(values).reshape(len(values), bs)[original]
+
+    def vertex_values(self, function):
+        space = self._p1_space(function.function_space)
+        if space is not function.function_space:
+            p1 = fem.Function(space)
+            p1.interpolate(function)
+            function = p1
+        bs = space.dofmap.index_map_bs
+        owned = space.dofmap.index_map.size_local
+        original = self._vertex_map(space)[:owned]
+        values = function.x.array.reshape(-1, bs)[:owned]
+        gathered = self.comm.gather((original, values.copy()), root=0)
+        if self.comm.rank != 0:
+            return None
+        n_vertices = space.mesh.mesh_data.num_vertices
+        result = np.empty((n_vertices, bs))
+        for indices, vals in gathered:
+            result[indices] = vals
+        return result[:, 0] if bs == 1 else result
+
+    # -- sizes --------------------------------------------------------------------------
+    def num_cells(self, mesh) -> int:
+        return mesh.topology.index_map(mesh.topology.dim).size_global
+
+    def num_dofs(self, space) -> int:
+        return space.dofmap.index_map.size_global * space.dofmap.index_map_bs

@@ -1,0 +1,193 @@
+"""The common assembly interface every finite element backend implements.
+
+Physics modules state their weak forms once, in UFL, on objects a backend hands
+out: function spaces are ``ufl.FunctionSpace`` instances, fields are
+``ufl.Coefficient`` instances, constants are ``ufl.Constant`` instances and
+measures are ``ufl.Measure`` objects carrying the backend's boundary tags.  A
+backend's only job is then to turn UFL forms into assembled PETSc objects on
+its own mesh and spaces, and to move DOF values in and out:
+
+    UFL form --(backend.assemble_matrix / assemble_vector)--> PETSc Mat / Vec
+                                                                   |
+                                        one petsc4py solver layer (coupling/solvers.py)
+
+Newton tangents come from ``ufl.derivative`` of the residual, never from a
+hand-written second copy, so a backend needs no knowledge of any physics.
+
+Conventions shared by all backends
+----------------------------------
+* DOF vectors are PETSc ``Vec`` objects of the owned DOFs (``petsc_vector``);
+  ``local_array`` is a writeable numpy view of owned + ghost values.
+* Dirichlet conditions follow dolfinx's convention: ``assemble_matrix`` zeroes
+  constrained rows and columns and puts ``diagonal`` on them;
+  ``assemble_residual`` applies lifting so that the Newton update
+  ``x <- x - J^{-1} F`` lands exactly on the prescribed values.
+* ``vertex_values`` returns, on rank 0, values at the vertices of the
+  :class:`~primordia.core.mesh.MeshData` the mesh was built from, in its vertex
+  order (``None`` on other ranks), so outputs do not depend on the backend.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import ufl
+
+from primordia.core.mesh import MeshData
+
+#: A callable giving values at points: ``values = fn(x)`` with ``x`` of shape
+#: (gdim, n_points) and values of shape (n_points,) or (value_size, n_points).
+PointFunction = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class DofLayout:
+    """Parallel layout of a space's DOF vector (block size 1 per scalar DOF).
+
+    ``owned_range`` is the global index range [start, stop) this rank owns;
+    ``ghosts`` holds the global indices of ghost DOFs, in the order they
+    follow the owned ones in ``local_array``.
+    """
+
+    owned_range: tuple[int, int]
+    ghosts: np.ndarray
+
+    @property
+    def num_owned(self) -> int:
+        return self.owned_range[1] - self.owned_range[0]
+
+    def global_to_local(self, indices: np.ndarray) -> np.ndarray:
+        """Local (owned + ghost) positions of global DOF indices known to this rank."""
+        indices = np.asarray(indices)
+        start, stop = self.owned_range
+        local = indices - start
+        off = (indices < start) | (indices >= stop)
+        if off.any():
+            order = np.argsort(self.ghosts)
+            pos = np.searchsorted(self.ghosts, indices[off], sorter=order)
+            local[off] = self.num_owned + order[pos]
+        return local
+
+
+@dataclass(frozen=True)
+class BoundaryCondition:
+    """A backend's Dirichlet condition (opaque ``handle``) and the DOFs it fixes."""
+
+    handle: Any
+    space: Any
+    boundary: str
+
+
+class Backend(ABC):
+    """One finite element library behind the common assembly interface."""
+
+    #: Name used in configs and on the command line (``--backend NAME``).
+    name: ClassVar[str]
+    #: Whether the backend runs with more than one MPI rank.
+    parallel: ClassVar[bool] = False
+
+    def __init__(self, comm):
+        self.comm = comm
+
+    # -- mesh, spaces, fields -----------------------------------------------------------
+    @abstractmethod
+    def create_mesh(self, data: MeshData) -> Any:
+        """The backend's mesh for ``data``; ``mesh.ufl_domain()`` is its UFL domain."""
+
+    @abstractmethod
+    def function_space(self, mesh, element: ufl.FiniteElementBase) -> ufl.FunctionSpace:
+        """A function space (a ``ufl.FunctionSpace``) of ``element`` on ``mesh``.
+
+        Supported at least: Lagrange P1/P2 scalars, vector elements and mixed
+        elements of those (e.g. Taylor-Hood), on triangles and tetrahedra.
+        """
+
+    @abstractmethod
+    def function(self, space, name: str) -> ufl.Coefficient:
+        """A zero-initialised field in ``space`` (a ``ufl.Coefficient``)."""
+
+    @abstractmethod
+    def constant(self, mesh, value) -> ufl.Constant:
+        """A ``ufl.Constant`` whose ``.value`` can be changed between assemblies."""
+
+    @abstractmethod
+    def measure(self, integral_type: str, mesh, metadata: dict | None = None) -> ufl.Measure:
+        """``dx`` or ``ds`` on ``mesh``; ``ds(mesh_data.boundary_id(name))`` selects a boundary."""
+
+    # -- assembly -----------------------------------------------------------------------
+    @abstractmethod
+    def assemble_matrix(self, form: ufl.Form, bcs: Sequence[BoundaryCondition] = (), A=None,
+                        diagonal: float = 1.0):
+        """Assemble a bilinear form into a PETSc Mat (into ``A`` when given, same pattern)."""
+
+    @abstractmethod
+    def assemble_vector(self, form: ufl.Form, b=None):
+        """Assemble a linear form into a PETSc Vec of owned DOFs (into ``b`` when given)."""
+
+    @abstractmethod
+    def assemble_scalar(self, form: ufl.Form) -> float:
+        """Assemble a functional, summed over all ranks."""
+
+    @abstractmethod
+    def assemble_residual(self, residual: ufl.Form, jacobian: ufl.Form, bcs: Sequence[BoundaryCondition],
+                          state, b=None):
+        """The Newton right-hand side F(state) with lifting (see module docstring)."""
+
+    @abstractmethod
+    def dirichlet_bc(self, space, boundary: str, value: PointFunction | float | Sequence[float],
+                     component: int | None = None) -> BoundaryCondition:
+        """Fix ``space`` (or one component of it) on the named boundary."""
+
+    @abstractmethod
+    def update_dirichlet_bc(self, bc: BoundaryCondition, value) -> None:
+        """Change the prescribed value of ``bc`` (time-dependent conditions)."""
+
+    # -- DOF values ---------------------------------------------------------------------
+    @abstractmethod
+    def petsc_vector(self, function):
+        """The PETSc Vec holding ``function``'s owned DOFs (shared memory)."""
+
+    @abstractmethod
+    def local_array(self, function) -> np.ndarray:
+        """Writeable numpy view of owned + ghost DOF values of ``function``."""
+
+    @abstractmethod
+    def update_ghosts(self, function) -> None:
+        """Refresh ghost values after the owned values changed."""
+
+    @abstractmethod
+    def dof_layout(self, space) -> DofLayout:
+        """Parallel layout of ``space``'s DOFs."""
+
+    @abstractmethod
+    def interpolate(self, function, values: PointFunction | float) -> None:
+        """Set ``function`` to the interpolant of ``values`` (Lagrange nodes)."""
+
+    @abstractmethod
+    def set_vertex_values(self, function, values: np.ndarray) -> None:
+        """Set a P1 ``function`` from values given at every MeshData vertex (global order)."""
+
+    @abstractmethod
+    def vertex_values(self, function) -> np.ndarray | None:
+        """Values at all MeshData vertices, gathered on rank 0 (``None`` elsewhere)."""
+
+    # -- sizes --------------------------------------------------------------------------
+    @abstractmethod
+    def num_cells(self, mesh) -> int:
+        """Global number of cells."""
+
+    @abstractmethod
+    def num_dofs(self, space) -> int:
+        """Global number of DOFs of ``space`` (all components)."""
+
+    # -- helpers every backend gets for free ----------------------------------------------
+    def lumped_dx(self, mesh) -> ufl.Measure:
+        """``dx`` with vertex quadrature: the lumped mass matrix for P1 fields."""
+        return self.measure("dx", mesh, metadata={"quadrature_rule": "vertex", "quadrature_degree": 1})
+
+    def is_root(self) -> bool:
+        return self.comm.rank == 0

@@ -1,0 +1,117 @@
+"""Run configurations: TOML files, ``--set`` overrides, and their validation.
+
+A configuration is a nested mapping with these tables (all optional but
+``[mesh]`` and ``[time]``)::
+
+    [model]        physics = ["chemotaxis"], backend = "fenicsx", name, description
+    [kinetics]     name = "painter2018", plus the kinetics' own options
+    [physics.NAME] options of one physics module
+    [parameters]   model constants by their seed names (Table 3.1)
+    [mesh]         type = "rectangle" | "box" | "file", ...
+    [time]         dt, t_final, t_start
+    [output]       times, snapshot_fields, series_every
+    [coupling]     scheme = "sequential"
+    [solver.PREFIX] PETSc options of one subproblem (e.g. [solver.chemotaxis_m])
+
+Every unknown table or key is reported by its dotted name; values are checked
+where they are used (parameters by their declarations, mesh by the mesh
+builder, options by their module).
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from primordia.core.errors import ConfigError
+
+SECTIONS = {
+    "model": {"physics", "backend", "name", "description"},
+    "kinetics": None,  # open: the kinetics validates its own options
+    "physics": None,  # open: one sub-table per physics module
+    "parameters": None,  # open: validated against the declared parameters
+    "mesh": None,  # open: validated by primordia.core.meshes.mesh_from_config
+    "time": {"dt", "t_final", "t_start"},
+    "output": {"times", "snapshot_fields", "series_every", "pictures"},
+    "coupling": {"scheme"},
+    "solver": None,  # open: PETSc options by prefix
+}
+
+
+def load_config(path: str | Path) -> dict:
+    """Read a TOML configuration; a missing or malformed file is one clear error."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    try:
+        with path.open("rb") as stream:
+            config = tomllib.load(stream)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+    config.setdefault("_base_dir", str(path.resolve().parent))
+    return config
+
+
+def parse_assignment(text: str) -> tuple[list[str], Any]:
+    """``"section.key=value"`` -> (["section", "key"], value), value parsed as TOML."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"--set expects section.key=value, got {text!r}")
+    keys = [part.strip() for part in key.strip().split(".")]
+    if len(keys) < 2 or not all(keys):
+        raise ConfigError(f"--set key must name a section and a key (e.g. parameters.D_m), got {key!r}")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()  # a bare word: take it as a string (e.g. --set model.backend=skfem)
+    return keys, value
+
+
+def apply_overrides(config: dict, assignments: list[str]) -> dict:
+    """A copy of ``config`` with every ``section.key=value`` assignment applied."""
+    config = copy.deepcopy(config)
+    for text in assignments or ():
+        keys, value = parse_assignment(text)
+        table = config
+        for key in keys[:-1]:
+            table = table.setdefault(key, {})
+            if not isinstance(table, dict):
+                raise ConfigError(f"--set {text}: {key} is not a table")
+        table[keys[-1]] = value
+    return config
+
+
+def check_structure(config: dict) -> None:
+    """Reject unknown tables and keys, naming them."""
+    for section, value in config.items():
+        if section.startswith("_"):
+            continue
+        if section not in SECTIONS:
+            raise ConfigError(f"unknown config section [{section}] (known: {', '.join(SECTIONS)})")
+        if not isinstance(value, dict):
+            raise ConfigError(f"config section [{section}] must be a table")
+        allowed = SECTIONS[section]
+        if allowed is None:
+            continue
+        for key in value:
+            if key not in allowed:
+                raise ConfigError(f"unknown key {section}.{key} (known: {', '.join(sorted(allowed))})")
+
+
+def require(config: dict, section: str, key: str, kind=(int, float)):
+    """``config[section][key]``, checked for presence and type."""
+    try:
+        value = config[section][key]
+    except KeyError:
+        raise ConfigError(f"missing {section}.{key} in the configuration") from None
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise ConfigError(f"{section}.{key} must be a {_kind_name(kind)}, got {value!r}")
+    return value
+
+
+def _kind_name(kind) -> str:
+    if kind == (int, float):
+        return "number"
+    return getattr(kind, "__name__", str(kind))

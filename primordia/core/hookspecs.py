@@ -1,0 +1,97 @@
+"""Every hook of primordia, in one file: the plugin author's manual.
+
+A plugin is a module (or object) with functions decorated ``@hookimpl`` and
+named like the stubs below; it is registered either as a built-in
+(``primordia.core.plugins.DEFAULT_PLUGINS``) or by a distribution's entry point
+in the group ``primordia``::
+
+    [project.entry-points.primordia]
+    my_kinetics = "my_package.plugin"
+
+Two kinds of hooks:
+
+* hooks that *contribute* (all answers are collected): physics modules,
+  kinetics, growth laws, backends, splitting schemes, outputs.  Each returns a
+  list of classes (or :class:`~primordia.core.plugins.BackendEntry` for
+  backends) carrying a unique ``name``.
+* hooks that *choose* (``firstresult``: the first non-None answer wins):
+  which backend and which splitting scheme a run uses.  primordia's own
+  choosers run last (``trylast``), so a plugin can override a choice.
+
+Built-in pieces register through these very same hooks.
+"""
+
+from __future__ import annotations
+
+import pluggy
+
+hookspec = pluggy.HookspecMarker("primordia")
+
+
+@hookspec
+def primordia_physics() -> list[type]:
+    """Physics modules (subclasses of ``primordia.physics.base.Physics``).
+
+    Returns a list of classes; each has a unique ``name`` used in a config's
+    ``[model] physics = [...]`` list.
+    """
+
+
+@hookspec
+def primordia_kinetics() -> list[type]:
+    """Reaction kinetics (subclasses of ``primordia.physics.kinetics.base.Kinetics``).
+
+    Returns a list of classes; each has a unique ``name`` selected by
+    ``[kinetics] name = "..."``.
+    """
+
+
+@hookspec
+def primordia_growth_laws() -> list[type]:
+    """Growth laws (subclasses of ``primordia.physics.growth_laws.GrowthLaw``).
+
+    Returns a list of classes; each has a unique ``name``.
+    """
+
+
+@hookspec
+def primordia_backends() -> list:
+    """Finite element backends, as ``BackendEntry(name, "module:Class")``.
+
+    Entries are imported only when chosen or listed, so a backend whose
+    library is missing does not break the others.
+    """
+
+
+@hookspec
+def primordia_splitting_schemes() -> list[type]:
+    """Operator-splitting schemes (subclasses of ``primordia.coupling.splitting.SplittingScheme``)."""
+
+
+@hookspec
+def primordia_outputs() -> list[type]:
+    """Output writers (subclasses of ``primordia.core.outputs.Output``).
+
+    Every registered output is attached to every run; each decides from the
+    run's ``[output]`` table what, if anything, it writes.
+    """
+
+
+@hookspec(firstresult=True)
+def primordia_select_backend(name: str, entries: dict, comm):
+    """Choose and instantiate the backend for a run.
+
+    ``name`` is the requested backend (from ``--backend`` or the config),
+    ``entries`` maps registered names to ``BackendEntry``; return a ``Backend``
+    instance, or None to let the next implementation decide.
+    """
+
+
+@hookspec(firstresult=True)
+def primordia_select_splitting_scheme(name: str, schemes: dict, physics: list):
+    """Choose the operator-splitting scheme for a run.
+
+    ``name`` is the requested scheme (``[coupling] scheme``), ``schemes`` maps
+    registered names to classes, ``physics`` lists the run's physics objects;
+    return a scheme instance, or None to defer.
+    """

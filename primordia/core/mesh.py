@@ -1,0 +1,93 @@
+"""Backend-neutral meshes: what a domain is before any backend sees it.
+
+A :class:`MeshData` is plain numpy: vertex coordinates, simplex cells, and named
+boundary facets.  Backends build their own mesh objects from it (dolfinx
+distributes it over MPI ranks; scikit-fem wraps it), and every output writer
+reads vertex values in the vertex order of the :class:`MeshData`, so results
+from either backend line up entry by entry.
+
+Generators (:func:`rectangle`, :func:`box`) and the meshio reader
+(:func:`read_mesh`) live in :mod:`primordia.core.meshes`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from primordia.core.errors import MeshError
+
+#: meshio / VTK names of the simplex cells primordia supports, by topological dimension.
+CELL_TYPES = {2: "triangle", 3: "tetra"}
+FACET_TYPES = {2: "line", 3: "triangle"}
+
+
+@dataclass
+class MeshData:
+    """A simplex mesh with named boundaries.
+
+    ``points``: (n_vertices, gdim) float array; ``cells``: (n_cells, tdim + 1)
+    int array of vertex indices; ``boundaries``: boundary name -> (n_facets,
+    tdim) int array of the vertex indices of its facets.  Each boundary name
+    gets a positive integer id (``boundary_ids``) used in facet tags.
+    """
+
+    points: np.ndarray
+    cells: np.ndarray
+    boundaries: dict[str, np.ndarray] = field(default_factory=dict)
+    description: str = ""
+
+    def __post_init__(self):
+        self.points = np.ascontiguousarray(self.points, dtype=np.float64)
+        self.cells = np.ascontiguousarray(self.cells, dtype=np.int64)
+        if self.points.ndim != 2 or self.points.shape[1] not in (2, 3):
+            raise MeshError(f"mesh points must be an (n, 2) or (n, 3) array, got shape {self.points.shape}")
+        if self.cells.ndim != 2 or self.cells.shape[1] != self.gdim + 1:
+            raise MeshError(
+                f"a {self.gdim}D mesh needs {CELL_TYPES[self.gdim]} cells with {self.gdim + 1} vertices, "
+                f"got cells of shape {self.cells.shape}"
+            )
+        if len(self.cells) == 0:
+            raise MeshError("the mesh has no cells")
+        if self.cells.min() < 0 or self.cells.max() >= len(self.points):
+            raise MeshError("mesh cells refer to vertices that do not exist")
+        self.boundaries = {
+            name: np.ascontiguousarray(facets, dtype=np.int64).reshape(-1, self.gdim)
+            for name, facets in self.boundaries.items()
+        }
+
+    @property
+    def gdim(self) -> int:
+        return self.points.shape[1]
+
+    @property
+    def cell_type(self) -> str:
+        return CELL_TYPES[self.gdim]
+
+    @property
+    def num_vertices(self) -> int:
+        return len(self.points)
+
+    @property
+    def num_cells(self) -> int:
+        return len(self.cells)
+
+    @property
+    def boundary_ids(self) -> dict[str, int]:
+        """Facet tag of each named boundary (1, 2, ... in declaration order)."""
+        return {name: i + 1 for i, name in enumerate(self.boundaries)}
+
+    def boundary_id(self, name: str) -> int:
+        try:
+            return self.boundary_ids[name]
+        except KeyError:
+            known = ", ".join(self.boundaries) or "none"
+            raise MeshError(f"unknown boundary '{name}' (this mesh has: {known})") from None
+
+    def cell_volumes(self) -> np.ndarray:
+        """Signed-free volumes (areas in 2D) of the cells."""
+        x = self.points[self.cells]
+        edges = x[:, 1:, :] - x[:, :1, :]
+        factor = 2.0 if self.gdim == 2 else 6.0
+        return np.abs(np.linalg.det(edges)) / factor

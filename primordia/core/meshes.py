@@ -1,0 +1,460 @@
+"""Mesh generators and the mesh-file reader, all returning :class:`MeshData`.
+
+* :func:`rectangle` -- a structured triangle mesh of ``[x0, x1] x [y0, y1]``
+  (the seed's domain is ``(0, 20)^2`` with 171 x 171 squares, i.e. 58,482
+  triangles), boundaries ``left``/``right``/``bottom``/``top``;
+* :func:`box` -- a structured tetrahedral mesh of a cuboid, each hexahedron
+  split into 6 tetrahedra, boundaries ``left``/``right`` (x), ``bottom``/``top``
+  (y), ``front``/``back`` (z);
+* :func:`read_mesh` -- any linear triangle / tetrahedron mesh meshio can read;
+  Gmsh physical names become named boundaries;
+* :func:`mesh_from_config` -- one of the above from a TOML ``[mesh]`` table.
+
+Lengths are in the units of the coordinates (dimensionless in the seed's
+scaling).  Every returned cell is positively oriented (counter-clockwise
+triangles, tetrahedra of positive signed volume), so backends may rely on it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from primordia.core.errors import ConfigError, MeshError
+from primordia.core.mesh import CELL_TYPES, FACET_TYPES, MeshData
+
+#: Ways of splitting each square of :func:`rectangle` (dolfinx's ``DiagonalType`` names).
+DIAGONALS = ("right", "left", "crossed")
+
+#: Boundary names of the generators: name -> (axis, "lower" or "upper" end).
+RECTANGLE_SIDES = {"left": (0, 0), "right": (0, 1), "bottom": (1, 0), "top": (1, 1)}
+BOX_SIDES = {**RECTANGLE_SIDES, "front": (2, 0), "back": (2, 1)}
+
+#: Keys a ``[mesh]`` config table may hold, by mesh type (``type`` itself aside).
+CONFIG_KEYS = {
+    "rectangle": {"required": ("upper", "cells"), "optional": ("lower", "diagonal")},
+    "box": {"required": ("upper", "cells"), "optional": ("lower",)},
+    "file": {"required": ("path",), "optional": ()},
+}
+
+#: Lower-dimensional cell blocks a mesh file may carry besides its cells (Gmsh
+#: keeps physical points and curves as ``vertex`` / ``line`` blocks).
+_AUXILIARY_CELL_TYPES = {2: {"vertex", "line"}, 3: {"vertex", "line", "triangle"}}
+
+#: A cell counts as degenerate below this fraction of (bounding-box diagonal)^tdim.
+_DEGENERATE_VOLUME_FRACTION = 1e-13
+
+
+# ---------------------------------------------------------------------------
+# Generators
+# ---------------------------------------------------------------------------
+
+
+def rectangle(
+    lower: Sequence[float] = (0.0, 0.0),
+    upper: Sequence[float] = (1.0, 1.0),
+    cells: Sequence[int] = (10, 10),
+    diagonal: str = "right",
+) -> MeshData:
+    """Triangle mesh of the rectangle ``[lower, upper]`` with ``nx x ny`` squares.
+
+    ``diagonal`` splits each square like dolfinx's ``DiagonalType``: ``"right"``
+    along the diagonal from its lower-left to upper-right corner, ``"left"``
+    from lower-right to upper-left (2 triangles per square), ``"crossed"``
+    through an extra centre vertex (4 triangles per square).  Vertices of the
+    grid come first, x running fastest; ``crossed`` centres follow.
+    """
+    lower, upper = _check_extent(lower, upper, 2)
+    nx, ny = _check_cell_counts(cells, 2)
+    if diagonal not in DIAGONALS:
+        raise MeshError(f"unknown rectangle diagonal {diagonal!r} (choose one of: {', '.join(DIAGONALS)})")
+    points = _grid_points(lower, upper, (nx, ny))
+    corners = _square_corners(nx, ny)
+    if diagonal == "crossed":
+        points, triangles = _crossed_triangles(points, corners)
+    else:
+        triangles = _split_squares(corners, diagonal)
+    description = f"rectangle {_extent_text(lower, upper)}, {nx} x {ny} squares, diagonal {diagonal}"
+    return _structured_mesh(points, triangles, lower, upper, RECTANGLE_SIDES, description)
+
+
+def box(
+    lower: Sequence[float] = (0.0, 0.0, 0.0),
+    upper: Sequence[float] = (1.0, 1.0, 1.0),
+    cells: Sequence[int] = (4, 4, 4),
+) -> MeshData:
+    """Tetrahedral mesh of the cuboid ``[lower, upper]`` with ``nx x ny x nz`` hexahedra.
+
+    Each hexahedron is split into the 6 tetrahedra around its main diagonal
+    (the Kuhn split, as dolfinx's ``create_box``); neighbouring hexahedra are
+    split alike, so their shared faces match and the mesh is conforming.
+    """
+    lower, upper = _check_extent(lower, upper, 3)
+    counts = _check_cell_counts(cells, 3)
+    points = _grid_points(lower, upper, counts)
+    tetrahedra = _kuhn_tetrahedra(*counts)
+    description = f"box {_extent_text(lower, upper)}, {' x '.join(map(str, counts))} hexahedra"
+    return _structured_mesh(points, tetrahedra, lower, upper, BOX_SIDES, description)
+
+
+def _check_extent(lower, upper, gdim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Corners as float arrays of length ``gdim`` with ``upper > lower``, else MeshError."""
+    lower = _real_vector(lower, gdim, "lower corner")
+    upper = _real_vector(upper, gdim, "upper corner")
+    for axis in range(gdim):
+        if not upper[axis] > lower[axis]:
+            raise MeshError(
+                f"mesh upper corner must exceed the lower corner along {'xyz'[axis]}, "
+                f"got lower {lower[axis]:g} and upper {upper[axis]:g}"
+            )
+    return lower, upper
+
+
+def _real_vector(values, length: int, what: str) -> np.ndarray:
+    """``values`` as a finite float array of ``length`` entries, else MeshError."""
+    if isinstance(values, (str, bytes)) or not isinstance(values, (Sequence, np.ndarray)):
+        raise MeshError(f"mesh {what} must be a list of {length} numbers, got {values!r}")
+    if len(values) != length or any(isinstance(v, bool) or not isinstance(v, (int, float, np.number)) for v in values):
+        raise MeshError(f"mesh {what} must be a list of {length} numbers, got {list(values)!r}")
+    vector = np.asarray(values, dtype=np.float64)
+    if not np.all(np.isfinite(vector)):
+        raise MeshError(f"mesh {what} must be finite, got {list(values)!r}")
+    return vector
+
+
+def _check_cell_counts(cells, gdim: int) -> tuple[int, ...]:
+    """Cell counts per axis as positive ints, else MeshError."""
+    if isinstance(cells, (str, bytes)) or not isinstance(cells, (Sequence, np.ndarray)) or len(cells) != gdim:
+        raise MeshError(f"mesh cells must be a list of {gdim} positive integers, got {cells!r}")
+    counts = []
+    for count in cells:
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count <= 0:
+            raise MeshError(f"mesh cells must be a list of {gdim} positive integers, got {list(cells)!r}")
+        counts.append(int(count))
+    return tuple(counts)
+
+
+def _extent_text(lower: np.ndarray, upper: np.ndarray) -> str:
+    return " x ".join(f"[{a:g}, {b:g}]" for a, b in zip(lower, upper))
+
+
+def _grid_points(lower: np.ndarray, upper: np.ndarray, counts: Sequence[int]) -> np.ndarray:
+    """Vertices of a structured grid, x fastest, then y, then z."""
+    axes = [np.linspace(lo, hi, n + 1) for lo, hi, n in zip(lower, upper, counts)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    # Fortran order makes the first axis (x) run fastest.
+    return np.column_stack([coordinate.ravel(order="F") for coordinate in mesh])
+
+
+def _square_corners(nx: int, ny: int) -> np.ndarray:
+    """(nx*ny, 4) vertex indices of each square: lower-left, lower-right, upper-left, upper-right."""
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+    v0 = (iy * (nx + 1) + ix).ravel()
+    return np.column_stack([v0, v0 + 1, v0 + nx + 1, v0 + nx + 2])
+
+
+def _split_squares(corners: np.ndarray, diagonal: str) -> np.ndarray:
+    """Two counter-clockwise triangles per square, cut along the chosen diagonal."""
+    v0, v1, v2, v3 = corners.T
+    if diagonal == "right":
+        first, second = (v0, v1, v3), (v0, v3, v2)
+    else:
+        first, second = (v0, v1, v2), (v1, v3, v2)
+    return np.column_stack([np.column_stack(first), np.column_stack(second)]).reshape(-1, 3)
+
+
+def _crossed_triangles(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Four counter-clockwise triangles per square around a new centre vertex."""
+    centres = points[corners].mean(axis=1)
+    c = len(points) + np.arange(len(corners))
+    v0, v1, v2, v3 = corners.T
+    fan = [(v0, v1, c), (v1, v3, c), (v3, v2, c), (v2, v0, c)]
+    triangles = np.column_stack([np.column_stack(t) for t in fan]).reshape(-1, 3)
+    return np.vstack([points, centres]), triangles
+
+
+def _kuhn_tetrahedra(nx: int, ny: int, nz: int) -> np.ndarray:
+    """Six tetrahedra per hexahedron, all sharing its diagonal from corner 0 to corner 7."""
+    ix, iy, iz = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+    v0 = (iz * (ny + 1) * (nx + 1) + iy * (nx + 1) + ix).ravel(order="F")
+    layer = (nx + 1) * (ny + 1)
+    v = [v0, v0 + 1, v0 + nx + 1, v0 + nx + 2]
+    v += [corner + layer for corner in v]
+    split = [(0, 1, 3, 7), (0, 1, 7, 5), (0, 5, 7, 4), (0, 3, 2, 7), (0, 6, 4, 7), (0, 2, 6, 7)]
+    return np.column_stack([np.column_stack([v[i] for i in tet]) for tet in split]).reshape(-1, 4)
+
+
+def _structured_mesh(points, cells, lower, upper, sides: Mapping[str, tuple[int, int]], description) -> MeshData:
+    """MeshData of a generated mesh, with its boundary facets named by the side they lie on."""
+    cells = orient_cells(points, cells)
+    facets = exterior_facets(cells)
+    extent = np.max(upper - lower)
+    boundaries = {}
+    for name, (axis, end) in sides.items():
+        plane = (lower, upper)[end][axis]
+        on_plane = np.all(np.abs(points[facets, axis] - plane) <= 1e-12 * extent, axis=1)
+        boundaries[name] = facets[on_plane]
+    return MeshData(points, cells, boundaries, description=description)
+
+
+# ---------------------------------------------------------------------------
+# Topology helpers (also used by the plotting code in primordia.core.io)
+# ---------------------------------------------------------------------------
+
+
+def signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Signed cell volumes (areas in 2D); positive for counter-clockwise triangles."""
+    x = points[cells]
+    edges = x[:, 1:, :] - x[:, :1, :]
+    return np.linalg.det(edges) / math.factorial(cells.shape[1] - 1)
+
+
+def orient_cells(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """``cells`` with the last two vertices of each negatively oriented cell swapped."""
+    cells = np.array(cells, dtype=np.int64)
+    flip = signed_volumes(points, cells) < 0
+    cells[flip, -2:] = cells[flip, :-3:-1]
+    return cells
+
+
+def exterior_facets(cells: np.ndarray) -> np.ndarray:
+    """Facets (vertex-index rows) that belong to exactly one cell, i.e. the mesh boundary."""
+    n_vertices = cells.shape[1]
+    facets = np.vstack([np.delete(cells, i, axis=1) for i in range(n_vertices)])
+    keys = np.sort(facets, axis=1)
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    return facets[np.sort(first[counts == 1])]
+
+
+# ---------------------------------------------------------------------------
+# Reader
+# ---------------------------------------------------------------------------
+
+
+def read_mesh(path: str | Path) -> MeshData:
+    """Read a linear triangle (2D) or tetrahedron (3D) mesh from any meshio format.
+
+    Gmsh files (``.msh`` v2 or v4): facet blocks (``line`` in 2D, ``triangle``
+    in 3D) tagged by ``gmsh:physical`` become named boundaries, named after
+    the physical names in ``field_data`` (``boundary_<tag>`` when a tag has no
+    name).  Other formats load without boundaries unless their facet blocks
+    carry such tags.  A 2D mesh stored with a constant z (normally 0) comes
+    back with gdim 2.  Vertices no cell uses (e.g. Gmsh geometry points) are
+    dropped and the rest renumbered; cells are reoriented to positive volume.
+    """
+    path = Path(path)
+    raw = _read_with_meshio(path)
+    if len(raw.points) == 0 or not any(len(block.data) for block in raw.cells):
+        raise MeshError(f"mesh file {path} is empty (no points or no cells)")
+    tdim = _topological_dimension(raw, path)
+    cells = _cells_of_type(raw, CELL_TYPES[tdim])
+    points = _points_in_dimension(np.asarray(raw.points, dtype=np.float64), tdim, path)
+    boundaries = _tagged_facets(raw, tdim)
+    _check_vertex_indices(cells, boundaries, len(points), path)
+    points, cells, boundaries = _drop_unused_points(points, cells, boundaries)
+    _check_not_degenerate(points, cells, path)
+    return MeshData(points, orient_cells(points, cells), boundaries, description=f"read from {path}")
+
+
+def _read_with_meshio(path: Path):
+    """The meshio.Mesh in ``path``, or a one-line MeshError saying why not."""
+    if not path.exists():
+        raise MeshError(f"mesh file {path} does not exist")
+    if not path.is_file():
+        raise MeshError(f"mesh file {path} is not a file")
+    reasons = []
+    for file_format in _candidate_formats(path):
+        mesh, reason = _try_meshio_format(path, file_format)
+        if mesh is not None:
+            return mesh
+        reasons.append(f"as {file_format}: {reason}")
+    raise MeshError(f"cannot read mesh file {path} ({'; '.join(reasons)})")
+
+
+def _candidate_formats(path: Path) -> list[str]:
+    """meshio format names for the file's extension, Gmsh first for ``.msh``."""
+    import meshio
+
+    formats = meshio.extension_to_filetypes.get(path.suffix.lower())
+    if not formats:
+        raise MeshError(f"cannot read mesh file {path}: meshio knows no mesh format with extension {path.suffix!r}")
+    return sorted(formats, key=lambda name: name != "gmsh")
+
+
+def _try_meshio_format(path: Path, file_format: str):
+    """(mesh, None) if meshio reads ``path`` as ``file_format``, else (None, reason)."""
+    import io
+
+    import meshio
+
+    chatter = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            return meshio.read(path, file_format=file_format), None
+    except SystemExit:
+        # meshio prints a failed reader's message and exits the interpreter.
+        return None, _one_line(chatter.getvalue()) or "not readable"
+    except Exception as error:  # readers raise many kinds for malformed files
+        return None, _one_line(str(error)) or type(error).__name__
+
+
+def _one_line(text: str) -> str:
+    """The first non-empty line of ``text``, whitespace collapsed."""
+    lines = [" ".join(line.split()) for line in text.splitlines()]
+    return next((line for line in lines if line and not line.startswith("Error")), "")
+
+
+def _topological_dimension(raw, path: Path) -> int:
+    """3 if the file holds tetrahedra, 2 if triangles; MeshError for other cell kinds."""
+    types = {block.type for block in raw.cells if len(block.data)}
+    tdim = 3 if "tetra" in types else 2 if "triangle" in types else None
+    if tdim is None:
+        found = ", ".join(sorted(types)) or "none"
+        raise MeshError(f"mesh file {path} has no triangle or tetra cells (found: {found})")
+    unsupported = types - {CELL_TYPES[tdim]} - _AUXILIARY_CELL_TYPES[tdim]
+    if unsupported:
+        raise MeshError(
+            f"mesh file {path} mixes {CELL_TYPES[tdim]} cells with unsupported cell types "
+            f"{', '.join(sorted(unsupported))} (only linear triangle or tetra meshes are supported)"
+        )
+    return tdim
+
+
+def _cells_of_type(raw, cell_type: str) -> np.ndarray:
+    return np.vstack([block.data for block in raw.cells if block.type == cell_type]).astype(np.int64)
+
+
+def _points_in_dimension(points: np.ndarray, tdim: int, path: Path) -> np.ndarray:
+    """Points with ``tdim`` coordinates: a flat 2D mesh loses its z = 0 column."""
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise MeshError(f"mesh file {path} has points of shape {points.shape}, expected 2 or 3 coordinates")
+    if tdim == 3 and points.shape[1] != 3:
+        raise MeshError(f"mesh file {path} has tetrahedra but only {points.shape[1]} coordinates per point")
+    if tdim == 2 and points.shape[1] == 3:
+        if np.any(points[:, 2] != points[0, 2]):
+            raise MeshError(f"mesh file {path} has triangles that are not in a z = constant plane (a surface mesh)")
+        points = points[:, :2]
+    return points
+
+
+def _tagged_facets(raw, tdim: int) -> dict[str, np.ndarray]:
+    """Boundary name -> facets, from facet blocks tagged by ``gmsh:physical``, in tag order."""
+    tags = raw.cell_data.get("gmsh:physical")
+    if tags is None:
+        return {}
+    facets_by_tag: dict[int, list[np.ndarray]] = {}
+    for block, block_tags in zip(raw.cells, tags):
+        if block.type != FACET_TYPES[tdim]:
+            continue
+        block_tags = np.asarray(block_tags).ravel()
+        for tag in np.unique(block_tags):
+            facets_by_tag.setdefault(int(tag), []).append(block.data[block_tags == tag])
+    names = _physical_names(raw.field_data, dim=tdim - 1)
+    return {
+        names.get(tag, f"boundary_{tag}"): np.vstack(facets_by_tag[tag]).astype(np.int64)
+        for tag in sorted(facets_by_tag)
+    }
+
+
+def _physical_names(field_data: Mapping, dim: int) -> dict[int, str]:
+    """Physical tag -> name of the Gmsh physical groups of dimension ``dim``."""
+    names = {}
+    for name, value in field_data.items():
+        value = np.asarray(value).ravel()
+        if len(value) == 2 and int(value[1]) == dim:
+            names[int(value[0])] = name
+    return names
+
+
+def _check_vertex_indices(cells, boundaries, n_points: int, path: Path) -> None:
+    """MeshError if a cell or facet refers to a vertex the file does not hold."""
+    for what, indices in [("cells", cells), *((f"boundary {name!r}", f) for name, f in boundaries.items())]:
+        if len(indices) and (indices.min() < 0 or indices.max() >= n_points):
+            raise MeshError(f"mesh file {path}: {what} refer to vertices that do not exist")
+
+
+def _drop_unused_points(points, cells, boundaries):
+    """Remove vertices no cell refers to, renumbering cells and boundary facets."""
+    used = np.zeros(len(points), dtype=bool)
+    used[cells.ravel()] = True
+    if used.all():
+        return points, cells, boundaries
+    new_index = np.cumsum(used) - 1
+    kept = {}
+    for name, facets in boundaries.items():
+        # A facet off the cells (e.g. a stray Gmsh curve) cannot bound them.
+        on_mesh = used[facets].all(axis=1)
+        kept[name] = new_index[facets[on_mesh]]
+    return points[used], new_index[cells], kept
+
+
+def _check_not_degenerate(points: np.ndarray, cells: np.ndarray, path: Path) -> None:
+    """MeshError if any cell has (numerically) zero volume."""
+    diagonal = np.linalg.norm(points.max(axis=0) - points.min(axis=0))
+    volumes = np.abs(signed_volumes(points, cells))
+    degenerate = np.count_nonzero(volumes <= _DEGENERATE_VOLUME_FRACTION * diagonal ** points.shape[1])
+    if degenerate:
+        kind = "area" if points.shape[1] == 2 else "volume"
+        raise MeshError(f"mesh file {path} has {degenerate} degenerate (zero-{kind}) cells")
+
+
+# ---------------------------------------------------------------------------
+# Config
+# ---------------------------------------------------------------------------
+
+
+def mesh_from_config(table: Mapping, base_dir: str | Path = ".") -> MeshData:
+    """Build the mesh a config ``[mesh]`` table describes.
+
+    ``{type = "rectangle", lower = [0, 0], upper = [20, 20], cells = [171, 171], diagonal = "right"}``,
+    ``{type = "box", lower = [0, 0, 0], upper = [1, 1, 1], cells = [4, 4, 4]}`` or
+    ``{type = "file", path = "mesh.msh"}`` (a relative path is taken from
+    ``base_dir``, normally the config file's directory).  ``lower`` defaults to
+    the origin and ``diagonal`` to ``"right"``; ``upper`` and ``cells`` are required.
+    """
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"[mesh] must be a table, got {table!r}")
+    mesh_type = table.get("type")
+    if mesh_type not in CONFIG_KEYS:
+        raise ConfigError(f"[mesh] type must be one of {', '.join(map(repr, CONFIG_KEYS))}, got {mesh_type!r}")
+    _check_config_keys(table, mesh_type)
+    if mesh_type == "file":
+        return read_mesh(_config_path(table["path"], base_dir))
+    gdim = 2 if mesh_type == "rectangle" else 3
+    lower = table.get("lower", [0] * gdim)
+    _check_config_list(table, "lower", lower, gdim, "numbers")
+    _check_config_list(table, "upper", table["upper"], gdim, "numbers")
+    _check_config_list(table, "cells", table["cells"], gdim, "positive integers")
+    if mesh_type == "rectangle":
+        return rectangle(lower, table["upper"], table["cells"], table.get("diagonal", "right"))
+    return box(lower, table["upper"], table["cells"])
+
+
+def _check_config_keys(table: Mapping, mesh_type: str) -> None:
+    keys = CONFIG_KEYS[mesh_type]
+    allowed = {"type", *keys["required"], *keys["optional"]}
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(
+                f"[mesh] unknown key {key!r} for type {mesh_type!r} (allowed: {', '.join(sorted(allowed))})"
+            )
+    for key in keys["required"]:
+        if key not in table:
+            raise ConfigError(f"[mesh] of type {mesh_type!r} needs {key!r}")
+
+
+def _check_config_list(table: Mapping, key: str, value, length: int, kind: str) -> None:
+    """ConfigError unless ``value`` is a list of ``length`` entries (the generators check the entries)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != length:
+        raise ConfigError(f"[mesh] {key} must be a list of {length} {kind} for type {table['type']!r}, got {value!r}")
+
+
+def _config_path(value, base_dir: str | Path) -> Path:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"[mesh] path must be a file name, got {value!r}")
+    path = Path(value).expanduser()
+    return path if path.is_absolute() else Path(base_dir) / path

@@ -1,0 +1,98 @@
+r"""Edge-averaged exponentially fitted transport (Scharfetter-Gummel / EAFE) for P1.
+
+For the flux J = -D grad c + chi c grad a (a species c climbing the gradient of
+an attractant a), the operator A with
+
+    A_ij = -w_ij D B(Pe_ij),       A_ii = sum_j w_ij D B(-Pe_ij),
+    Pe_ij = chi_ij (a_j - a_i) / D,     B(x) = x / (exp(x) - 1),
+
+is built from the P1 stiffness matrix S of the mesh (w_ij = -S_ij, the
+"cotangent" edge weights) and vertex values of chi and a (chi_ij the mean of
+chi_i and chi_j).  A has non-positive off-diagonals and zero column sums, so
+M_L/dt + A is an M-matrix on meshes with w_ij >= 0: the transported density
+stays non-negative and its integral is conserved exactly.  For |Pe| << 1,
+B(x) ~ 1 - x/2 and A reduces to the central (second-order) discretisation
+(Xu & Zikatanov, Math. Comp. 68 (1999) 1429-1446).
+
+The construction is row-local on the assembled PETSc matrix (global column
+indices, ghost values from the backend), so it runs unchanged on every backend
+and in parallel.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import ufl
+from petsc4py import PETSc
+
+from primordia.physics.base import AlgebraicOperator
+
+
+def bernoulli(x: np.ndarray) -> np.ndarray:
+    """B(x) = x / (exp(x) - 1), with B(0) = 1, accurate near 0 and for large |x|."""
+    x = np.asarray(x, dtype=float)
+    small = np.abs(x) < 1e-6
+    safe = np.where(small, 1.0, x)
+    return np.where(small, 1.0 - 0.5 * x + x * x / 12.0, safe / np.expm1(safe))
+
+
+class ExponentiallyFittedFlux(AlgebraicOperator):
+    """A(chi(c^n), a^n) for the species ``species`` climbing ``attractant``.
+
+    ``sensitivity`` maps vertex values of ``c^n`` to chi (numpy); the state read
+    is the start-of-step value (``disc.previous``), as the IMEX scheme requires.
+    """
+
+    def __init__(self, disc, species: str, attractant: str, diffusivity: float, sensitivity):
+        self.disc, self.species, self.attractant = disc, species, attractant
+        self.diffusivity = float(diffusivity)
+        self.sensitivity = sensitivity
+        backend = disc.backend
+        space = disc.field(species).ufl_function_space()
+        trial, test = ufl.TrialFunction(space), ufl.TestFunction(space)
+        stiffness = backend.assemble_matrix(ufl.inner(ufl.grad(trial), ufl.grad(test)) * disc.dx)
+        self._A = stiffness
+        self._prepare_edges(stiffness, backend.dof_layout(space))
+
+    def _prepare_edges(self, stiffness, layout):
+        indptr, columns, values = stiffness.getValuesCSR()
+        start = layout.owned_range[0]
+        rows_global = np.repeat(np.arange(len(indptr) - 1) + start, np.diff(indptr))
+        self._indptr, self._columns = indptr, columns
+        self._diagonal = columns == rows_global
+        off = ~self._diagonal
+        weights = np.where(off, -values, 0.0)
+        if self.disc.backend.comm.allreduce(int((weights < -1e-12 * np.abs(values).max()).sum())):
+            warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
+                          "the exponentially fitted flux no longer guarantees a non-negative density",
+                          stacklevel=3)
+        self._weights = weights
+        self._row_local = rows_global - start
+        self._col_local = layout.global_to_local(columns)
+        # position of each row's diagonal entry, to accumulate the row sums
+        self._diag_positions = np.flatnonzero(self._diagonal)
+
+    def update(self) -> None:
+        backend = self.disc.backend
+        c = backend.local_array(self.disc.previous(self.species))
+        a = backend.local_array(self.disc.previous(self.attractant))
+        chi = self.sensitivity(c)
+        i, j = self._row_local, self._col_local
+        peclet = 0.5 * (chi[i] + chi[j]) * (a[j] - a[i]) / self.diffusivity
+        scaled = self._weights * self.diffusivity
+        values = -scaled * bernoulli(peclet)  # A_ij, zero on the diagonal positions (weight 0)
+        outflow = scaled * bernoulli(-peclet)  # contributions to A_ii
+        row_sums = np.bincount(i, weights=outflow, minlength=len(self._indptr) - 1)
+        values[self._diag_positions] = row_sums[self._row_local[self._diag_positions]]
+        self._A.setValuesCSR(self._indptr, self._columns, values)
+        self._A.assemble()
+
+    def matrix(self):
+        return self._A
+
+
+def apply_operator(operator: AlgebraicOperator, x: PETSc.Vec, residual: PETSc.Vec) -> None:
+    """residual += A x."""
+    operator.matrix().multAdd(x, residual, residual)

@@ -1,0 +1,230 @@
+"""The coupling orchestrator: set up a model on a backend and march it in time.
+
+``setup()`` is an ordered list of single-purpose steps; ``run()`` loops
+``step()``; everything time-dependent is updated in ``step()``.  Which
+operator-splitting scheme shares a step between the physics modules is chosen
+through the ``primordia_select_splitting_scheme`` hook; which backend assembles
+the forms, through ``primordia_select_backend``.
+"""
+
+from __future__ import annotations
+
+import time as clock
+from pathlib import Path
+
+import numpy as np
+import ufl
+
+from primordia.core.errors import PrimordiaError, SolverError
+from primordia.core.plugins import get_plugin_manager, registry
+from primordia.coupling.discretisation import Discretisation
+from primordia.coupling.solvers import SubproblemSolver
+
+
+class Simulation:
+    """One run of a :class:`~primordia.model.Model` on one backend."""
+
+    def __init__(self, model, backend: str = "fenicsx", out_dir: str | Path = "out/run", comm=None):
+        self.model = model
+        self.backend_name = backend
+        self.out_dir = Path(out_dir)
+        self.comm = comm
+        self.step_index = 0
+        self.time = model.t_start
+        self.dt = model.dt
+        self.iterations: dict[str, list[int]] = {}
+        self._vertex_cache: tuple[int, dict] | None = None
+
+    # -- setup ----------------------------------------------------------------------------
+    def setup(self) -> "Simulation":
+        self._choose_backend()
+        self._discretise()
+        self._create_fields()
+        self._setup_physics()
+        self._initialise_fields()
+        self._create_solvers()
+        self._choose_splitting()
+        self._attach_outputs()
+        return self
+
+    def _choose_backend(self):
+        pm = get_plugin_manager()
+        if self.comm is None:
+            from mpi4py import MPI
+
+            self.comm = MPI.COMM_WORLD
+        entries = {name: entry for name, (entry, _) in registry("backends", pm).items()}
+        self.backend = pm.hook.primordia_select_backend(name=self.backend_name, entries=entries, comm=self.comm)
+        self.is_root = self.comm.rank == 0
+
+    def _discretise(self):
+        self.mesh_data = self.model.mesh_data
+        self.disc = Discretisation(self.backend, self.mesh_data)
+        self.disc.set_time(self.time, self.dt)
+
+    def _create_fields(self):
+        for physics in self.model.physics_objects:
+            for spec in physics.fields():
+                self.disc.add_field(spec.name, self.disc.space(spec.degree, spec.vector), owner=physics.name)
+
+    def _setup_physics(self):
+        for physics in self.model.physics_objects:
+            for name in physics.requires:
+                self.disc.field(name)  # names a missing provider before any assembly
+            physics.setup(self.disc)
+
+    def _initialise_fields(self):
+        for physics in self.model.physics_objects:
+            physics.initialise(self.disc)
+        self.disc.store_previous()
+
+    def _create_solvers(self):
+        self.solvers = [SubproblemSolver(self.backend, sub, overrides=self.model.solver.get(sub.prefix[:-1]))
+                        for physics in self.model.physics_objects for sub in physics.subproblems()]
+        self._integrals = {name: ufl.inner(self.disc.field(name), self.disc.field(name)) ** 0.5 * self.disc.dx
+                           if self.disc.field(name).ufl_shape else self.disc.field(name) * self.disc.dx
+                           for name in self.disc.field_names()}
+
+    def _choose_splitting(self):
+        pm = get_plugin_manager()
+        schemes = {name: cls for name, (cls, _) in registry("splitting_schemes", pm).items()}
+        self.scheme = pm.hook.primordia_select_splitting_scheme(
+            name=self.model.coupling, schemes=schemes, physics=self.model.physics_objects)
+
+    def _attach_outputs(self):
+        if self.is_root:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.outputs = [cls() for cls, _ in registry("outputs").values()]
+        self.wall_start = clock.perf_counter()
+        self.wall_time = 0.0
+        self.status = "running"
+        for output in self.outputs:
+            output.start(self)
+
+    # -- time loop ------------------------------------------------------------------------
+    def run(self, progress: bool = False) -> "Simulation":
+        bar = _progress_bar(self, progress)
+        snapshot_steps = {int(round((t - self.model.t_start) / self.dt)) for t in self.model.output["times"]}
+        try:
+            while self.step_index < self.model.num_steps:
+                self.step()
+                bar.update(1)
+                bar.set_postfix_str(f"t={self.time:.2f}", refresh=False)
+                if self.step_index % self.model.output["series_every"] == 0 or self.step_index in snapshot_steps:
+                    self._notify("record")
+                if self.step_index in snapshot_steps:
+                    self._notify("snapshot")
+        except (PrimordiaError, KeyboardInterrupt) as exc:
+            bar.close()
+            reason = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc)
+            self._finish(f"stopped at t = {self.time:g}: {reason}")
+            raise
+        bar.close()
+        self._finish("completed")
+        return self
+
+    def step(self) -> None:
+        """Advance every field by one time step ``dt``."""
+        self.disc.store_previous()
+        t_next = self.model.t_start + (self.step_index + 1) * self.dt
+        self.disc.set_time(t_next, self.dt)
+        for physics in self.model.physics_objects:
+            physics.before_step(t_next, self.dt)
+        stats = self.scheme.advance(self)
+        for name, solve in stats.items():
+            self.iterations.setdefault(name, []).append(solve.linear_iterations)
+        self.step_index += 1
+        self.time = t_next
+        self._check_finite()
+
+    def _check_finite(self):
+        for name in self.disc.field_names():
+            if not np.all(np.isfinite(self.backend.local_array(self.disc.field(name)))):
+                raise SolverError(f"field {name} is not finite at t = {self.time:g}")
+
+    def _notify(self, moment: str, *args):
+        for output in self.outputs:
+            getattr(output, moment)(self, *args)
+
+    def _finish(self, status: str):
+        self.status = status
+        self.wall_time = clock.perf_counter() - self.wall_start
+        self._notify("finish", status)
+
+    # -- what outputs read ------------------------------------------------------------------
+    def vertex_values(self) -> dict:
+        """All fields at the MeshData vertices (rank 0; None elsewhere), cached per step."""
+        if self._vertex_cache is None or self._vertex_cache[0] != self.step_index:
+            values = {name: self.backend.vertex_values(self.disc.field(name)) for name in self.disc.field_names()}
+            self._vertex_cache = (self.step_index, values)
+        return self._vertex_cache[1]
+
+    def field_statistics(self) -> dict[str, dict[str, float]]:
+        stats = {}
+        for name in self.disc.field_names():
+            field = self.disc.field(name)
+            layout = self.backend.dof_layout(field.ufl_function_space())
+            owned = self.backend.local_array(field)[:layout.num_owned]
+            local_min = owned.min() if owned.size else np.inf
+            local_max = owned.max() if owned.size else -np.inf
+            stats[name] = {
+                "integral": self.backend.assemble_scalar(self._integrals[name]),
+                "min": self.comm.allreduce(local_min, op=_mpi_op("MIN")),
+                "max": self.comm.allreduce(local_max, op=_mpi_op("MAX")),
+            }
+        return stats
+
+    def iteration_counts(self) -> dict[str, float]:
+        """Linear iterations of the last step per subproblem."""
+        return {f"{name.replace('.', '_')}_linear_iterations": float(its[-1])
+                for name, its in self.iterations.items() if its}
+
+    def summary(self, status: str) -> dict:
+        wall = clock.perf_counter() - self.wall_start
+        field_space = {name: self.disc.field(name).ufl_function_space() for name in self.disc.field_names()}
+        return {
+            "status": status,
+            "backend": self.backend.name,
+            "mpi_ranks": self.comm.size,
+            "cells": self.backend.num_cells(self.disc.mesh),
+            "dofs": {name: self.backend.num_dofs(space) for name, space in field_space.items()},
+            "dofs_total": sum(self.backend.num_dofs(space) for space in field_space.values()),
+            "steps": self.step_index,
+            "time": self.time,
+            "dt": self.dt,
+            "wall_time_s": wall,
+            "ms_per_step": 1e3 * wall / self.step_index if self.step_index else None,
+            "final": self.field_statistics(),
+            "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items() if its},
+            "splitting_scheme": self.scheme.name,
+        }
+
+
+def _mpi_op(name: str):
+    from mpi4py import MPI
+
+    return getattr(MPI, name)
+
+
+class _NoBar:
+    def update(self, n):
+        pass
+
+    def set_postfix_str(self, text, refresh=False):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress_bar(sim: Simulation, enabled: bool):
+    """A progress bar on rank 0: simulated time, step, ETA (tqdm)."""
+    if not (enabled and sim.is_root):
+        return _NoBar()
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(total=sim.model.num_steps, unit="step", dynamic_ncols=True, file=sys.stderr,
+                mininterval=0.5 if sys.stderr.isatty() else 15.0,
+                bar_format="{l_bar}{bar}| step {n_fmt}/{total_fmt} {postfix} [{elapsed}<{remaining}]")

@@ -1,0 +1,210 @@
+"""Composing a model: from a TOML file or in a few lines of Python.
+
+>>> from primordia import Model
+>>> from primordia.core.meshes import rectangle
+>>> model = Model(physics=["chemotaxis"], kinetics="painter2018",
+...               parameters={"m0": 0.75, "D_m": 0.03},
+...               mesh=rectangle((0, 0), (20, 20), cells=(43, 43)),
+...               dt=0.2, t_final=20.0, output={"times": [10, 20], "snapshot_fields": ["m"]})
+>>> result = model.run(backend="fenicsx", out="out/quick")     # doctest: +SKIP
+
+:class:`Model` validates everything it is given before any assembly: unknown
+physics, kinetics, parameters, options, backend or splitting scheme, wrong
+signs and impossible meshes are reported in one line naming the culprit.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+from primordia.core import config as config_
+from primordia.core.errors import ConfigError
+from primordia.core.mesh import MeshData
+from primordia.core.parameters import ParameterSet
+from primordia.core.plugins import lookup
+
+DEFAULT_OUTPUT = {"times": None, "snapshot_fields": None, "series_every": 10, "pictures": True}
+
+
+class Model:
+    """A validated model: physics + kinetics + parameters + mesh + time + outputs."""
+
+    def __init__(self, physics=("chemotaxis",), kinetics: str | dict | None = None, parameters=None,
+                 mesh: MeshData | dict | None = None, dt: float | None = None, t_final: float | None = None,
+                 t_start: float = 0.0, output: dict | None = None, physics_options: dict | None = None,
+                 coupling: str = "sequential", solver: dict | None = None, backend: str = "fenicsx",
+                 name: str = "", base_dir: str | Path = "."):
+        self.name = name
+        self.backend = backend
+        self.base_dir = Path(base_dir)
+        self.coupling = coupling
+        self.solver = dict(solver or {})
+        self._mesh_spec = mesh
+        self.physics_classes = [lookup("physics", p) for p in _as_list(physics, "model.physics")]
+        self.kinetics_spec = _kinetics_table(kinetics, self.physics_classes)
+        self.kinetics_class = (lookup("kinetics", self.kinetics_spec["name"])
+                               if self.kinetics_spec is not None else None)
+        self.parameters = self._parameter_set(parameters or {})
+        self.physics_options = self._physics_options(physics_options or {})
+        self.t_start, self.dt, self.t_final = _time(t_start, dt, t_final)
+        self.output = self._output(output or {})
+        self._instantiate_physics()  # validates kinetics and physics options now
+        self.mesh_data = self._mesh()
+
+    # -- construction from a config --------------------------------------------------------
+    @classmethod
+    def from_config(cls, config: dict) -> "Model":
+        config_.check_structure(config)
+        model_table = config.get("model", {})
+        time = config.get("time", {})
+        if "dt" not in time or "t_final" not in time:
+            raise ConfigError("the configuration needs [time] dt and t_final")
+        if "mesh" not in config:
+            raise ConfigError("the configuration needs a [mesh] table")
+        return cls(
+            physics=model_table.get("physics", ["chemotaxis"]), kinetics=config.get("kinetics"),
+            parameters=config.get("parameters"), mesh=config["mesh"], dt=time["dt"], t_final=time["t_final"],
+            t_start=time.get("t_start", 0.0), output=config.get("output"),
+            physics_options=config.get("physics"), coupling=config.get("coupling", {}).get("scheme", "sequential"),
+            solver=config.get("solver"), backend=model_table.get("backend", "fenicsx"),
+            name=model_table.get("name", ""), base_dir=config.get("_base_dir", "."),
+        )
+
+    @classmethod
+    def from_file(cls, path, overrides: list[str] | None = None) -> "Model":
+        return cls.from_config(config_.apply_overrides(config_.load_config(path), overrides or []))
+
+    # -- validation pieces -------------------------------------------------------------------
+    def _parameter_set(self, overrides: dict) -> ParameterSet:
+        declarations = [p for cls in self.physics_classes for p in cls.parameters]
+        if self.kinetics_class is not None:
+            declarations += list(self.kinetics_class.parameters)
+        if not isinstance(overrides, dict):
+            raise ConfigError("[parameters] must be a table of name = value")
+        return ParameterSet(declarations, overrides)
+
+    def _physics_options(self, table: dict) -> dict:
+        names = {cls.name for cls in self.physics_classes}
+        for name in table:
+            if name not in names:
+                raise ConfigError(f"[physics.{name}] configures a module that is not in model.physics "
+                                  f"({', '.join(sorted(names))})")
+        return {cls.name: dict(table.get(cls.name, {})) for cls in self.physics_classes}
+
+    def _output(self, table: dict) -> dict:
+        unknown = set(table) - set(DEFAULT_OUTPUT)
+        if unknown:
+            raise ConfigError(f"unknown key output.{sorted(unknown)[0]} (known: {', '.join(DEFAULT_OUTPUT)})")
+        output = {**DEFAULT_OUTPUT, **table}
+        times = output["times"] if output["times"] is not None else [self.t_final]
+        if not isinstance(times, list) or not all(isinstance(t, (int, float)) for t in times):
+            raise ConfigError("output.times must be a list of numbers")
+        for t in times:
+            if not self.t_start < t <= self.t_final + 1e-12:
+                raise ConfigError(f"output time {t:g} lies outside (t_start, t_final] = "
+                                  f"({self.t_start:g}, {self.t_final:g}]")
+            if abs(round((t - self.t_start) / self.dt) * self.dt - (t - self.t_start)) > 1e-9 * max(1.0, t):
+                raise ConfigError(f"output time {t:g} is not a multiple of dt = {self.dt:g} after t_start")
+        output["times"] = sorted(float(t) for t in times)
+        every = output["series_every"]
+        if not isinstance(every, int) or isinstance(every, bool) or every < 1:
+            raise ConfigError(f"output.series_every must be a positive integer (steps), got {every!r}")
+        return output
+
+    def _instantiate_physics(self):
+        self.kinetics_object = None
+        if self.kinetics_class is not None:
+            options = {k: v for k, v in self.kinetics_spec.items() if k != "name"}
+            self.kinetics_object = self.kinetics_class(self.parameters, **options)
+        self.physics_objects = [cls(self.parameters, kinetics=self.kinetics_object, **self.physics_options[cls.name])
+                                for cls in self.physics_classes]
+        fields = [f.name for p in self.physics_objects for f in p.fields()]
+        snapshot = self.output["snapshot_fields"]
+        if snapshot is None:
+            self.output["snapshot_fields"] = fields[:1]
+        else:
+            for name in snapshot:
+                if name not in fields:
+                    raise ConfigError(f"output.snapshot_fields names '{name}', which is not a field of this model "
+                                      f"({', '.join(fields)})")
+
+    def _mesh(self) -> MeshData:
+        from primordia.core.meshes import mesh_from_config
+
+        if isinstance(self._mesh_spec, MeshData):
+            return self._mesh_spec
+        if isinstance(self._mesh_spec, dict):
+            return mesh_from_config(self._mesh_spec, self.base_dir)
+        raise ConfigError("a model needs a mesh (a MeshData or a [mesh] table)")
+
+    # -- what a run needs ----------------------------------------------------------------------
+    @property
+    def num_steps(self) -> int:
+        return int(round((self.t_final - self.t_start) / self.dt))
+
+    def resolved_config(self) -> dict:
+        """The fully resolved configuration (defaults filled in), as written to ``config.toml``."""
+        mesh = (copy.deepcopy(self._mesh_spec) if isinstance(self._mesh_spec, dict)
+                else {"type": "in-memory", "vertices": self.mesh_data.num_vertices,
+                      "cells": self.mesh_data.num_cells, "description": self.mesh_data.description})
+        resolved = {
+            "model": {"name": self.name, "physics": [p.name for p in self.physics_objects], "backend": self.backend},
+            "parameters": dict(self.parameters),
+            "physics": {p.name: dict(p.opts) for p in self.physics_objects},
+            "mesh": mesh,
+            "time": {"t_start": self.t_start, "dt": self.dt, "t_final": self.t_final},
+            "output": dict(self.output),
+            "coupling": {"scheme": self.coupling},
+        }
+        if self.kinetics_object is not None:
+            resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.opts}
+        if self.solver:
+            resolved["solver"] = copy.deepcopy(self.solver)
+        return resolved
+
+    def run(self, backend: str | None = None, out: str | Path = "out/run", progress: bool = False, comm=None):
+        """Set up and run; returns the finished :class:`~primordia.coupling.orchestrator.Simulation`."""
+        from primordia.coupling.orchestrator import Simulation
+
+        sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm)
+        sim.setup()
+        sim.run(progress=progress)
+        return sim
+
+
+def _as_list(value, where: str) -> list[str]:
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value) or not value:
+        raise ConfigError(f"{where} must be a non-empty list of names")
+    return list(value)
+
+
+def _kinetics_table(kinetics, physics_classes) -> dict | None:
+    if not any(cls.needs_kinetics for cls in physics_classes):
+        if kinetics:
+            raise ConfigError("[kinetics] is given but no physics module of this model uses reaction kinetics")
+        return None
+    if kinetics is None:
+        return {"name": "painter2018"}
+    if isinstance(kinetics, str):
+        return {"name": kinetics}
+    if not isinstance(kinetics, dict):
+        raise ConfigError("[kinetics] must be a table with a name")
+    return {"name": "painter2018", **kinetics}
+
+
+def _time(t_start, dt, t_final) -> tuple[float, float, float]:
+    for key, value in (("t_start", t_start), ("dt", dt), ("t_final", t_final)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"time.{key} must be a number, got {value!r}")
+    if dt <= 0:
+        raise ConfigError(f"time.dt must be > 0, got {dt:g}")
+    if t_final <= t_start:
+        raise ConfigError(f"time.t_final ({t_final:g}) must be greater than time.t_start ({t_start:g})")
+    steps = (t_final - t_start) / dt
+    if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+        raise ConfigError(f"time.t_final - time.t_start = {t_final - t_start:g} is not a multiple of dt = {dt:g}")
+    return float(t_start), float(dt), float(t_final)

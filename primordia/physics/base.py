@@ -1,0 +1,133 @@
+"""What a physics module is, and what it may ask of the run it joins.
+
+A physics module owns some fields (``fields()``), states its weak forms once in
+UFL on the objects a :class:`Discretisation` hands out, and returns them as an
+ordered list of :class:`Subproblem` objects that the coupling layer solves.  It
+never imports a finite element library: the backend behind the
+:class:`Discretisation` does the assembly.
+
+A module that needs a field owned by another module declares it in
+``requires`` (e.g. the mechano-chemical coupling requires ``u`` from a
+poroelasticity module) and reads it with ``disc.field(name)``; a missing
+provider is reported by name before anything is assembled.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import ufl
+
+from primordia.core.errors import ConfigError
+from primordia.core.parameters import Parameter
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """A field a physics module owns: its name, element and meaning."""
+
+    name: str
+    degree: int = 1
+    shape: tuple[int, ...] = ()  # () scalar, ("gdim",) vector via vector=True
+    vector: bool = False
+    description: str = ""
+
+
+@dataclass
+class Subproblem:
+    """One (non)linear solve: find ``unknown`` with ``residual(unknown) = 0``.
+
+    ``jacobian`` is ``ufl.derivative(residual, unknown)``.  ``linear`` marks a
+    residual affine in the unknown (one Newton step is exact);
+    ``constant_jacobian`` marks a Jacobian that does not change between time
+    steps (assembled and factorised once).  ``operator`` is an optional
+    algebraic term (see :class:`AlgebraicOperator`) added to both.
+    ``petsc_options`` are defaults for the options prefix ``prefix``.
+    """
+
+    name: str
+    unknown: Any
+    residual: ufl.Form
+    jacobian: ufl.Form
+    bcs: list = field(default_factory=list)
+    linear: bool = True
+    constant_jacobian: bool = False
+    operator: "AlgebraicOperator | None" = None
+    petsc_options: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def prefix(self) -> str:
+        return self.name.replace(".", "_") + "_"
+
+
+class AlgebraicOperator(ABC):
+    """A term assembled from matrices rather than from a UFL integrand.
+
+    Used where a discretisation must act on the assembled operator to keep a
+    discrete property (e.g. the exponentially fitted chemotactic flux that
+    keeps the cell density non-negative).  ``update`` is called once per time
+    step before the solve; the operator's matrix is added to the Jacobian and
+    its action to the residual.
+    """
+
+    @abstractmethod
+    def update(self) -> None:
+        """Recompute the operator from the current state."""
+
+    @abstractmethod
+    def matrix(self):
+        """The PETSc Mat of the operator (pattern of the P1 stiffness matrix)."""
+
+
+class Physics(ABC):
+    """A balance law or constitutive piece, contributed through ``primordia_physics``."""
+
+    #: Name used in ``[model] physics = [...]``.
+    name: ClassVar[str]
+    #: Parameters read by this module (seed names and defaults).
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    #: Non-numeric options of the module's config table ``[physics.NAME]``, with defaults.
+    options: ClassVar[Mapping[str, Any]] = {}
+    #: Fields this module reads but another module provides.
+    requires: ClassVar[tuple[str, ...]] = ()
+    #: Whether the module needs a reaction kinetics plugin.
+    needs_kinetics: ClassVar[bool] = False
+
+    def __init__(self, params: Mapping[str, float], kinetics=None, **options):
+        self.params = params
+        self.kinetics = kinetics
+        unknown = set(options) - set(self.options)
+        if unknown:
+            raise ConfigError(f"physics {self.name}: unknown option '{sorted(unknown)[0]}' "
+                              f"(known: {', '.join(self.options) or 'none'})")
+        self.opts = {**self.options, **options}
+        self.validate_options()
+
+    def validate_options(self) -> None:
+        """Check ``self.opts``; raise :class:`ConfigError` naming a bad value."""
+
+    @abstractmethod
+    def fields(self) -> list[FieldSpec]:
+        """The fields this module owns."""
+
+    @abstractmethod
+    def setup(self, disc) -> None:
+        """Build forms on ``disc`` (a :class:`~primordia.coupling.discretisation.Discretisation`)."""
+
+    @abstractmethod
+    def initialise(self, disc) -> None:
+        """Set the initial values of the owned fields (seed eq. (2.5) etc.)."""
+
+    @abstractmethod
+    def subproblems(self) -> list[Subproblem]:
+        """The solves of one time step of this module, in order."""
+
+    def before_step(self, t: float, dt: float) -> None:
+        """Update anything time-dependent before the solves of the step ending at ``t``."""
+
+
+#: A function of an ``ops`` namespace and a state, used by kinetics-like plugins.
+StateFunction = Callable[..., Any]

@@ -1,0 +1,210 @@
+r"""Chemotaxis of mesenchymal cells with epithelium, FGF and BMP (seed eqs. (2.2a)-(2.2d)).
+
+The four species and their transport are declared data (:data:`SPECIES`);
+their reactions come from a kinetics plugin (built-in: ``painter2018``).  In the
+dimensionless form of seed section 3 (D_b = delta_B = kappa_F = kappa_B =
+gamma = 1 by default) the balance laws are
+
+    dm/dt = div( D_m grad m - alpha m exp(-gamma m) grad f )          (2.2a)
+    de/dt = R_e(m, e, b, x, t)                                        (2.2b)
+    df/dt = div( D_f grad f ) + R_f(e, f)                             (2.2c)
+    db/dt = div( D_b grad b ) + R_b(m, b)                             (2.2d)
+
+with zero-flux boundaries (2.6a) and initial data (2.5) plus a seeded random
+perturbation of m (``perturbation`` x m0 x U(-1, 1) at each vertex).  Couplings
+to a moving solid (advection by u_t, the FGF sink xi_f div u) are not stated
+here: the module that declares the coupling adds them (``disc.contribute``).
+
+Time discretisation (implicit-explicit, one linear solve per species)
+-----------------------------------------------------------------------
+Each reaction is split by the kinetics as R_s = P_s - L_s c_s with P_s, L_s >= 0;
+production is explicit, loss implicit.  With M_L the lumped P1 mass matrix
+(vertex quadrature) and S the P1 stiffness matrix, one step t_n -> t_{n+1}
+solves, in this order (Gauss-Seidel: each solve sees the species already
+updated):
+
+    (M_L/dt + A_chi(m^n, f^n)) m^{n+1}               = M_L m^n / dt
+    M_L (e^{n+1} - e^n)/dt = M_L [P_e - L_e e^{n+1}]   at (m^{n+1}, b^n, t_{n+1})
+    (M_L/dt + D_f S + delta_F M_L) f^{n+1}           = M_L (f^n/dt + kappa_F e^{n+1})
+    (M_L/dt + D_b S + delta_B M_L) b^{n+1}           = M_L (b^n/dt + kappa_B h_3(m^{n+1}) m^{n+1})
+
+A_chi is the cell transport operator.  With ``flux_scheme = "exponential_fitting"``
+(default) it is the edge-averaged exponentially fitted (Scharfetter-Gummel,
+"EAFE", Xu & Zikatanov 1999) discretisation of the flux D_m grad m - chi m grad f,
+chi = alpha exp(-gamma m^n): for every edge ij with stiffness weight
+w_ij = -S_ij and Peclet number Pe_ij = chi_ij (f_j - f_i)/D_m (chi_ij the edge
+mean of chi at the vertices), the flux from i to j is
+w_ij D_m [B(-Pe_ij) m_i - B(Pe_ij) m_j], B(x) = x/(e^x - 1).
+The matrix M_L/dt + A_chi then has non-positive off-diagonals and zero column
+sums of A_chi, i.e. it is an M-matrix whenever w_ij >= 0 (weakly acute meshes,
+such as squares split in two): m^{n+1} >= 0 for any dt, and the integral of m
+(sum of M_L m) is conserved to round-off.  For small Peclet numbers B(x) =
+1 - x/2 + O(x^2), the central scheme, so smooth solutions converge at second
+order in L2.  ``flux_scheme = "galerkin"`` uses the plain Galerkin form
+D_m grad m . grad v - chi m grad f . grad v instead (second order, but m can go
+negative: a P1 Galerkin run of seed example 1a reached min m = -0.19 by t = 160).
+
+Because every species solve is linear in its unknown, it is one exact Newton
+step on the UFL residual; the f and b matrices are constant and factorised once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from ufl.algorithms import expand_derivatives
+
+from primordia.core import ops as ops_
+from primordia.core.errors import ConfigError
+from primordia.physics.base import FieldSpec, Physics, Subproblem
+from primordia.physics.seed_parameters import CHEMOTAXIS
+
+
+@dataclass(frozen=True)
+class Species:
+    """A transported species: its diffusivity parameter and chemo-attractant, if any."""
+
+    name: str
+    description: str
+    diffusivity: str | None = None  # parameter name; None = immobile
+    attractant: str | None = None  # species whose gradient the flux climbs
+
+
+#: The four species of seed eqs. (2.2a)-(2.2d), in solve order.
+SPECIES = (
+    Species("m", "mesenchymal cell density", diffusivity="D_m", attractant="f"),
+    Species("e", "epithelium activation state (dimensionless, in [0, 1])"),
+    Species("f", "FGF concentration", diffusivity="D_f"),
+    Species("b", "BMP concentration", diffusivity="D_b"),
+)
+
+FLUX_SCHEMES = ("exponential_fitting", "galerkin")
+
+
+# -- the terms of seed eqs. (2.2a)-(2.2d), each a UFL integrand -------------------------------
+def accumulation(c, c_previous, test, dt, dx_lumped):
+    """d c / d t by backward Euler, lumped: (c - c^n)/dt v."""
+    return (c - c_previous) / dt * test * dx_lumped
+
+
+def diffusive_flux(diffusivity, c, test, dx):
+    """-div(D grad c) in weak form: D grad c . grad v."""
+    return diffusivity * ufl.inner(ufl.grad(c), ufl.grad(test)) * dx
+
+
+def chemotactic_flux(sensitivity, c, attractant, test, dx):
+    """+div(chi c grad f) in weak form (seed eq. (2.2a)): -chi c grad f . grad v."""
+    return -sensitivity * c * ufl.inner(ufl.grad(attractant), ufl.grad(test)) * dx
+
+
+def reaction(production, loss_rate, c, test, dx_lumped):
+    """-R = -(P - L c), lumped (seed eqs. (2.2b)-(2.2d))."""
+    return -(production - loss_rate * c) * test * dx_lumped
+
+
+class Chemotaxis(Physics):
+    """The 4-species m, e, f, b model of seed eqs. (2.2a)-(2.2d), (2.5), (2.6a)."""
+
+    name = "chemotaxis"
+    parameters = CHEMOTAXIS
+    needs_kinetics = True
+    options = {"flux_scheme": "exponential_fitting", "perturbation": 0.01, "seed": 1}
+
+    def validate_options(self):
+        if self.opts["flux_scheme"] not in FLUX_SCHEMES:
+            raise ConfigError(f"physics.chemotaxis.flux_scheme must be one of {', '.join(FLUX_SCHEMES)}, "
+                              f"got {self.opts['flux_scheme']!r}")
+        amplitude = self.opts["perturbation"]
+        if not isinstance(amplitude, (int, float)) or not 0 <= amplitude < 1:
+            raise ConfigError(f"physics.chemotaxis.perturbation must be a number in [0, 1), got {amplitude!r}")
+        if not isinstance(self.opts["seed"], int) or isinstance(self.opts["seed"], bool):
+            raise ConfigError(f"physics.chemotaxis.seed must be an integer, got {self.opts['seed']!r}")
+        missing = set(s.name for s in SPECIES) - set(self.kinetics.species)
+        if missing:
+            raise ConfigError(f"kinetics {self.kinetics.name} does not react species {sorted(missing)}")
+
+    def fields(self):
+        return [FieldSpec(s.name, degree=1, description=s.description) for s in SPECIES]
+
+    def sensitivity(self, m, ops):
+        """chi(m) = alpha exp(-gamma m): the chemotactic flux is chi(m) m grad f (seed eq. (2.2a))."""
+        return self.params["alpha"] * ops.exp(-self.params["gamma"] * m)
+
+    def setup(self, disc):
+        self.disc = disc
+        self.tests = {s.name: ufl.TestFunction(disc.field(s.name).ufl_function_space()) for s in SPECIES}
+
+    def initialise(self, disc):
+        """Seed eq. (2.5) plus the seeded perturbation of m."""
+        m0 = self.params["m0"]
+        rng = np.random.default_rng(self.opts["seed"])
+        noise = rng.uniform(-1.0, 1.0, disc.mesh_data.num_vertices)
+        disc.set_vertex_values("m", m0 * (1.0 + self.opts["perturbation"] * noise))
+        t0 = disc.time
+        for name in ("e", "f", "b"):
+            disc.interpolate(name, lambda x, name=name: np.broadcast_to(
+                self.kinetics.initial_state(m0, t0, ops_.NUMPY.at(x))[name], x.shape[1:]).copy())
+
+    def _reactions(self):
+        state = {s.name: self.disc.field(s.name) for s in SPECIES}
+        return self.kinetics.split_rates(state, self.disc.t, ops_.UFL.at(self.disc.x))
+
+    def species_residual(self, species: Species, reactions) -> ufl.Form:
+        """The residual of one species: the terms of its balance law (+ contributed couplings)."""
+        disc = self.disc
+        c, c_previous, test = disc.field(species.name), disc.previous(species.name), self.tests[species.name]
+        residual = accumulation(c, c_previous, test, disc.dt, disc.dx_lumped)
+        production, loss_rate = reactions[species.name]
+        if production != 0 or loss_rate != 0:
+            residual += reaction(production, loss_rate, c, test, disc.dx_lumped)
+        if species.diffusivity is not None and not self._fitted(species):
+            residual += diffusive_flux(self.params[species.diffusivity], c, test, disc.dx)
+        if species.attractant is not None and not self._fitted(species):
+            chi = self.sensitivity(disc.previous(species.name), ops_.UFL)
+            residual += chemotactic_flux(chi, c, disc.previous(species.attractant), test, disc.dx)
+        for term in disc.contributions(species.name, test):
+            residual += term
+        return residual
+
+    def _fitted(self, species: Species) -> bool:
+        return species.attractant is not None and self.opts["flux_scheme"] == "exponential_fitting"
+
+    def subproblems(self):
+        from primordia.coupling.edge_flux import ExponentiallyFittedFlux
+
+        reactions = self._reactions()
+        problems = []
+        for species in SPECIES:
+            unknown = self.disc.field(species.name)
+            residual = self.species_residual(species, reactions)
+            jacobian = ufl.derivative(residual, unknown)
+            operator = None
+            if self._fitted(species):
+                operator = ExponentiallyFittedFlux(
+                    self.disc, species.name, species.attractant,
+                    diffusivity=self.params[species.diffusivity],
+                    sensitivity=lambda m: self.sensitivity(m, ops_.NUMPY),
+                )
+            problems.append(Subproblem(
+                name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
+                linear=True, constant_jacobian=_jacobian_is_constant(jacobian, self.disc),
+                operator=operator, petsc_options=_solver_defaults(species),
+            ))
+        return problems
+
+
+def _jacobian_is_constant(jacobian: ufl.Form, disc) -> bool:
+    """True when the Jacobian reads no field (only constants fixed during a run)."""
+    expanded = expand_derivatives(jacobian)  # before expansion, derivative() still lists the unknown
+    return not expanded.coefficients() and disc.t not in expanded.constants()
+
+
+def _solver_defaults(species: Species) -> dict:
+    """Direct solves for constant symmetric matrices, Krylov for the rest (overridable)."""
+    if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
+        return {"ksp_type": "preonly", "pc_type": "jacobi"}
+    if species.attractant is not None:  # nonsymmetric M-matrix, rebuilt every step
+        return {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
+    return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}

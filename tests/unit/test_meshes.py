@@ -1,0 +1,402 @@
+"""Mesh generators, the meshio reader and the [mesh] config table (primordia.core.meshes)."""
+
+from __future__ import annotations
+
+import meshio
+import numpy as np
+import pytest
+
+from primordia.core.errors import ConfigError, MeshError
+from primordia.core.mesh import MeshData
+from primordia.core.meshes import (
+    box,
+    exterior_facets,
+    mesh_from_config,
+    read_mesh,
+    rectangle,
+    signed_volumes,
+)
+
+# ---------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------
+
+
+def facet_measures(mesh: MeshData, name: str) -> np.ndarray:
+    """Lengths (2D) or areas (3D) of the facets of boundary ``name``."""
+    x = mesh.points[mesh.boundaries[name]]
+    if mesh.gdim == 2:
+        return np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
+    return 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
+
+
+def assert_conforming(mesh: MeshData) -> None:
+    """Every facet is shared by at most two cells, and the exterior ones are exactly the named boundaries."""
+    cells = mesh.cells
+    facets = np.vstack([np.delete(cells, i, axis=1) for i in range(cells.shape[1])])
+    _, counts = np.unique(np.sort(facets, axis=1), axis=0, return_counts=True)
+    assert counts.max() == 2
+    named = np.vstack(list(mesh.boundaries.values()))
+    exterior = exterior_facets(cells)
+    assert len(named) == len(exterior)
+    assert {tuple(f) for f in np.sort(named, axis=1)} == {tuple(f) for f in np.sort(exterior, axis=1)}
+
+
+def gmsh_mesh_from(mesh: MeshData, volume_tag: int = 100) -> meshio.Mesh:
+    """A meshio.Mesh with Gmsh physical tags and names for each boundary of ``mesh``."""
+    facet_type = "line" if mesh.gdim == 2 else "triangle"
+    facets = np.vstack(list(mesh.boundaries.values()))
+    tags = np.concatenate([np.full(len(f), mesh.boundary_id(n)) for n, f in mesh.boundaries.items()])
+    points = np.column_stack([mesh.points, np.zeros(mesh.num_vertices)]) if mesh.gdim == 2 else mesh.points
+    field_data = {name: np.array([tag, mesh.gdim - 1]) for name, tag in mesh.boundary_ids.items()}
+    field_data["tissue"] = np.array([volume_tag, mesh.gdim])
+    return meshio.Mesh(
+        points,
+        [(facet_type, facets), (mesh.cell_type, mesh.cells)],
+        cell_data={
+            "gmsh:physical": [tags, np.full(mesh.num_cells, volume_tag)],
+            "gmsh:geometrical": [tags, np.ones(mesh.num_cells, dtype=int)],
+        },
+        field_data=field_data,
+    )
+
+
+#: A unit square of two triangles in Gmsh 4.1 ASCII, written by hand (not by meshio),
+#: with physical curves "left" (x = 0) and "right" (x = 1) and a physical surface.
+GMSH41_SQUARE = """$MeshFormat
+4.1 0 8
+$EndMeshFormat
+$PhysicalNames
+3
+1 1 "left"
+1 2 "right"
+2 3 "tissue"
+$EndPhysicalNames
+$Entities
+0 2 1 0
+1 0 0 0 0 1 0 1 1 0
+2 1 0 0 1 1 0 1 2 0
+1 0 0 0 1 1 0 1 3 0
+$EndEntities
+$Nodes
+1 4 1 4
+2 1 0 4
+1
+2
+3
+4
+0 0 0
+1 0 0
+1 1 0
+0 1 0
+$EndNodes
+$Elements
+3 4 1 4
+1 1 1 1
+1 1 4
+1 2 1 1
+2 2 3
+2 1 2 2
+3 1 2 3
+4 1 3 4
+$EndElements
+"""
+
+#: The same square in Gmsh 2.2 ASCII plus a fifth node no element uses, with the
+#: second triangle listed clockwise and the "bottom" boundary given no name.
+GMSH22_SQUARE = """$MeshFormat
+2.2 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+1 1 "left"
+2 3 "tissue"
+$EndPhysicalNames
+$Nodes
+5
+1 0 0 0
+2 1 0 0
+3 1 1 0
+4 0 1 0
+5 7 7 0
+$EndNodes
+$Elements
+4
+1 1 2 1 1 1 4
+2 1 2 7 2 1 2
+3 2 2 3 1 1 2 3
+4 2 2 3 1 1 4 3
+$EndElements
+"""
+
+#: A Gmsh 2.2 file with one node and no elements.
+GMSH22_NO_ELEMENTS = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n$Elements\n0\n$EndElements\n"
+
+
+# ---------------------------------------------------------------------------
+# rectangle
+# ---------------------------------------------------------------------------
+
+
+def test_seed_rectangle_has_the_papers_58482_triangles():
+    mesh = rectangle((0, 0), (20, 20), (171, 171), diagonal="right")
+    assert mesh.num_cells == 58_482
+    assert mesh.num_vertices == 172 * 172
+    assert mesh.cell_volumes().sum() == pytest.approx(400.0, rel=1e-12)
+    assert signed_volumes(mesh.points, mesh.cells).min() > 0
+    for name in ("left", "right", "bottom", "top"):
+        assert facet_measures(mesh, name).sum() == pytest.approx(20.0, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "diagonal, triangles_per_square, extra_vertices",
+    [("right", 2, 0), ("left", 2, 0), ("crossed", 4, 1)],
+)
+def test_rectangle_counts_area_orientation_and_boundaries(diagonal, triangles_per_square, extra_vertices):
+    lower, upper, (nx, ny) = (-1.0, 2.0), (3.0, 3.5), (5, 3)
+    mesh = rectangle(lower, upper, (nx, ny), diagonal=diagonal)
+    assert mesh.gdim == 2
+    assert mesh.num_cells == triangles_per_square * nx * ny
+    assert mesh.num_vertices == (nx + 1) * (ny + 1) + extra_vertices * nx * ny
+    assert mesh.cell_volumes().sum() == pytest.approx(4.0 * 1.5)
+    assert signed_volumes(mesh.points, mesh.cells).min() > 0, "every triangle counter-clockwise"
+    assert list(mesh.boundaries) == ["left", "right", "bottom", "top"]
+    assert mesh.boundary_ids == {"left": 1, "right": 2, "bottom": 3, "top": 4}
+    expected = {"left": (0, -1.0, 1.5), "right": (0, 3.0, 1.5), "bottom": (1, 2.0, 4.0), "top": (1, 3.5, 4.0)}
+    for name, (axis, plane, length) in expected.items():
+        assert np.all(mesh.points[mesh.boundaries[name], axis] == plane)
+        assert facet_measures(mesh, name).sum() == pytest.approx(length)
+    assert len(mesh.boundaries["left"]) == ny and len(mesh.boundaries["bottom"]) == nx
+    assert_conforming(mesh)
+
+
+@pytest.mark.parametrize("diagonal, cut", [("right", {(0, 0), (1, 1)}), ("left", {(1, 0), (0, 1)})])
+def test_rectangle_diagonal_direction_follows_dolfinx(diagonal, cut):
+    mesh = rectangle((0, 0), (1, 1), (1, 1), diagonal=diagonal)
+    shared = set(map(int, mesh.cells[0])) & set(map(int, mesh.cells[1]))
+    assert {tuple(mesh.points[v]) for v in shared} == cut
+
+
+def test_rectangle_vertices_run_x_fastest():
+    mesh = rectangle((0, 0), (2, 1), (2, 1))
+    np.testing.assert_array_equal(mesh.points, [[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1]])
+
+
+# ---------------------------------------------------------------------------
+# box
+# ---------------------------------------------------------------------------
+
+
+def test_box_volume_counts_orientation_and_boundaries():
+    lower, upper, (nx, ny, nz) = (0.0, -1.0, 1.0), (2.0, 2.0, 1.5), (4, 3, 2)
+    mesh = box(lower, upper, (nx, ny, nz))
+    assert mesh.gdim == 3 and mesh.cell_type == "tetra"
+    assert mesh.num_cells == 6 * nx * ny * nz
+    assert mesh.num_vertices == (nx + 1) * (ny + 1) * (nz + 1)
+    assert mesh.cell_volumes().sum() == pytest.approx(2.0 * 3.0 * 0.5)
+    assert signed_volumes(mesh.points, mesh.cells).min() > 0
+    assert list(mesh.boundaries) == ["left", "right", "bottom", "top", "front", "back"]
+    expected = {
+        "left": (0, 0.0, 3.0 * 0.5),
+        "right": (0, 2.0, 3.0 * 0.5),
+        "bottom": (1, -1.0, 2.0 * 0.5),
+        "top": (1, 2.0, 2.0 * 0.5),
+        "front": (2, 1.0, 2.0 * 3.0),
+        "back": (2, 1.5, 2.0 * 3.0),
+    }
+    for name, (axis, plane, area) in expected.items():
+        assert np.all(mesh.points[mesh.boundaries[name], axis] == plane), name
+        assert facet_measures(mesh, name).sum() == pytest.approx(area), name
+    assert len(mesh.boundaries["front"]) == 2 * nx * ny
+    assert_conforming(mesh)
+
+
+# ---------------------------------------------------------------------------
+# generator input errors
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"cells": (0, 3)}, "positive integers"),
+        ({"cells": (2.5, 3)}, "positive integers"),
+        ({"cells": (2, 3, 4)}, "list of 2 positive integers"),
+        ({"lower": (0, 0), "upper": (1, 0)}, "upper corner must exceed the lower corner along y"),
+        ({"lower": (0,), "upper": (1, 1)}, "lower corner must be a list of 2 numbers"),
+        ({"upper": (1, float("nan"))}, "must be finite"),
+        ({"diagonal": "diagonal"}, "unknown rectangle diagonal 'diagonal'"),
+    ],
+)
+def test_rectangle_rejects_bad_input_in_one_line(kwargs, message):
+    with pytest.raises(MeshError, match=message) as error:
+        rectangle(**kwargs)
+    assert "\n" not in str(error.value)
+
+
+def test_box_rejects_upper_below_lower():
+    with pytest.raises(MeshError, match="along z"):
+        box((0, 0, 1), (1, 1, 0), (1, 1, 1))
+
+
+# ---------------------------------------------------------------------------
+# read_mesh
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_read_gmsh22_written_by_meshio_keeps_names_and_drops_z(tmp_path, binary):
+    original = rectangle((0, 0), (2, 1), (4, 2))
+    path = tmp_path / "square.msh"
+    meshio.write(path, gmsh_mesh_from(original), file_format="gmsh22", binary=binary)
+    mesh = read_mesh(path)
+    assert mesh.gdim == 2
+    np.testing.assert_array_equal(mesh.points, original.points)
+    np.testing.assert_array_equal(mesh.cells, original.cells)
+    assert mesh.boundary_ids == original.boundary_ids
+    for name, facets in original.boundaries.items():
+        np.testing.assert_array_equal(mesh.boundaries[name], facets)
+    assert "tissue" not in mesh.boundaries
+
+
+def test_read_hand_written_gmsh41(tmp_path):
+    path = tmp_path / "square41.msh"
+    path.write_text(GMSH41_SQUARE)
+    mesh = read_mesh(path)
+    assert (mesh.gdim, mesh.num_cells, mesh.num_vertices) == (2, 2, 4)
+    assert mesh.cell_volumes().sum() == pytest.approx(1.0)
+    assert mesh.boundary_ids == {"left": 1, "right": 2}
+    assert facet_measures(mesh, "left").sum() == pytest.approx(1.0)
+    assert np.all(mesh.points[mesh.boundaries["left"], 0] == 0.0)
+    assert np.all(mesh.points[mesh.boundaries["right"], 0] == 1.0)
+
+
+def test_read_gmsh22_drops_unused_nodes_reorients_and_names_unnamed_tags(tmp_path):
+    path = tmp_path / "square22.msh"
+    path.write_text(GMSH22_SQUARE)
+    mesh = read_mesh(path)
+    assert mesh.num_vertices == 4, "the node no element uses is dropped"
+    assert signed_volumes(mesh.points, mesh.cells).min() > 0, "the clockwise triangle is flipped"
+    assert mesh.boundary_ids == {"left": 1, "boundary_7": 2}
+    np.testing.assert_array_equal(mesh.points[mesh.boundaries["boundary_7"]], [[[0, 0], [1, 0]]])
+
+
+def test_read_3d_gmsh_box_with_facet_names(tmp_path):
+    original = box((0, 0, 0), (1, 2, 3), (2, 2, 2))
+    path = tmp_path / "box.msh"
+    meshio.write(path, gmsh_mesh_from(original), file_format="gmsh22", binary=False)
+    mesh = read_mesh(path)
+    assert mesh.gdim == 3 and mesh.num_cells == original.num_cells
+    assert mesh.cell_volumes().sum() == pytest.approx(6.0)
+    assert list(mesh.boundaries) == list(original.boundaries)
+    assert facet_measures(mesh, "front").sum() == pytest.approx(2.0)
+    assert facet_measures(mesh, "left").sum() == pytest.approx(6.0)
+
+
+@pytest.mark.parametrize("suffix", [".xdmf", ".vtu"])
+def test_read_other_formats_without_boundary_names(tmp_path, suffix):
+    original = rectangle((0, 0), (1, 1), (3, 3))
+    path = tmp_path / f"plain{suffix}"
+    meshio.write(path, meshio.Mesh(original.points, [("triangle", original.cells)]))
+    mesh = read_mesh(path)
+    assert mesh.boundaries == {}
+    np.testing.assert_allclose(mesh.points, original.points)
+    np.testing.assert_array_equal(mesh.cells, original.cells)
+
+
+def write_vtu(path, points, cells):
+    meshio.write(path, meshio.Mesh(np.asarray(points, dtype=float), cells))
+    return path
+
+
+UNIT_SQUARE = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+
+
+@pytest.mark.parametrize(
+    "make_file, message",
+    [
+        (lambda d: d / "missing.msh", "does not exist"),
+        (lambda d: d, "is not a file"),
+        (lambda d: (d / "junk.msh").write_text("not a mesh") and d / "junk.msh", "cannot read mesh file"),
+        (lambda d: (d / "mesh.txt").write_text("1 2 3") and d / "mesh.txt", "no mesh format with extension '.txt'"),
+        (lambda d: write_vtu(d / "q.vtu", UNIT_SQUARE, [("quad", [[0, 1, 2, 3]])]), "no triangle or tetra cells"),
+        (
+            lambda d: write_vtu(
+                d / "mixed.vtu", UNIT_SQUARE + [[2, 0, 0]], [("triangle", [[1, 4, 2]]), ("quad", [[0, 1, 2, 3]])]
+            ),
+            "unsupported cell types quad",
+        ),
+        (
+            lambda d: write_vtu(
+                d / "flat.vtu", [[0, 0], [1, 0], [2, 0], [0, 1]], [("triangle", [[0, 1, 2], [0, 1, 3]])]
+            ),
+            "1 degenerate",
+        ),
+        (lambda d: (d / "empty.msh").write_text(GMSH22_NO_ELEMENTS) and d / "empty.msh", "is empty"),
+        (
+            lambda d: write_vtu(d / "surface.vtu", [[0, 0, 0], [1, 0, 0], [0, 1, 1]], [("triangle", [[0, 1, 2]])]),
+            "not in a z = constant plane",
+        ),
+    ],
+    ids=["missing", "directory", "unreadable", "unknown-format", "quads", "mixed", "degenerate", "empty", "surface"],
+)
+def test_read_mesh_errors_are_one_line(tmp_path, make_file, message):
+    path = make_file(tmp_path)
+    with pytest.raises(MeshError, match=message) as error:
+        read_mesh(path)
+    assert "\n" not in str(error.value)
+
+
+# ---------------------------------------------------------------------------
+# mesh_from_config
+# ---------------------------------------------------------------------------
+
+
+def test_config_rectangle_is_the_seed_mesh():
+    mesh = mesh_from_config(
+        {"type": "rectangle", "lower": [0, 0], "upper": [20, 20], "cells": [171, 171], "diagonal": "right"}, "."
+    )
+    assert mesh.num_cells == 58_482
+    assert mesh.cell_volumes().sum() == pytest.approx(400.0)
+
+
+def test_config_box_defaults_lower_to_origin():
+    mesh = mesh_from_config({"type": "box", "upper": [1, 2, 3], "cells": [1, 2, 3]})
+    assert mesh.points.min(axis=0).tolist() == [0, 0, 0]
+    assert mesh.cell_volumes().sum() == pytest.approx(6.0)
+
+
+def test_config_file_path_is_relative_to_base_dir(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "square.msh").write_text(GMSH41_SQUARE)
+    mesh = mesh_from_config({"type": "file", "path": "meshes/square.msh"}, base_dir=tmp_path)
+    assert mesh.boundary_ids == {"left": 1, "right": 2}
+
+
+@pytest.mark.parametrize(
+    "table, error, message",
+    [
+        ({"type": "disc", "cells": [1, 1]}, ConfigError, "type must be one of 'rectangle', 'box', 'file', got 'disc'"),
+        ({"upper": [1, 1], "cells": [1, 1]}, ConfigError, "got None"),
+        ({"type": "rectangle", "upper": [1, 1], "cells": [1, 1], "nx": 3}, ConfigError, "unknown key 'nx'"),
+        (
+            {"type": "box", "upper": [1, 1, 1], "cells": [1, 1, 1], "diagonal": "left"},
+            ConfigError,
+            "unknown key 'diagonal'",
+        ),
+        ({"type": "rectangle", "upper": [1, 1]}, ConfigError, "needs 'cells'"),
+        ({"type": "rectangle", "upper": [1, 1], "cells": [4]}, ConfigError, "cells must be a list of 2"),
+        ({"type": "box", "upper": [1, 1], "cells": [1, 1, 1]}, ConfigError, "upper must be a list of 3"),
+        ({"type": "rectangle", "upper": [1, 1], "cells": [0, 4]}, MeshError, "positive integers"),
+        ({"type": "rectangle", "upper": [1, 1], "cells": [-2, 4]}, MeshError, "positive integers"),
+        ({"type": "rectangle", "lower": [1, 0], "upper": [1, 1], "cells": [2, 2]}, MeshError, "along x"),
+        ({"type": "rectangle", "upper": ["a", 1], "cells": [2, 2]}, MeshError, "upper corner must be a list of 2"),
+        ({"type": "file"}, ConfigError, "needs 'path'"),
+        ({"type": "file", "path": "nowhere.msh"}, MeshError, "nowhere.msh does not exist"),
+        ({"type": "file", "path": 3}, ConfigError, "path must be a file name"),
+    ],
+)
+def test_config_errors_name_the_problem(tmp_path, table, error, message):
+    with pytest.raises(error, match=message) as raised:
+        mesh_from_config(table, tmp_path)
+    assert "\n" not in str(raised.value)
