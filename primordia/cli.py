@@ -13,6 +13,7 @@ exits with status 2; outputs already written stay on disk.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -68,8 +69,8 @@ def command_run(args) -> int:
     model = Model.from_file(args.config, overrides)
     out = Path(args.out) if args.out else Path("out") / Path(args.config).stem
     sim = model.run(out=out, progress=not args.no_progress)
+    final = sim.summary(sim.status)  # collective (reductions over ranks): every rank calls it
     if sim.is_root:
-        final = sim.summary("completed")
         print(f"primordia: {sim.status}: {sim.step_index} steps on {final['backend']} "
               f"({final['cells']} cells, {final['dofs_total']} dofs) in {sim.wall_time:.1f} s -> {out}")
     return 0
@@ -93,13 +94,22 @@ def command_plugins(args) -> int:
     return 0
 
 
+def _is_root() -> bool:
+    """Whether this is MPI rank 0 (errors are printed once, not once per rank)."""
+    if "mpi4py.MPI" in sys.modules:
+        return sys.modules["mpi4py.MPI"].COMM_WORLD.rank == 0
+    rank = os.environ.get("OMPI_COMM_WORLD_RANK") or os.environ.get("PMI_RANK") or "0"
+    return rank == "0"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return args.func(args)
     except PrimordiaError as exc:
-        print(f"primordia: error: {exc}", file=sys.stderr)
+        if _is_root():
+            print(f"primordia: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("primordia: interrupted", file=sys.stderr)

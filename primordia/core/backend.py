@@ -68,7 +68,10 @@ class DofLayout:
         off = (indices < start) | (indices >= stop)
         if off.any():
             order = np.argsort(self.ghosts)
-            pos = np.searchsorted(self.ghosts, indices[off], sorter=order)
+            sorted_ghosts = self.ghosts[order]
+            pos = np.minimum(np.searchsorted(sorted_ghosts, indices[off]), max(len(order) - 1, 0))
+            if len(order) == 0 or np.any(sorted_ghosts[pos] != indices[off]):
+                raise ValueError("global DOF indices that are neither owned nor ghosts on this rank")
             local[off] = self.num_owned + order[pos]
         return local
 

@@ -135,5 +135,5 @@ def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):
         return table[name][0]
     except KeyError:
         known = ", ".join(sorted(table)) or "none"
-        label = kind.replace("_", " ").rstrip("s")
+        label = kind.replace("_", " ") if kind in ("physics", "kinetics") else kind.replace("_", " ")[:-1]
         raise PluginError(f"unknown {label} '{name}' (registered: {known})") from None

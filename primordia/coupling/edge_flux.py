@@ -54,43 +54,67 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         trial, test = ufl.TrialFunction(space), ufl.TestFunction(space)
         stiffness = backend.assemble_matrix(ufl.inner(ufl.grad(trial), ufl.grad(test)) * disc.dx)
         self._A = stiffness
-        self._prepare_edges(stiffness, backend.dof_layout(space))
+        self._prepare_edges(stiffness)
+        self._prepare_gather(backend.petsc_vector(disc.previous(species)))
 
-    def _prepare_edges(self, stiffness, layout):
+    def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
-        start = layout.owned_range[0]
+        start = stiffness.getOwnershipRange()[0]
         rows_global = np.repeat(np.arange(len(indptr) - 1) + start, np.diff(indptr))
         self._indptr, self._columns = indptr, columns
-        self._diagonal = columns == rows_global
-        off = ~self._diagonal
-        weights = np.where(off, -values, 0.0)
-        if self.disc.backend.comm.allreduce(int((weights < -1e-12 * np.abs(values).max()).sum())):
+        diagonal = columns == rows_global
+        weights = np.where(diagonal, 0.0, -values)
+        scale = self.disc.backend.comm.allreduce(float(np.abs(values).max(initial=0.0)), op=_max_op())
+        if self.disc.backend.comm.allreduce(int((weights < -1e-12 * scale).sum())):
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
                           "the exponentially fitted flux no longer guarantees a non-negative density",
                           stacklevel=3)
         self._weights = weights
-        self._row_local = rows_global - start
-        self._col_local = layout.global_to_local(columns)
-        # position of each row's diagonal entry, to accumulate the row sums
-        self._diag_positions = np.flatnonzero(self._diagonal)
+        self._row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))  # local row of each entry
+        self._diag_positions = np.flatnonzero(diagonal)
+        if len(self._diag_positions) != len(indptr) - 1:
+            raise ValueError("the stiffness matrix lacks diagonal entries")
+
+    def _prepare_gather(self, template):
+        """A scatter bringing the values at every column of the local rows to this rank.
+
+        A matrix row may reference DOFs that are neither owned nor ghosts here (cells
+        sharing only a vertex with this rank's cells), so ghost values are not enough.
+        """
+        needed, self._entry_column = np.unique(self._columns, return_inverse=True)
+        self._gathered = PETSc.Vec().createSeq(len(needed), comm=PETSc.COMM_SELF)
+        index_set = PETSc.IS().createGeneral(needed.astype(PETSc.IntType), comm=PETSc.COMM_SELF)
+        self._scatter = PETSc.Scatter().create(template, index_set, self._gathered, None)
+        # the gathered position of each local row's own DOF (its diagonal entry's column)
+        self._row_column = self._entry_column[self._diag_positions]
+
+    def _gather(self, name: str) -> np.ndarray:
+        vector = self.disc.backend.petsc_vector(self.disc.previous(name))
+        self._scatter.scatter(vector, self._gathered, addv=PETSc.InsertMode.INSERT,
+                              mode=PETSc.ScatterMode.FORWARD)
+        return self._gathered.getArray(readonly=True).copy()
 
     def update(self) -> None:
-        backend = self.disc.backend
-        c = backend.local_array(self.disc.previous(self.species))
-        a = backend.local_array(self.disc.previous(self.attractant))
+        c, a = self._gather(self.species), self._gather(self.attractant)
         chi = self.sensitivity(c)
-        i, j = self._row_local, self._col_local
+        i = self._row_column[self._row]  # gathered position of the row DOF of each entry
+        j = self._entry_column  # gathered position of the column DOF of each entry
         peclet = 0.5 * (chi[i] + chi[j]) * (a[j] - a[i]) / self.diffusivity
         scaled = self._weights * self.diffusivity
-        values = -scaled * bernoulli(peclet)  # A_ij, zero on the diagonal positions (weight 0)
-        outflow = scaled * bernoulli(-peclet)  # contributions to A_ii
-        row_sums = np.bincount(i, weights=outflow, minlength=len(self._indptr) - 1)
-        values[self._diag_positions] = row_sums[self._row_local[self._diag_positions]]
+        values = -scaled * bernoulli(peclet)  # A_ij; zero at the diagonal positions (weight 0)
+        row_sums = np.bincount(self._row, weights=scaled * bernoulli(-peclet), minlength=len(self._indptr) - 1)
+        values[self._diag_positions] = row_sums
         self._A.setValuesCSR(self._indptr, self._columns, values)
         self._A.assemble()
 
     def matrix(self):
         return self._A
+
+
+def _max_op():
+    from mpi4py import MPI
+
+    return MPI.MAX
 
 
 def apply_operator(operator: AlgebraicOperator, x: PETSc.Vec, residual: PETSc.Vec) -> None:

@@ -1,0 +1,383 @@
+"""Growth rates phi(k): every root of det M(phi, k) = 0, as a polynomial eigenvalue problem.
+
+M(phi, k) = M0 + phi M1 + phi^2 M2 (seed Definition 3.1, built in
+:mod:`primordia.analysis.linearisation`) is quadratic in phi, and only the
+displacement rows carry phi^2 (``M2 = rho I`` on u).  Writing ``v = phi u``
+gives the first-order (companion) linearisation of size n + d, n = d + 5::
+
+    [ -M0  0 ] [w]         [ M1   rho E_u ] [w]
+    [  0   I ] [v]  = phi  [ E_u^T   0    ] [v]        (E_u selects u from w)
+
+whose generalised eigenvalues are exactly the roots of det M (the full
+2n companion form would add d + 5 spurious infinite eigenvalues; introducing
+``phi w`` only where M2 != 0 avoids them).  The pencil is made real first (u
+-> -i u, :func:`~primordia.analysis.linearisation.real_pencil`), so rates come
+in exact conjugate pairs.  It is solved
+
+* by QZ (``scipy.linalg.eig(A, B)``, ``method="qz"``), which needs no inverse and
+  copes with rho = 0 or C_0 = 0 (B singular: infinite eigenvalues are dropped);
+* or, for the many small problems of a patterning space, as the standard
+  batched problem B^-1 A (``method="standard"``, valid when rho C_0 > 0, which
+  makes B invertible).
+
+No polynomial is expanded by hand on the way; the closed forms of
+:mod:`primordia.analysis.polynomials` serve as an independent check.
+
+The 2(d - 1) roots of the transverse factor B(phi)^(d-1) = (rho phi^2 + mu K)^(d-1)
+(shear waves, purely imaginary: neutral) are identified among the computed
+roots and reported separately; the remaining roots, those of P_1 + P_2 P_3, do
+not depend on d.  Units: phi is a rate in the seed's dimensionless time,
+k a wavenumber in its dimensionless length (section 2 scaling).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from primordia.analysis.linearisation import (
+    LinearisedCoefficients,
+    _as_coefficients,
+    real_pencil,
+    wave_vectors,
+)
+from primordia.analysis.polynomials import a0_quadratic, d0_quadratic
+
+#: Degree of P_1 + P_2 P_3 in phi when rho C_0 > 0 (4 chemical + 3 poroelastic roots).
+LONGITUDINAL_DEGREE = 7
+#: Generalised eigenvalues with |alpha/beta| above this are treated as infinite (B singular).
+INFINITE = 1e12
+
+
+def first_order_pencil(M0, M1, rho, d: int):
+    """(A, B) of the linearisation A z = phi B z, z = (w, phi u), of M0 + phi M1 + phi^2 rho E_u E_u^T."""
+    n = M0.shape[-1]
+    shape = np.broadcast_shapes(M0.shape[:-2], np.shape(rho))
+    A = np.zeros(shape + (n + d, n + d))
+    B = np.zeros_like(A)
+    A[..., :n, :n] = -M0
+    B[..., :n, :n] = M1
+    rho = np.broadcast_to(np.asarray(rho, dtype=float), shape)
+    for i in range(d):
+        A[..., n + i, n + i] = 1.0  # v_i ...
+        B[..., n + i, i] = 1.0  # ... = phi u_i
+        B[..., i, n + i] = rho  # rho phi^2 u_i = phi (rho v_i)
+    return A, B
+
+
+def balance_pencil(A, B, sweeps: int = 12):
+    """Row and column scalings by powers of 2 that equilibrate the pencil (A, B) (exact in floating point).
+
+    The pencil mixes stiffnesses ~1e4 K with storage ~1e-3 and mobilities
+    ~1e-3 K; unbalanced, QZ loses up to 8 digits on the slow chemical
+    rates.  Scaling rows and columns alternately by the (rounded) largest
+    entry of A and B brings it back to ~1e-12 relative accuracy.  Generalised
+    eigenvalues are unchanged: (D_1 A D_2) z = phi (D_1 B D_2) z.
+    """
+    A, B = np.array(A, dtype=float), np.array(B, dtype=float)
+    for _ in range(sweeps):
+        for axis in (-1, -2):  # rows (max over columns), then columns
+            size = np.sqrt(np.max(np.abs(A), axis=axis) ** 2 + np.max(np.abs(B), axis=axis) ** 2)
+            size = np.where(size > 0, 2.0 ** np.round(np.log2(np.where(size > 0, size, 1.0))), 1.0)
+            scale = size[..., :, None] if axis == -1 else size[..., None, :]
+            A /= scale
+            B /= scale
+    return A, B
+
+
+def _qz_eigenvalues(A, B, size: int):
+    """Finite generalised eigenvalues of each (A, B), NaN-padded to ``size``."""
+    A, B = balance_pencil(A, B)
+    batch = A.shape[:-2]
+    out = np.full(batch + (size,), np.nan, dtype=complex)
+    for index in np.ndindex(*batch):
+        (alpha, beta) = scipy.linalg.eig(A[index], B[index], right=False, homogeneous_eigvals=True)
+        finite = np.abs(beta) * INFINITE > np.abs(alpha)
+        values = alpha[finite] / beta[finite]
+        out[index][: values.size] = values[:size]
+    return out
+
+
+def _standard_eigenvalues(A, B):
+    # LAPACK's geev balances B^-1 A itself; measured against 40-digit roots of the
+    # closed form this path is accurate to ~1e-12 relative without balance_pencil.
+    return np.linalg.eigvals(np.linalg.solve(B, A))
+
+
+def _choose_method(c: LinearisedCoefficients, method: str) -> str:
+    invertible = bool(np.all(np.asarray(c.rho) > 0) and np.all(np.asarray(c.C_0) > 0))
+    if method == "auto":
+        return "standard" if invertible else "qz"
+    if method == "standard" and not invertible:
+        raise ValueError("method='standard' needs rho > 0 and C_0 > 0; use method='qz'")
+    if method not in ("standard", "qz"):
+        raise ValueError(f"method must be 'auto', 'standard' or 'qz', got {method!r}")
+    return method
+
+
+def _sort_by_growth(rates):
+    """Descending real part, then descending imaginary part; NaN last.
+
+    Real parts are compared to 12 significant digits (relative to the
+    largest root) so that the two members of a conjugate pair, whose real
+    parts may differ in the last bit, always come out as (+Im, -Im).
+    """
+    rates = np.asarray(rates, dtype=complex)
+    finite = np.isfinite(rates)
+    scale = 1.0 + np.max(np.where(finite, np.abs(rates), 0.0), axis=-1, keepdims=True)
+    real_key = np.where(finite, -np.round(rates.real / scale, 12), np.inf)
+    imag_key = np.where(finite, -rates.imag, np.inf)
+    order = np.lexsort((imag_key, real_key), axis=-1)
+    return np.take_along_axis(rates, order, axis=-1)
+
+
+def _uncouple(c: LinearisedCoefficients) -> LinearisedCoefficients:
+    from dataclasses import replace
+
+    return replace(c, xi_f=0.0 * np.asarray(c.xi_f))
+
+
+def _homogeneous_rates(c: LinearisedCoefficients, size: int):
+    """Roots of det M(phi, 0): every coupling term carries k, so M is block diagonal.
+
+    The mechanics (rho phi^2 u = 0, C_0 phi p = 0) contributes only phi = 0;
+    the chemistry the eigenvalues of -M22(0, 0).
+    """
+    from primordia.analysis.linearisation import matrix_pencil
+
+    M0, _, _ = matrix_pencil(c, np.zeros((1,)))
+    chemistry = np.linalg.eigvals(-M0[..., 2:, 2:])  # d = 1: rows u, p come first
+    zeros = np.zeros(chemistry.shape[:-1] + (size - 4,), dtype=complex)
+    return _sort_by_growth(np.concatenate([chemistry.astype(complex), zeros], axis=-1))
+
+
+def longitudinal_rates(params_or_coefficients, k, coupled: bool = True, method: str = "auto",
+                       paired: bool = False):
+    """Roots of P_1 + P_2 P_3 (the d-independent part of det M), shape ``batch + k.shape + (7,)``.
+
+    Computed from the d = 1 matrix (the longitudinal block of Definition 3.1:
+    u along k, p, m, e, f, b).  ``coupled=False`` drops the mechano-chemical
+    loop (xi_f = 0, i.e. P_1 = 0).  Sorted by descending real part, NaN-padded
+    where the degree is lower (rho = 0 or C_0 = 0).  With ``paired=True``, ``k``
+    has the parameters' batch shape and is matched element by element
+    (shape ``broadcast(batch, k.shape) + (7,)``).
+    """
+    c = _as_coefficients(params_or_coefficients)
+    if not coupled:
+        c = _uncouple(c)
+    k = np.asarray(k, dtype=float)
+    cc = c if paired else _expand(c, k.ndim)
+    shape = np.broadcast_shapes(cc.shape, k.shape)
+    M0, M1, _ = real_pencil(cc, wave_vectors(k, 1))
+    A, B = first_order_pencil(M0, M1, cc.rho, 1)
+    if _choose_method(c, method) == "standard":
+        rates = _standard_eigenvalues(A, B)
+    else:
+        rates = _qz_eigenvalues(A, B, LONGITUDINAL_DEGREE)
+    rates = _sort_by_growth(rates)
+    at_rest = np.broadcast_to(k == 0, shape)
+    if np.any(at_rest):
+        rates = np.where(at_rest[..., None], _homogeneous_rates(cc, LONGITUDINAL_DEGREE), rates)
+    return rates
+
+
+def _expand(c: LinearisedCoefficients, ndim: int) -> LinearisedCoefficients:
+    """Append ``ndim`` unit axes to every coefficient, so it broadcasts against k."""
+    from dataclasses import fields
+
+    if ndim == 0:
+        return c
+    values = {}
+    for f in fields(c):
+        value = np.asarray(getattr(c, f.name), dtype=float)
+        values[f.name] = value.reshape(value.shape + (1,) * ndim)
+    return LinearisedCoefficients(**values)
+
+
+@dataclass(frozen=True)
+class GrowthRates:
+    """All roots phi of det M(phi, k) = 0 at each wavenumber, for one parameter set.
+
+    ``rates[i]`` are the 7 roots of P_1 + P_2 P_3 at ``k[i]`` (descending real
+    part); ``transverse[i]`` the 2(d-1) roots of B^(d-1), +-i k sqrt(mu/rho),
+    identified among the computed roots.  Dimensionless rates.
+    """
+
+    k: np.ndarray
+    rates: np.ndarray
+    transverse: np.ndarray
+    d: int
+
+    @property
+    def max_real(self) -> np.ndarray:
+        """max Re phi at each k over the non-transverse roots."""
+        return np.nanmax(self.rates.real, axis=-1)
+
+    @property
+    def all_roots(self) -> np.ndarray:
+        return np.concatenate([self.rates, self.transverse], axis=-1)
+
+
+def growth_rates(params, k, d: int = 2, coupled: bool = True, method: str = "qz", direction=None) -> GrowthRates:
+    """Every root of det M(phi, k) = 0 for d = 2 or 3, by the linearised generalised eigenproblem.
+
+    ``k`` is an array of wavenumber magnitudes (>= 0), ``direction`` the wave
+    direction (e_1 by default; the model is isotropic).  The full
+    (d+5) x (d+5) matrix of Definition 3.1 is used; the transverse factor's
+    roots are then identified as the 2(d-1) computed roots nearest to
+    +-i k sqrt(mu/rho) (none when rho = 0) and returned separately.
+    """
+    if d not in (2, 3):
+        raise ValueError(f"d must be 2 or 3, got {d}")
+    c = _as_coefficients(params)
+    if c.shape != ():
+        raise ValueError("growth_rates takes one parameter set; use max_growth_rate for grids")
+    if not coupled:
+        c = _uncouple(c)
+    k = np.atleast_1d(np.asarray(k, dtype=float))
+    if np.any(k < 0):
+        raise ValueError("wavenumbers must be >= 0")
+    M0, M1, _ = real_pencil(c, wave_vectors(k, d, direction))
+    A, B = first_order_pencil(M0, M1, c.rho, d)
+    n_transverse = 2 * (d - 1) if float(c.rho) > 0 else 0
+    size = LONGITUDINAL_DEGREE + n_transverse
+    if _choose_method(c, method) == "standard":
+        roots = _standard_eigenvalues(A, B)
+    else:
+        roots = _qz_eigenvalues(A, B, size)
+    rates, transverse = _split_transverse(roots, c, k, d, n_transverse)
+    rates = _sort_by_growth(rates)
+    at_rest = k == 0
+    if np.any(at_rest):
+        rates[at_rest] = _homogeneous_rates(c, LONGITUDINAL_DEGREE)
+        transverse[at_rest] = 0.0
+    return GrowthRates(k=k, rates=rates, transverse=transverse, d=d)
+
+
+def _split_transverse(roots, c, k, d, n_transverse):
+    """Remove the roots of B^(d-1) (each of +-i k sqrt(mu/rho), d-1 times) by nearest match."""
+    remaining = roots.copy()
+    found = np.full(k.shape + (n_transverse,), np.nan, dtype=complex)
+    if n_transverse:
+        speed = np.sqrt(c.mu / c.rho)
+        targets = [sign * 1j * k * speed for sign in (1, -1) for _ in range(d - 1)]
+        for column, target in enumerate(targets):
+            distance = np.abs(remaining - target[:, None])
+            distance = np.where(np.isnan(distance), np.inf, distance)
+            nearest = np.argmin(distance, axis=-1)
+            rows = np.arange(k.size)
+            found[rows, column] = remaining[rows, nearest]
+            remaining[rows, nearest] = np.nan
+    kept = _sort_by_growth(remaining)[..., :LONGITUDINAL_DEGREE]  # NaN (removed) sort last
+    return kept, found
+
+
+def max_growth_rate(params_or_coefficients, k, coupled: bool = True, method: str = "auto"):
+    """max Re phi over the roots of P_1 + P_2 P_3, shape ``batch + k.shape``."""
+    return np.nanmax(longitudinal_rates(params_or_coefficients, k, coupled, method).real, axis=-1)
+
+
+def default_wavenumbers(params_or_coefficients, n: int = 241, coupled: bool = True) -> np.ndarray:
+    """A log-spaced k grid from 1e-3 to past the end of the predicted unstable band (>= 10).
+
+    The band where a_0 (or d_0) < 0 ends at the larger root of its quadratic
+    factor (:func:`~primordia.analysis.polynomials.a0_quadratic`); the grid
+    reaches 3 times its square root.  Over a parameter grid, the widest band wins.
+    """
+    c = _as_coefficients(params_or_coefficients)
+    alpha, X, Y = d0_quadratic(c) if coupled else a0_quadratic(c)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        root = (-X + np.sqrt(np.maximum(X**2 - 4 * alpha * Y, 0.0))) / (2 * alpha)
+    root = np.where(np.isfinite(root) & (root > 0), root, 0.0)
+    k_high = max(10.0, 3.0 * float(np.sqrt(np.max(root))))
+    return np.logspace(-3.0, np.log10(k_high), n)
+
+
+#: Re phi <= GROWTH_TOLERANCE (1 + |phi|) is rounding, not growth (rates are accurate to ~1e-12 relative).
+GROWTH_TOLERANCE = 1e-11
+#: |Im phi| <= REAL_TOLERANCE (1 + |phi|): a real root, i.e. a stationary (Turing) mode.
+REAL_TOLERANCE = 1e-7
+KINDS = ("any", "stationary", "oscillatory")
+
+
+def growth_of_kind(rates, kind: str = "any"):
+    """Re phi of the roots of one kind (stationary: real roots; oscillatory: complex), -inf elsewhere.
+
+    Roots whose real part is within rounding of zero are set to 0 (neutral).
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    rates = np.asarray(rates, dtype=complex)
+    size = 1.0 + np.abs(rates)
+    growth = np.where(np.abs(rates.real) <= GROWTH_TOLERANCE * size, 0.0, rates.real)
+    growth = np.where(np.isfinite(rates), growth, -np.inf)
+    if kind == "any":
+        return growth
+    real = np.abs(rates.imag) <= REAL_TOLERANCE * size
+    return np.where(real if kind == "stationary" else ~real, growth, -np.inf)
+
+
+def max_growth_of_kind(rates, kind: str = "any"):
+    """max over the last axis (the roots) of :func:`growth_of_kind`."""
+    return np.max(growth_of_kind(rates, kind), axis=-1)
+
+
+@dataclass(frozen=True)
+class FastestMode:
+    """The fastest-growing wavenumber of a parameter set (dimensionless)."""
+
+    k_max: float  #: wavenumber of the largest Re phi
+    growth_rate: float  #: Re phi at k_max (> 0: the steady state is unstable)
+    frequency: float  #: |Im phi| of that root (0 for a stationary Turing mode)
+    band: tuple[float, float]  #: (lowest, highest) k of the sampled grid with Re phi > 0; NaN if none
+    at_edge: bool  #: the maximum sits at an end of the k range: widen it
+    kind: str = "any"  #: which roots were searched: "any", "stationary" or "oscillatory"
+
+    @property
+    def unstable(self) -> bool:
+        return self.growth_rate > 0
+
+    @property
+    def stationary(self) -> bool:
+        return self.frequency == 0.0
+
+    @property
+    def wavelength(self) -> float:
+        """2 pi / k_max, in the seed's dimensionless length."""
+        return 2.0 * np.pi / self.k_max if self.k_max > 0 else np.inf
+
+
+def fastest_growing_mode(params, k=None, coupled: bool = True, kind: str = "any") -> FastestMode:
+    """k_max, its growth rate and wavelength 2 pi / k_max, refined past the k grid by Brent's method.
+
+    ``kind="stationary"`` looks only at real roots (Turing patterns, what a
+    simulation shows as spots); ``"oscillatory"`` only at complex ones; the
+    default at all roots.  Returns ``growth_rate = -inf`` if no root of that kind exists.
+    """
+    c = _as_coefficients(params)
+    k = default_wavenumbers(c, coupled=coupled) if k is None else np.sort(np.asarray(k, dtype=float))
+
+    def growth_at(kk):
+        return max_growth_of_kind(longitudinal_rates(c, np.atleast_1d(kk), coupled, method="qz"), kind)
+
+    growth = growth_at(k)
+    best = int(np.argmax(growth))
+    at_edge = best in (0, k.size - 1)
+    k_max = float(k[best])
+    if not at_edge and np.isfinite(growth[best]):
+        found = scipy.optimize.minimize_scalar(
+            lambda kk: -float(growth_at(kk)[0]), bounds=(k[best - 1], k[best + 1]), method="bounded",
+            options={"xatol": 1e-8 * k[best]})
+        if -found.fun >= growth[best]:
+            k_max = float(found.x)
+    roots = longitudinal_rates(c, np.array([k_max]), coupled, method="qz")[0]
+    of_kind = growth_of_kind(roots, kind)
+    leading = roots[np.argmax(of_kind)]
+    rate = float(np.max(of_kind))
+    frequency = float(abs(leading.imag)) if np.abs(leading.imag) > REAL_TOLERANCE * (1 + abs(leading)) else 0.0
+    unstable = k[growth > 0]
+    band = (float(unstable.min()), float(unstable.max())) if unstable.size else (np.nan, np.nan)
+    return FastestMode(k_max=k_max, growth_rate=rate, frequency=frequency, band=band, at_edge=at_edge, kind=kind)

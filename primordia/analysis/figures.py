@@ -1,0 +1,195 @@
+"""Figures in the layout of seed Figures 3.1-3.3 (matplotlib, Agg backend).
+
+:func:`patterning_figure` draws one row of the seed's figures from a
+:func:`~primordia.analysis.patterning.patterning_space` Dataset:
+
+1. the patterning space: the region where a_0 (d_0) < 0 for some k filled in
+   light grey, the boundary found from the growth rates (max real root = 0) in
+   thick black, and each seed condition's boundary curve in the seed's style;
+2. a_0(k^2) (or d_0) at the critical value of one parameter and at 50%, 75%,
+   125%, 150% of it (critical curve green, as in the seed);
+3. the dispersion curves max Re phi(k^2) for the same values.
+
+:func:`dispersion_figure` draws the growth rates of one parameter set.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+from primordia.analysis.patterning import (  # noqa: E402
+    COUPLED_CORRECTED_CURVES,
+    COUPLED_CURVES,
+    CRITICAL_SCALES,
+    UNCOUPLED_CURVES,
+)
+
+#: Colours of the curves at 50%, 75%, 100% (critical, green as in the seed), 125%, 150%.
+SCALE_COLOURS = ("tab:blue", "tab:cyan", "tab:green", "tab:orange", "tab:red")
+
+
+def _boundary_curves(ds: xr.Dataset):
+    if not ds.attrs.get("coupled"):
+        return UNCOUPLED_CURVES
+    return COUPLED_CURVES if ds.attrs.get("theta_variant") == "seed" else COUPLED_CORRECTED_CURVES
+
+
+def _changes_sign(values: np.ndarray) -> bool:
+    finite = values[np.isfinite(values)]
+    return finite.size > 0 and finite.min() < 0 < finite.max()
+
+
+def draw_patterning_space(ax, ds: xr.Dataset) -> None:
+    """Panel 1: predicted region (grey), numerical boundary (black), seed condition curves."""
+    xname, yname = ds.attrs["x"], ds.attrs["y"]
+    x, y = ds[xname].values, ds[yname].values
+    handles = []
+    region = ds["unstable_conditions"].values.T.astype(float)
+    if region.max() > 0:
+        ax.contourf(x, y, region, levels=[0.5, 1.5], colors=["0.85"])
+    handles.append(Patch(color="0.85", label=f"{'d_0' if ds.attrs['coupled'] else 'a_0'} < 0 for some k"))
+    # The growth rate is ~0 all over the stable side (the conserved cell mode at small k), so
+    # its zero contour is ill-defined; the 0/1 flag's 0.5 contour is exact to one grid cell.
+    numerical = ds["unstable_numerical"].values.T.astype(float)
+    if 0 < numerical.mean() < 1:
+        ax.contour(x, y, numerical, levels=[0.5], colors="black", linewidths=2.6)
+    handles.append(Line2D([], [], color="black", linewidth=2.6, label="max real root = 0 (eigenvalues)"))
+    oscillatory = ds["oscillatory_growth_rate"].values.T
+    if _changes_sign(oscillatory):
+        ax.contour(x, y, np.where(np.isfinite(oscillatory), oscillatory, -1.0), levels=[0.0], colors="0.4",
+                   linewidths=1.0, linestyles=":")
+        handles.append(Line2D([], [], color="0.4", linestyle=":", label="oscillatory Re phi = 0"))
+    for variable, label, style in _boundary_curves(ds):
+        values = ds[variable].values.T
+        if _changes_sign(values):
+            ax.contour(x, y, values, levels=[0.0], colors=style["color"], linestyles=[style["linestyle"]],
+                       linewidths=1.4)
+            handles.append(Line2D([], [], linewidth=1.4, label=label, **style))
+    base_x, base_y = ds.attrs.get(f"parameter_{xname}"), ds.attrs.get(f"parameter_{yname}")
+    if base_x is not None and x.min() <= base_x <= x.max() and y.min() <= base_y <= y.max():
+        ax.plot(base_x, base_y, marker="*", color="gold", markeredgecolor="black", markersize=12, linestyle="")
+        handles.append(Line2D([], [], marker="*", color="gold", markeredgecolor="black", markersize=10,
+                              linestyle="", label="fixed parameters"))
+    ax.set_xlim(x.min(), x.max())
+    ax.set_ylim(y.min(), y.max())
+    ax.set_xlabel(xname)
+    ax.set_ylabel(yname)
+    kind = "coupled" if ds.attrs["coupled"] else "uncoupled"
+    variant = f", {ds.attrs['theta_variant']} theta" if ds.attrs["coupled"] else ""
+    ax.set_title(f"patterning space ({kind}{variant})", fontsize=10)
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
+              frameon=False)
+
+
+def _constant_term_limits(curves, K, k_c):
+    """Show every curve's dip below zero and the critical curve's tangency, not the K^3 growth."""
+    low = float(np.nanmin(curves))
+    critical = curves[CRITICAL_SCALES.index(1.0)]
+    near = critical[K <= max(3.0 * k_c**2, 0.2 * K.max())]
+    high = max(-low, float(np.nanmax(np.abs(near))), 1e-300)
+    return (1.15 * low if low < 0 else -0.25 * high, 1.5 * high)
+
+
+def draw_critical_curves(ax_constant, ax_dispersion, ds: xr.Dataset) -> None:
+    """Panels 2 and 3: a_0 (d_0) and max Re phi against k^2 at the critical value x 0.5 ... 1.5."""
+    name = ds.attrs.get("critical_parameter", "?")
+    if "constant_term" not in ds:
+        for ax in (ax_constant, ax_dispersion):
+            ax.text(0.5, 0.5, ds.attrs.get("critical_note", "no critical value"), ha="center", va="center",
+                    transform=ax.transAxes, fontsize=8, wrap=True)
+        return
+    K = ds["k_squared"].values
+    critical = ds.attrs["critical_value"]
+    symbol = "d_0" if ds.attrs["coupled"] else "a_0"
+    constant = ds["constant_term"].values
+    growth = ds["dispersion_max_real"].values
+    for i, scale in enumerate(CRITICAL_SCALES):
+        label = f"{name} = {scale:g} x {critical:.4g}"
+        width = 2.2 if scale == 1.0 else 1.3
+        ax_constant.plot(K, constant[i], color=SCALE_COLOURS[i], linewidth=width, label=label)
+        ax_dispersion.plot(K, growth[i], color=SCALE_COLOURS[i], linewidth=width, label=label)
+    for ax in (ax_constant, ax_dispersion):
+        ax.axhline(0.0, color="black", linewidth=0.7)
+        ax.set_xlabel("k^2")
+        ax.set_xlim(K.min(), K.max())
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
+    ax_constant.set_ylim(*_constant_term_limits(constant, K, ds.attrs["critical_wavenumber"]))
+    ax_constant.set_ylabel(symbol)
+    ax_constant.set_title(f"{symbol}(k^2) around the critical {name} (k_c = {ds.attrs['critical_wavenumber']:.3g})",
+                          fontsize=10)
+    finite = growth[np.isfinite(growth)]
+    high = max(finite.max(), 1e-3 * abs(finite.min())) if finite.size else 1.0
+    ax_dispersion.set_ylim(-0.6 * high if finite.min() < -0.6 * high else finite.min() * 1.1, 1.15 * high)
+    ax_dispersion.set_ylabel("max Re phi")
+    ax_dispersion.set_title("dispersion relation", fontsize=10)
+
+
+def patterning_figure(ds: xr.Dataset, path=None):
+    """One row of seed Figures 3.1/3.2: patterning space, a_0 (d_0) curves, dispersion curves."""
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
+    draw_patterning_space(axes[0], ds)
+    draw_critical_curves(axes[1], axes[2], ds)
+    return _finish(fig, path)
+
+
+def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
+    """Re phi(k) and Im phi(k) of the leading roots, and a_0, d_0 (as a_0/k^2, d_0/((kappa/eta)(2mu+lambda)k^6))."""
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
+    k = ds["k"].values
+    real, imag = ds["growth_rate_real"].values, ds["growth_rate_imag"].values
+    for b in range(min(branches, real.shape[1])):
+        axes[0].plot(k, real[:, b], linewidth=2.0 if b == 0 else 1.0, label=f"branch {b}")
+        axes[1].plot(k, imag[:, b], linewidth=2.0 if b == 0 else 1.0, label=f"branch {b}")
+    # rates span ~1e-7 (slow modes at small k) to ~1e3 (elastic waves): symmetric log scales
+    axes[0].set_yscale("symlog", linthresh=1e-6)
+    axes[1].set_yscale("symlog", linthresh=1e-3)
+    axes[0].axhline(0.0, color="black", linewidth=0.7)
+    for prefix, style in (("turing", "-"), ("fastest", ":")):
+        if ds.attrs.get(f"{prefix}_unstable"):
+            axes[0].axvline(ds.attrs[f"{prefix}_k_max"], color="gray", linestyle=style,
+                            label=f"{prefix} k_max = {ds.attrs[f'{prefix}_k_max']:.3g}")
+    axes[0].set_title("Re phi (leading roots of P_1 + P_2 P_3; symlog, linear below 1e-6)", fontsize=10)
+    axes[1].set_title("Im phi", fontsize=10)
+    modulus = ds.attrs["parameter_kappa"] / ds.attrs["parameter_eta"]
+    K = k**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        axes[2].plot(k, ds["a0"].values / K, label="a_0 / k^2 (uncoupled)")
+        from primordia.physics.seed_parameters import lame
+
+        mu, lam = lame({"E": ds.attrs["parameter_E"], "nu": ds.attrs["parameter_nu"]})
+        axes[2].plot(k, ds["d0"].values / (modulus * (2 * mu + lam) * K**3),
+                     label="d_0 / ((kappa/eta)(2mu+lambda) k^6) (coupled)")
+    axes[2].axhline(0.0, color="black", linewidth=0.7)
+    axes[2].set_title("constant terms (negative: a real positive root)", fontsize=10)
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("k")
+        ax.legend(fontsize=7, loc="best")
+    return _finish(fig, path)
+
+
+def _finish(fig, path):
+    """Save to ``path`` (via a temporary file and a rename, so no half-written PNG) and close."""
+    if path is not None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(handle)
+        try:
+            fig.savefig(temporary, dpi=130, format=path.suffix.lstrip(".") or "png")
+            os.replace(temporary, path)
+        finally:
+            Path(temporary).unlink(missing_ok=True)
+            plt.close(fig)
+    return fig

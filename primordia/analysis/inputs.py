@@ -1,0 +1,59 @@
+"""Parameters for the stability analysis from a TOML file and ``--set`` overrides.
+
+A configuration's ``[parameters]`` table holds overrides by seed name (Table
+3.1 names, as in simulations); every other table is ignored, so a simulation
+config can be analysed as it is.  ``--set parameters.NAME=VALUE`` overrides on
+top.  Every mistake is a one-line :class:`~primordia.core.errors.ConfigError`.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Iterable
+from pathlib import Path
+
+from primordia.core.errors import ConfigError
+from primordia.core.parameters import ParameterSet
+from primordia.physics.seed_parameters import seed_parameters
+
+
+def parameters_table(path) -> dict:
+    """The ``[parameters]`` table of a TOML file (empty if it has none)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    try:
+        with path.open("rb") as stream:
+            config = tomllib.load(stream)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+    table = config.get("parameters", {})
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [parameters] must be a table")
+    return dict(table)
+
+
+def parse_parameter_assignment(text: str) -> tuple[str, float]:
+    """``"parameters.NAME=VALUE"`` -> (NAME, VALUE as float)."""
+    key, sep, raw = str(text).partition("=")
+    section, dot, name = key.strip().partition(".")
+    if not sep or section != "parameters" or not dot or not name or "." in name:
+        raise ConfigError(f"--set expects parameters.NAME=VALUE, got {text!r}")
+    try:
+        value = float(raw.strip())
+    except ValueError:
+        raise ConfigError(f"--set {key.strip()}: value must be a number, got {raw.strip()!r}") from None
+    return name, value
+
+
+def read_parameters(config=None, assignments: Iterable[str] = ()) -> ParameterSet:
+    """Table 3.1 defaults, overridden by ``config``'s ``[parameters]``, then by ``--set`` assignments.
+
+    Unknown names and values of the wrong sign are reported by the parameter
+    declarations (one line, naming the parameter).
+    """
+    overrides = parameters_table(config) if config is not None else {}
+    for text in assignments or ():
+        name, value = parse_parameter_assignment(text)
+        overrides[name] = value
+    return seed_parameters(**overrides)

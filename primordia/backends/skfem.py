@@ -1,0 +1,851 @@
+"""scikit-fem behind the common assembly interface: serial, pip-installable.
+
+The same UFL forms the FEniCSx backend compiles with FFCx are evaluated here
+with numpy at FFCx's quadrature points (:mod:`primordia.backends.ufl_numpy`),
+on scikit-fem meshes, elements and DOF numberings, and assembled into PETSc
+objects.  No dolfinx is needed (basix is used for FFCx's quadrature points when
+present).  Nothing physical lives here.
+
+DOF numbering
+-------------
+A space's DOFs are numbered by scikit-fem (:class:`skfem.assembly.Dofs` of the
+scikit-fem element matching the UFL element: ``ElementTriP1``...,
+``ElementVector`` for vector/tensor elements, ``ElementComposite`` for mixed
+ones).  Consequences: P1 DOFs are the MeshData vertices in their order; a
+vector P1 DOF is ``vertex * dim + component`` (dolfinx's blocked layout); P2
+DOFs list vertices first, then edges; mixed spaces interleave their parts
+entity by entity.  Internally each space is split into *blocks*, one per scalar
+component (component index in the flattened value shape, scalar scikit-fem
+element, and its cell -> DOF map), which is all the evaluator needs.
+
+Geometry is affine: Jacobians come from the MeshData cells in their own vertex
+order, the same order dolfinx keeps, so quadrature points coincide with FFCx's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import skfem
+import ufl
+from petsc4py import PETSc
+
+from primordia.backends.ufl_numpy import (
+    REFERENCE_VERTICES,
+    REFERENCE_VOLUMES,
+    IntegralPlan,
+    UnsupportedUFL,
+    cell_quantities,
+    integrate_integrand,
+    preprocess_form,
+    reference_quadrature,
+    unsupported,
+)
+from primordia.core.backend import Backend, BoundaryCondition, DofLayout
+from primordia.core.errors import MeshError, PrimordiaError
+from primordia.core.mesh import MeshData
+
+CELL_NAMES = {2: "triangle", 3: "tetrahedron"}
+FACET_NAMES = {"triangle": "interval", "tetrahedron": "triangle"}
+_SKFEM_MESHES = {"triangle": skfem.MeshTri1, "tetrahedron": skfem.MeshTet1}
+_LAGRANGE = {
+    ("triangle", 1): skfem.ElementTriP1, ("triangle", 2): skfem.ElementTriP2,
+    ("tetrahedron", 1): skfem.ElementTetP1, ("tetrahedron", 2): skfem.ElementTetP2,
+}
+_PIECEWISE_CONSTANT = {"triangle": skfem.ElementTriP0, "tetrahedron": skfem.ElementTetP0}
+
+#: Local facet ``i`` of a simplex is the one opposite vertex ``i`` (basix / FFCx numbering).
+def _facet_vertices(tdim: int) -> np.ndarray:
+    return np.array([[v for v in range(tdim + 1) if v != i] for i in range(tdim + 1)])
+
+
+#: Outward normals of the reference facets (not normalised), same numbering.
+def _reference_normals(tdim: int) -> np.ndarray:
+    normals = np.vstack([np.ones((1, tdim)), -np.eye(tdim)])
+    return normals
+
+
+#: Cells per chunk are chosen so that an array of (test x trial x gdim^2 x points x cells)
+#: values, the largest an integrand of a tangent typically builds, stays below this.
+_CHUNK_VALUES = 2 ** 22
+
+
+class _SerialComm:
+    """Stands in for ``MPI.COMM_WORLD`` when mpi4py is not installed."""
+
+    rank = 0
+    size = 1
+
+    def allreduce(self, value, op=None):
+        return value
+
+    def gather(self, value, root=0):
+        return [value]
+
+    def bcast(self, value, root=0):
+        return value
+
+    def Barrier(self):
+        pass
+
+
+# ---------------------------------------------------------------------------------------
+# Mesh
+# ---------------------------------------------------------------------------------------
+
+
+class SkfemMesh(ufl.Mesh):
+    """A ``ufl.Mesh`` carrying the scikit-fem mesh, its MeshData and affine cell geometry."""
+
+    def __init__(self, data: MeshData):
+        self.cellname = CELL_NAMES[data.gdim]
+        super().__init__(ufl.VectorElement("Lagrange", ufl.Cell(self.cellname), 1))
+        self.mesh_data = data
+        self.tdim = self.gdim = data.gdim
+        # sort_t=False keeps the MeshData vertex order inside each cell (as dolfinx does)
+        self.skfem = _SKFEM_MESHES[self.cellname](data.points.T.copy(), data.cells.T.copy(), sort_t=False)
+        vertices = data.points[data.cells]                         # (C, tdim + 1, gdim)
+        self.origin = vertices[:, 0, :]                            # (C, gdim)
+        self.jacobian = np.swapaxes(vertices[:, 1:, :] - vertices[:, :1, :], 1, 2)  # (C, gdim, tdim)
+        self.inverse_jacobian = np.linalg.inv(self.jacobian)       # (C, tdim, gdim)
+        # (tdim, gdim, C): contiguous over cells, for gradients of basis functions
+        self.inverse_jacobian_by_cell = np.ascontiguousarray(np.moveaxis(self.inverse_jacobian, 0, -1))
+        self.determinant = np.linalg.det(self.jacobian)            # (C,)
+        if np.any(self.determinant == 0.0):
+            raise MeshError("the mesh has degenerate (zero-volume) cells")
+        self._index_facets(data)
+
+    def ufl_domain(self):
+        return self
+
+    def _index_facets(self, data: MeshData):
+        """Exterior facets as (cell, local facet) with their boundary tags; named facets located."""
+        tdim, ncells = self.tdim, data.num_cells
+        local = _facet_vertices(tdim)
+        cell_facets = np.sort(data.cells[:, local], axis=2).reshape(-1, tdim)   # slot = cell * (tdim+1) + lf
+        names = list(data.boundaries)
+        named = [np.sort(data.boundaries[n], axis=1) for n in names]
+        rows = np.vstack([cell_facets] + named) if named else cell_facets
+        _, facet_ids = np.unique(rows, axis=0, return_inverse=True)
+        facet_ids = facet_ids.ravel()
+        slot_ids, named_ids = facet_ids[: len(cell_facets)], facet_ids[len(cell_facets):]
+        count = np.bincount(slot_ids, minlength=facet_ids.max() + 1)
+        first_slot = np.full(count.size, -1, dtype=np.int64)
+        first_slot[slot_ids[::-1]] = np.arange(len(slot_ids))[::-1]
+        slot_cells = np.repeat(np.arange(ncells), tdim + 1)
+        slot_local = np.tile(np.arange(tdim + 1), ncells)
+
+        tags = np.zeros(count.size, dtype=np.int64)
+        self.boundary_facets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        offset = 0
+        for name, facets in zip(names, named):
+            ids = named_ids[offset: offset + len(facets)]
+            offset += len(facets)
+            if np.any(count[ids] == 0):
+                raise MeshError(f"boundary '{name}' lists facets that are not facets of any cell")
+            tags[ids] = data.boundary_ids[name]
+            slots = first_slot[ids]
+            self.boundary_facets[name] = (slot_cells[slots], slot_local[slots])
+        exterior = count[slot_ids] == 1
+        self.exterior_cells = slot_cells[exterior]
+        self.exterior_local = slot_local[exterior]
+        self.exterior_tags = tags[slot_ids[exterior]]
+
+    def exterior_facets(self, tags: tuple[int, ...] | None) -> tuple[np.ndarray, np.ndarray]:
+        """(cells, local facets) of the exterior facets carrying one of ``tags`` (all if ``None``)."""
+        if tags is None:
+            return self.exterior_cells, self.exterior_local
+        keep = np.isin(self.exterior_tags, tags)
+        return self.exterior_cells[keep], self.exterior_local[keep]
+
+
+# ---------------------------------------------------------------------------------------
+# Spaces, fields, constants
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Block:
+    """One scalar component of a space: where its DOFs sit among the element's DOFs."""
+
+    component: int           # index in the flattened value shape
+    element: skfem.Element   # scalar scikit-fem element
+    local: np.ndarray        # (n_scalar_local,) positions among the full element's local DOFs
+    cell_dofs: np.ndarray    # (n_cells, n_scalar_local) global DOFs
+
+
+def _scalar_element(element, cellname: str) -> skfem.Element:
+    family, degree = element.family(), element.degree()
+    if family in ("Lagrange", "P", "CG") and (cellname, degree) in _LAGRANGE:
+        return _LAGRANGE[(cellname, degree)]()
+    if family in ("Discontinuous Lagrange", "DG", "DP") and degree == 0:
+        return _PIECEWISE_CONSTANT[cellname]()
+    raise unsupported(f"{family} element of degree {degree} on {cellname}s")
+
+
+def _skfem_element(element, cellname: str):
+    """The scikit-fem element for a UFL element, and per local DOF (component, scalar element, scalar index)."""
+    if isinstance(element, (ufl.VectorElement, ufl.TensorElement)):
+        if isinstance(element, ufl.TensorElement) and element.symmetry():
+            raise unsupported("symmetric TensorElement")
+        scalar = _scalar_element(element.sub_elements()[0], cellname)
+        size = int(np.prod(element.value_shape()))
+        nlocal = len(scalar.doflocs)
+        layout = [(i % size, scalar, i // size) for i in range(size * nlocal)]
+        return skfem.ElementVector(scalar, size), layout
+    if isinstance(element, ufl.MixedElement):
+        parts = []
+        for sub in element.sub_elements():
+            if isinstance(sub, ufl.MixedElement) and not isinstance(sub, (ufl.VectorElement, ufl.TensorElement)):
+                raise unsupported("nested MixedElement")
+            parts.append(_skfem_element(sub, cellname))
+        composite = skfem.ElementComposite(*(p[0] for p in parts))
+        offsets = np.cumsum([0] + [int(np.prod(s.value_shape())) for s in element.sub_elements()])
+        layout = []
+        for i in range(sum(len(p[1]) for p in parts)):
+            part, index = composite._deduce_bfun(i)  # scikit-fem's own local numbering of the composite
+            component, scalar, scalar_index = parts[part][1][index]
+            layout.append((int(offsets[part]) + component, scalar, scalar_index))
+        return composite, layout
+    if isinstance(element, ufl.FiniteElement):
+        scalar = _scalar_element(element, cellname)
+        return scalar, [(0, scalar, i) for i in range(len(scalar.doflocs))]
+    raise unsupported(type(element).__name__)
+
+
+class SkfemFunctionSpace(ufl.FunctionSpace):
+    """A ``ufl.FunctionSpace`` holding the scikit-fem element, DOF numbering and blocks."""
+
+    def __init__(self, mesh: SkfemMesh, element: ufl.FiniteElementBase):
+        super().__init__(mesh, element)
+        self.mesh = mesh
+        self.skfem_element, layout = _skfem_element(element, mesh.cellname)
+        self.dofs = skfem.assembly.Dofs(mesh.skfem, self.skfem_element)
+        self.num_dofs = int(self.dofs.N)
+        self.cell_dofs = np.ascontiguousarray(self.dofs.element_dofs.T.astype(np.int64))  # (C, n_local)
+        self.value_shape = tuple(element.value_shape())
+        self.value_size = int(np.prod(self.value_shape))
+        self.blocks = []
+        for component in range(self.value_size):
+            entries = sorted((scalar_index, i, scalar) for i, (c, scalar, scalar_index) in enumerate(layout)
+                             if c == component)
+            local = np.array([i for _, i, _ in entries])
+            self.blocks.append(_Block(component, entries[0][2], local, self.cell_dofs[:, local]))
+        self.sub_components = self._sub_components(element)
+
+    @staticmethod
+    def _sub_components(element) -> list[range]:
+        """Flat components of each sub-space (what ``component=i`` selects, like ``V.sub(i)``)."""
+        if isinstance(element, (ufl.VectorElement, ufl.TensorElement)):
+            return [range(i, i + 1) for i in range(int(np.prod(element.value_shape())))]
+        if isinstance(element, ufl.MixedElement):
+            sizes = [int(np.prod(s.value_shape())) for s in element.sub_elements()]
+            starts = np.cumsum([0] + sizes)
+            return [range(int(starts[i]), int(starts[i + 1])) for i in range(len(sizes))]
+        return []
+
+    @cached_property
+    def basis(self) -> skfem.CellBasis:
+        """scikit-fem's own basis of this space (same DOF numbering), for scikit-fem tools."""
+        return skfem.CellBasis(self.mesh.skfem, self.skfem_element, dofs=self.dofs)
+
+    @cached_property
+    def dof_coordinates(self) -> np.ndarray:
+        """Coordinates (gdim, n_dofs) of the Lagrange node of each DOF."""
+        coordinates = np.empty((self.num_dofs, self.mesh.gdim))
+        for block in self.blocks:
+            nodes = self.mesh.origin[:, None, :] + np.einsum("cak,ik->cia", self.mesh.jacobian,
+                                                               block.element.doflocs)
+            coordinates[block.cell_dofs] = nodes
+        return coordinates.T.copy()
+
+    @cached_property
+    def dof_component(self) -> np.ndarray:
+        """Flat value component of each DOF."""
+        component = np.empty(self.num_dofs, dtype=np.int64)
+        for block in self.blocks:
+            component[block.cell_dofs] = block.component
+        return component
+
+    def vertex_local_dofs(self, block: _Block) -> np.ndarray:
+        """Local index (within the block) of the DOF at each reference vertex."""
+        reference = REFERENCE_VERTICES[self.mesh.cellname]
+        locations = block.element.doflocs
+        local = []
+        for vertex in reference:
+            hit = np.flatnonzero(np.all(np.isclose(locations, vertex), axis=1))
+            if hit.size != 1:
+                raise PrimordiaError("vertex values need a continuous Lagrange field (P1 or P2)")
+            local.append(int(hit[0]))
+        return np.array(local)
+
+    def facet_local_dofs(self, block: _Block) -> list[np.ndarray]:
+        """Local DOFs (within the block) on each local facet: barycentric coordinate lf is zero."""
+        locations = block.element.doflocs
+        barycentric = np.column_stack([1.0 - locations.sum(axis=1), locations])
+        return [np.flatnonzero(np.abs(barycentric[:, lf]) < 1e-12) for lf in range(self.mesh.tdim + 1)]
+
+
+class SkfemFunction(ufl.Coefficient):
+    """A ``ufl.Coefficient`` owning its DOF array and a PETSc Vec sharing that memory."""
+
+    def __init__(self, space: SkfemFunctionSpace, name: str = "f"):
+        super().__init__(space)
+        self.name = name
+        self.array = np.zeros(space.num_dofs)
+        self.vector = PETSc.Vec().createWithArray(self.array, comm=PETSc.COMM_SELF)
+
+    @property
+    def function_space(self) -> SkfemFunctionSpace:
+        return self.ufl_function_space()
+
+
+class SkfemConstant(ufl.Constant):
+    """A ``ufl.Constant`` whose ``value`` can change between assemblies."""
+
+    def __init__(self, mesh: SkfemMesh, value):
+        value = np.asarray(value, dtype=float)
+        super().__init__(mesh, shape=value.shape)
+        self._value = value
+
+    @property
+    def value(self) -> np.ndarray:
+        return self._value
+
+    @value.setter
+    def value(self, value):
+        value = np.asarray(value, dtype=float)
+        if value.shape != self.ufl_shape:
+            raise PrimordiaError(f"a constant of shape {self.ufl_shape} cannot take a value of shape {value.shape}")
+        self._value = value
+
+
+# ---------------------------------------------------------------------------------------
+# Quadrature on a chunk of cells or facets
+# ---------------------------------------------------------------------------------------
+
+
+class _Rule:
+    """Reference points of one integral (per local facet for ``ds``) and their weights."""
+
+    def __init__(self, mesh: SkfemMesh, plan: IntegralPlan):
+        tdim = mesh.tdim
+        self.facet = plan.integral_type == "exterior_facet"
+        if not self.facet:
+            points, self.weights = reference_quadrature(mesh.cellname, plan.degree, plan.rule)
+            self.points = points.T                                          # (tdim, Q)
+        else:
+            facet_points, self.weights = reference_quadrature(FACET_NAMES[mesh.cellname], plan.degree, plan.rule)
+            vertices = REFERENCE_VERTICES[mesh.cellname]
+            per_facet = []
+            for corners in _facet_vertices(tdim):
+                # as ffcx map_facet_points: v0 + sum_j (v_j - v0) s_j
+                edges = vertices[corners[1:]] - vertices[corners[0]]        # (tdim - 1, tdim)
+                per_facet.append((vertices[corners[0]] + facet_points @ edges).T)
+            self.points = np.stack(per_facet)                               # (tdim + 1, tdim, Q)
+        self.num_points = len(self.weights)
+        self._tables: dict[tuple, np.ndarray] = {}
+
+    def table(self, element: skfem.Element, derivatives: int) -> np.ndarray:
+        """Reference basis values / gradients / Hessians at the points.
+
+        Cells: (n_local, *(tdim,) * derivatives, Q); facets: one more leading axis
+        for the local facet.  Hessians come from central differences of the
+        gradients, exact for the degree <= 2 elements supported here.
+        """
+        key = (type(element), derivatives)
+        if key not in self._tables:
+            points = self.points if self.facet else self.points[None]
+            tables = [_reference_table(element, x, derivatives) for x in points]
+            self._tables[key] = np.stack(tables) if self.facet else tables[0]
+        return self._tables[key]
+
+
+def _reference_table(element: skfem.Element, points: np.ndarray, derivatives: int) -> np.ndarray:
+    nlocal = len(element.doflocs)
+    if derivatives == 0:
+        return np.array([element.lbasis(points, i)[0] for i in range(nlocal)])
+    if derivatives == 1:
+        return np.array([element.lbasis(points, i)[1] for i in range(nlocal)])
+    if derivatives == 2:
+        tdim = points.shape[0]
+        step = 0.5
+        hessian = np.empty((nlocal, tdim, tdim, points.shape[1]))
+        for k in range(tdim):
+            shift = np.zeros((tdim, 1))
+            shift[k] = step
+            for i in range(nlocal):
+                forward = element.lbasis(points + shift, i)[1]
+                backward = element.lbasis(points - shift, i)[1]
+                hessian[i, :, k] = (forward - backward) / (2 * step)
+        return hessian
+    raise unsupported(f"derivatives of order {derivatives}")
+
+
+class _Chunk:
+    """Quadrature data on a chunk of cells (or exterior facets): a QuadratureContext."""
+
+    def __init__(self, mesh: SkfemMesh, rule: _Rule, cells: np.ndarray | slice, local_facets: np.ndarray | None):
+        """``cells``: the cell of each entity, as indices or (for whole runs of cells) a slice."""
+        self.mesh, self.rule, self.cells, self.local_facets = mesh, rule, cells, local_facets
+        self.gdim = mesh.gdim
+        self.inverse_jacobian = mesh.inverse_jacobian[cells]                   # (E, tdim, gdim)
+        self.num_entities = len(self.inverse_jacobian)
+        self._scalar_cache: dict[tuple, np.ndarray] = {}
+        self._field_cache: dict[tuple, np.ndarray] = {}
+        self._geometry_cache: dict[str, np.ndarray | None] = {}
+
+    # -- integration weights ------------------------------------------------------------
+    @cached_property
+    def weights(self) -> np.ndarray:
+        """Quadrature weights times the Jacobian of the map to the entity: (E, Q)."""
+        if not self.rule.facet:
+            return np.abs(self.mesh.determinant[self.cells])[:, None] * self.rule.weights
+        return self._facet_scale[:, None] * self.rule.weights
+
+    @cached_property
+    def _facet_scale(self) -> np.ndarray:
+        corners = self.mesh.mesh_data.points[self._facet_corner_vertices]    # (E, tdim, gdim)
+        edges = corners[:, 1:] - corners[:, :1]
+        if self.mesh.tdim == 2:
+            return np.linalg.norm(edges[:, 0], axis=1)
+        return np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+
+    @cached_property
+    def _facet_corner_vertices(self) -> np.ndarray:
+        local = _facet_vertices(self.mesh.tdim)[self.local_facets]            # (E, tdim)
+        return np.take_along_axis(self.mesh.mesh_data.cells[self.cells], local, axis=1)
+
+    # -- basis functions ----------------------------------------------------------------
+    def _scalar(self, element: skfem.Element, derivatives: int) -> np.ndarray:
+        """(n_local, *(gdim,) * derivatives, E or 1, Q or 1) physical values of a scalar element."""
+        key = (type(element), derivatives)
+        if key in self._scalar_cache:
+            return self._scalar_cache[key]
+        table = self.rule.table(element, derivatives)
+        if derivatives and derivatives >= element.maxdeg:  # affine cells: constant over the points
+            table = table[..., :1]
+        K = self.mesh.inverse_jacobian_by_cell[:, :, self.cells]                # (tdim, gdim, E)
+        if self.rule.facet:
+            table = np.moveaxis(table[self.local_facets], 0, -2)               # (n, ..., E, Q)
+            if derivatives == 0:
+                values = table
+            elif derivatives == 1:
+                values = np.einsum("ikeq,kde->ideq", table, K)
+            else:
+                values = np.einsum("ikleq,kae,lbe->iabeq", table, K, K, optimize=True)
+        elif derivatives == 0:
+            values = table[..., None, :]
+        elif derivatives == 1:
+            values = np.moveaxis(np.tensordot(table, K, axes=([1], [0])), 1, -1)   # (n, gdim, E, Q)
+        else:
+            values = np.einsum("iklq,kae,lbe->iabeq", table, K, K, optimize=True)
+        self._scalar_cache[key] = values
+        return values
+
+    def argument(self, space: SkfemFunctionSpace, derivatives: int) -> np.ndarray:
+        self._check_space(space)
+        if len(space.blocks) == 1 and space.value_shape == ():
+            return self._scalar(space.blocks[0].element, derivatives)
+        parts = [self._scalar(block.element, derivatives) for block in space.blocks]
+        entities = max(p.shape[-2] for p in parts)
+        points = max(p.shape[-1] for p in parts)
+        derivative_shape = (self.gdim,) * derivatives
+        dense = np.zeros((space.cell_dofs.shape[1], space.value_size) + derivative_shape + (entities, points))
+        for block, part in zip(space.blocks, parts):
+            dense[block.local, block.component] = part
+        return dense.reshape(dense.shape[:1] + space.value_shape + dense.shape[2:])
+
+    def coefficient(self, function, derivatives: int) -> np.ndarray:
+        if not isinstance(function, SkfemFunction):
+            raise unsupported(f"{type(function).__name__} (a coefficient not made by the skfem backend)")
+        space = function.function_space
+        self._check_space(space)
+        key = (id(function), derivatives)
+        if key not in self._field_cache:
+            parts = []
+            for block in space.blocks:
+                dofs = function.array[block.cell_dofs[self.cells]]                # (E, n)
+                parts.append(np.einsum("ei,i...eq->...eq", dofs, self._scalar(block.element, derivatives)))
+            parts = np.broadcast_arrays(*parts)
+            values = np.stack(parts).reshape(space.value_shape + parts[0].shape)
+            self._field_cache[key] = values
+        return self._field_cache[key]
+
+    def constant(self, constant) -> np.ndarray:
+        if not isinstance(constant, SkfemConstant):
+            raise unsupported(f"{type(constant).__name__} (a constant not made by the skfem backend)")
+        return constant.value
+
+    def _check_space(self, space):
+        if not isinstance(space, SkfemFunctionSpace):
+            raise unsupported(f"{type(space).__name__} (a function space not made by the skfem backend)")
+        if space.mesh is not self.mesh:
+            raise PrimordiaError("a form mixes fields on different meshes")
+
+    # -- geometry -----------------------------------------------------------------------
+    def geometry(self, quantity: str) -> np.ndarray | None:
+        if quantity not in self._geometry_cache:
+            compute = getattr(self, f"_geometry_{quantity}", None)
+            self._geometry_cache[quantity] = None if compute is None else compute()
+        return self._geometry_cache[quantity]
+
+    def _geometry_SpatialCoordinate(self):
+        points = self.rule.points
+        jacobian = self.mesh.jacobian[self.cells]
+        origin = self.mesh.origin[self.cells].T[:, :, None]
+        if self.rule.facet:
+            return origin + np.einsum("eak,keq->aeq", jacobian, np.moveaxis(points[self.local_facets], 0, 1))
+        return origin + np.einsum("eak,kq->aeq", jacobian, points)
+
+    def _geometry_FacetNormal(self):
+        if not self.rule.facet:
+            return None
+        reference = _reference_normals(self.mesh.tdim)[self.local_facets]       # (E, tdim)
+        normal = np.einsum("eka,ek->ae", self.inverse_jacobian, reference)
+        return (normal / np.linalg.norm(normal, axis=0))[:, :, None]
+
+    def _geometry_FacetArea(self):
+        if not self.rule.facet:
+            return None
+        return (self._facet_scale * REFERENCE_VOLUMES[FACET_NAMES[self.mesh.cellname]])[:, None]
+
+    def _geometry_Jacobian(self):
+        return np.moveaxis(self.mesh.jacobian[self.cells], 0, -1)[..., None]
+
+    def _geometry_JacobianInverse(self):
+        return np.moveaxis(self.inverse_jacobian, 0, -1)[..., None]
+
+    def _geometry_JacobianDeterminant(self):
+        return self.mesh.determinant[self.cells][:, None]
+
+    @cached_property
+    def _cell_quantities(self):
+        return cell_quantities(self.mesh.mesh_data.points[self.mesh.mesh_data.cells[self.cells]])
+
+    def _geometry_CellVolume(self):
+        return self._cell_quantities["CellVolume"][:, None]
+
+    def _geometry_Circumradius(self):
+        return self._cell_quantities["Circumradius"][:, None]
+
+    def _geometry_CellDiameter(self):
+        return self._cell_quantities["CellDiameter"][:, None]
+
+    def _geometry_MinCellEdgeLength(self):
+        return self._cell_quantities["MinCellEdgeLength"][:, None]
+
+    def _geometry_MaxCellEdgeLength(self):
+        return self._cell_quantities["MaxCellEdgeLength"][:, None]
+
+
+# ---------------------------------------------------------------------------------------
+# Boundary conditions
+# ---------------------------------------------------------------------------------------
+
+
+class _Dirichlet:
+    """Constrained DOFs of one condition and their prescribed values (mutable handle)."""
+
+    def __init__(self, dofs: np.ndarray, components: range):
+        self.dofs = dofs
+        self.components = components
+        self.values = np.zeros(len(dofs))
+
+
+# ---------------------------------------------------------------------------------------
+# The backend
+# ---------------------------------------------------------------------------------------
+
+
+class SkfemBackend(Backend):
+    """scikit-fem 12: serial assembly of UFL forms (evaluated with numpy) into PETSc objects."""
+
+    name = "skfem"
+    parallel = False
+
+    def __init__(self, comm=None):
+        if comm is None:
+            try:
+                from mpi4py import MPI
+                comm = MPI.COMM_WORLD
+            except ImportError:
+                comm = _SerialComm()
+        if comm.size > 1 or PETSc.COMM_WORLD.getSize() > 1:
+            raise PrimordiaError("the skfem backend is serial: run it without mpirun "
+                                 "(or choose --backend fenicsx for parallel runs)")
+        super().__init__(comm)
+        self._plans: dict[int, tuple[ufl.Form, list[IntegralPlan]]] = {}
+        self._rules: dict[tuple, _Rule] = {}
+        self._patterns: dict[tuple[int, int], tuple] = {}
+
+    # -- mesh, spaces, fields -----------------------------------------------------------
+    def create_mesh(self, data: MeshData) -> SkfemMesh:
+        return SkfemMesh(data)
+
+    def function_space(self, mesh, element) -> SkfemFunctionSpace:
+        return SkfemFunctionSpace(mesh, element)
+
+    def function(self, space, name: str) -> SkfemFunction:
+        return SkfemFunction(space, name)
+
+    def constant(self, mesh, value) -> SkfemConstant:
+        return SkfemConstant(mesh, value)
+
+    def measure(self, integral_type: str, mesh, metadata=None) -> ufl.Measure:
+        if integral_type not in ("dx", "ds", "cell", "exterior_facet"):
+            raise unsupported(f"measure {integral_type}")
+        return ufl.Measure(integral_type, domain=mesh, metadata=metadata or {})
+
+    # -- integration --------------------------------------------------------------------
+    def _form_plans(self, form: ufl.Form) -> list[IntegralPlan]:
+        hit = self._plans.get(id(form))
+        if hit is None or hit[0] is not form:
+            hit = (form, preprocess_form(form))
+            self._plans[id(form)] = hit
+        return hit[1]
+
+    def _rule(self, mesh: SkfemMesh, plan: IntegralPlan) -> _Rule:
+        key = (id(mesh), plan.integral_type, plan.degree, plan.rule)
+        if key not in self._rules:
+            self._rules[key] = _Rule(mesh, plan)
+        return self._rules[key]
+
+    @staticmethod
+    def _form_mesh(form: ufl.Form) -> SkfemMesh:
+        mesh = form.ufl_domain()
+        if not isinstance(mesh, SkfemMesh):
+            raise PrimordiaError("the form is not defined on a mesh made by the skfem backend")
+        return mesh
+
+    @staticmethod
+    def _form_spaces(form: ufl.Form) -> list[SkfemFunctionSpace]:
+        spaces = [a.ufl_function_space() for a in sorted(form.arguments(), key=lambda a: a.number())]
+        for space in spaces:
+            if not isinstance(space, SkfemFunctionSpace):
+                raise PrimordiaError("the form's arguments are not on spaces made by the skfem backend")
+        return spaces
+
+    def _element_tensors(self, form: ufl.Form, cell_mask: np.ndarray | None = None):
+        """Yield (cells, element tensors (E, n_test, n_trial)) chunk by chunk over all integrals.
+
+        Linear forms give n_trial = 1 and functionals n_test = n_trial = 1.
+        ``cell_mask`` restricts integration to the marked cells (used for lifting).
+        """
+        mesh = self._form_mesh(form)
+        spaces = self._form_spaces(form)
+        sizes = [s.cell_dofs.shape[1] for s in spaces] + [1] * (2 - len(spaces))
+        for plan in self._form_plans(form):
+            if plan.integral_type == "cell":
+                cells, local_facets = np.arange(mesh.mesh_data.num_cells), None
+            else:
+                cells, local_facets = mesh.exterior_facets(plan.subdomain_ids)
+            if cell_mask is not None:
+                keep = cell_mask[cells]
+                cells = cells[keep]
+                local_facets = None if local_facets is None else local_facets[keep]
+            if len(cells) == 0:
+                continue
+            rule = self._rule(mesh, plan)
+            chunk = max(1, _CHUNK_VALUES // (sizes[0] * sizes[1] * mesh.gdim ** 2 * rule.num_points))
+            whole = local_facets is None and cell_mask is None  # chunks are runs of cells: slice them
+            for start in range(0, len(cells), chunk):
+                part = slice(start, min(start + chunk, len(cells)))
+                entities = part if whole else cells[part]
+                context = _Chunk(mesh, rule, entities, None if local_facets is None else local_facets[part])
+                tensors = integrate_integrand(plan.integrand, context, context.weights)
+                yield entities, np.broadcast_to(tensors, (context.num_entities, sizes[0], sizes[1]))
+
+    def _pattern(self, test: SkfemFunctionSpace, trial: SkfemFunctionSpace):
+        """CSR pattern of all cell couplings, and each (cell, i, j) entry's position in it."""
+        key = (id(test), id(trial))
+        hit = self._patterns.get(key)
+        if hit is None or hit[0] is not test or hit[1] is not trial:
+            rows, cols = test.cell_dofs, trial.cell_dofs
+            keys = rows[:, :, None] * trial.num_dofs + cols[:, None, :]
+            unique, positions = np.unique(keys.ravel(), return_inverse=True)
+            row, col = np.divmod(unique, trial.num_dofs)
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=test.num_dofs))])
+            positions = positions.reshape(keys.shape).astype(np.int64)
+            hit = (test, trial, indptr.astype(PETSc.IntType), col.astype(PETSc.IntType), positions, row, col)
+            self._patterns[key] = hit
+        return hit[2:]
+
+    # -- assembly -----------------------------------------------------------------------
+    def assemble_matrix(self, form, bcs: Sequence[BoundaryCondition] = (), A=None, diagonal: float = 1.0):
+        test, trial = self._form_spaces(form)
+        indptr, indices, positions, row, col = self._pattern(test, trial)
+        data = np.zeros(len(indices))
+        for cells, tensors in self._element_tensors(form):
+            data += np.bincount(positions[cells].ravel(), weights=tensors.ravel(), minlength=len(data))
+        row_fixed = self._constrained(bcs, test)
+        col_fixed = self._constrained(bcs, trial)
+        if row_fixed is not None or col_fixed is not None:
+            zero = np.zeros(len(data), dtype=bool)
+            if row_fixed is not None:
+                zero |= row_fixed[row]
+            if col_fixed is not None:
+                zero |= col_fixed[col]
+            data[zero] = 0.0
+            if test is trial and row_fixed is not None:
+                data[zero & (row == col) & row_fixed[row]] = diagonal
+        if A is None:
+            A = PETSc.Mat().createAIJ(size=(test.num_dofs, trial.num_dofs), csr=(indptr, indices, data),
+                                      comm=PETSc.COMM_SELF)
+        else:
+            A.zeroEntries()
+            A.setValuesCSR(indptr, indices, data)
+        A.assemble()
+        return A
+
+    @staticmethod
+    def _constrained(bcs, space) -> np.ndarray | None:
+        """Mask of the DOFs of ``space`` fixed by ``bcs`` (``None`` if none applies)."""
+        mask = None
+        for bc in bcs:
+            if bc.space == space:
+                if mask is None:
+                    mask = np.zeros(space.num_dofs, dtype=bool)
+                mask[bc.handle.dofs] = True
+        return mask
+
+    def _assemble_array(self, form) -> np.ndarray:
+        (test,) = self._form_spaces(form)
+        values = np.zeros(test.num_dofs)
+        for cells, tensors in self._element_tensors(form):
+            values += np.bincount(test.cell_dofs[cells].ravel(), weights=tensors[:, :, 0].ravel(),
+                                  minlength=test.num_dofs)
+        return values
+
+    def assemble_vector(self, form, b=None):
+        values = self._assemble_array(form)
+        if b is None:
+            return PETSc.Vec().createWithArray(values, comm=PETSc.COMM_SELF)
+        b.array[:] = values
+        return b
+
+    def assemble_scalar(self, form) -> float:
+        if form.arguments():
+            raise PrimordiaError("assemble_scalar needs a functional (a form without test or trial functions)")
+        return float(sum(tensors.sum() for _, tensors in self._element_tensors(form)))
+
+    def assemble_residual(self, residual, jacobian, bcs, state, b=None):
+        values = self._assemble_array(residual)
+        x = state.array
+        if bcs:
+            test, trial = self._form_spaces(jacobian)
+            # lifting as dolfinx apply_lifting(b, [J], [bcs], x0=[x], scale=-1): b += J (g - x) on fixed columns
+            shift = np.zeros(trial.num_dofs)
+            fixed = np.zeros(trial.num_dofs, dtype=bool)
+            for bc in bcs:
+                if bc.space == trial:
+                    shift[bc.handle.dofs] = bc.handle.values - x[bc.handle.dofs]
+                    fixed[bc.handle.dofs] = True
+            if fixed.any():
+                touched = fixed[trial.cell_dofs].any(axis=1)
+                for cells, tensors in self._element_tensors(jacobian, cell_mask=touched):
+                    local = np.einsum("eij,ej->ei", tensors, shift[trial.cell_dofs[cells]])
+                    values += np.bincount(test.cell_dofs[cells].ravel(), weights=local.ravel(),
+                                          minlength=test.num_dofs)
+            # as dolfinx set_bc(b, bcs, x, scale=-1): b = -(g - x) on fixed rows
+            for bc in bcs:
+                if bc.space == test:
+                    values[bc.handle.dofs] = x[bc.handle.dofs] - bc.handle.values
+        if b is None:
+            return PETSc.Vec().createWithArray(values, comm=PETSc.COMM_SELF)
+        b.array[:] = values
+        return b
+
+    # -- Dirichlet conditions -------------------------------------------------------------
+    def dirichlet_bc(self, space, boundary: str, value, component=None):
+        mesh = space.mesh
+        mesh.mesh_data.boundary_id(boundary)  # one-line MeshError for unknown names
+        cells, local_facets = mesh.boundary_facets[boundary]
+        if component is None:
+            components = range(0, space.value_size)
+        elif 0 <= component < len(space.sub_components):
+            components = space.sub_components[component]
+        else:
+            raise PrimordiaError(f"component {component} does not exist in a space of value shape {space.value_shape}")
+        dofs = []
+        for block in space.blocks:
+            if block.component not in components:
+                continue
+            on_facet = space.facet_local_dofs(block)
+            for lf in range(mesh.tdim + 1):
+                which = local_facets == lf
+                dofs.append(block.cell_dofs[np.ix_(cells[which], on_facet[lf])].ravel())
+        handle = _Dirichlet(np.unique(np.concatenate(dofs)) if dofs else np.empty(0, dtype=np.int64), components)
+        bc = BoundaryCondition(handle=handle, space=space, boundary=boundary)
+        self.update_dirichlet_bc(bc, value)
+        return bc
+
+    def update_dirichlet_bc(self, bc: BoundaryCondition, value) -> None:
+        handle, space = bc.handle, bc.space
+        position = space.dof_component[handle.dofs] - handle.components.start
+        handle.values = self._values_at(space, handle.dofs, position, len(handle.components), value)
+
+    @staticmethod
+    def _values_at(space, dofs: np.ndarray, position: np.ndarray, size: int, value) -> np.ndarray:
+        """Values of ``value`` (number, sequence or fn(x)) at ``dofs``, of components ``position`` < ``size``."""
+        if callable(value):
+            result = np.asarray(value(space.dof_coordinates[:, dofs]), dtype=float)
+            if result.ndim == 1 and size == 1:
+                return np.broadcast_to(result, (len(dofs),)).copy()
+            result = np.broadcast_to(result, (size, len(dofs))) if result.ndim == 2 else None
+            if result is None:
+                raise PrimordiaError(f"an interpolated function must return an array of shape ({size}, n)")
+            return result[position, np.arange(len(dofs))]
+        value = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+        return value[position] if value.size == size else np.full(len(dofs), value[0])
+
+    # -- DOF values ---------------------------------------------------------------------
+    def petsc_vector(self, function):
+        return function.vector
+
+    def local_array(self, function) -> np.ndarray:
+        return function.array
+
+    def update_ghosts(self, function) -> None:
+        """Nothing to do: a serial run has no ghosts."""
+
+    def dof_layout(self, space) -> DofLayout:
+        return DofLayout(owned_range=(0, space.num_dofs), ghosts=np.empty(0, dtype=np.int64))
+
+    def interpolate(self, function, values) -> None:
+        space = function.function_space
+        dofs = np.arange(space.num_dofs)
+        function.array[:] = self._values_at(space, dofs, space.dof_component, space.value_size, values)
+
+    def set_vertex_values(self, function, values: np.ndarray) -> None:
+        space = function.function_space
+        if any(block.element.maxdeg != 1 for block in space.blocks):
+            raise PrimordiaError("set_vertex_values needs a P1 field")
+        values = np.asarray(values, dtype=float).reshape(space.mesh.mesh_data.num_vertices, space.value_size)
+        cells = space.mesh.mesh_data.cells
+        for block in space.blocks:
+            local = space.vertex_local_dofs(block)
+            function.array[block.cell_dofs[:, local]] = values[cells, block.component]
+
+    def vertex_values(self, function) -> np.ndarray:
+        space = function.function_space
+        data = space.mesh.mesh_data
+        result = np.empty((data.num_vertices, space.value_size))
+        for block in space.blocks:
+            local = space.vertex_local_dofs(block)
+            result[data.cells, block.component] = function.array[block.cell_dofs[:, local]]
+        return result[:, 0] if space.value_shape == () else result
+
+    # -- sizes --------------------------------------------------------------------------
+    def num_cells(self, mesh) -> int:
+        return mesh.mesh_data.num_cells
+
+    def num_dofs(self, space) -> int:
+        return space.num_dofs
+
+
+__all__ = ["SkfemBackend", "SkfemMesh", "SkfemFunctionSpace", "SkfemFunction", "SkfemConstant", "UnsupportedUFL"]

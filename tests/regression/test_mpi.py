@@ -1,0 +1,44 @@
+"""The fenicsx backend under MPI gives the serial answer (2 ranks vs 1)."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ARGS = ["run", str(ROOT / "examples/ex01a.toml"), "--set", "mesh.cells=[24,24]", "--set", "time.t_final=10",
+        "--set", "output.times=[10]", "--set", "output.pictures=false", "--no-progress"]
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+
+
+def _run(tmp_path, ranks: int) -> dict:
+    out = tmp_path / f"np{ranks}"
+    command = [sys.executable, "-m", "primordia.cli", *ARGS, "--out", str(out)]
+    if ranks > 1:
+        command = ["mpirun", "-n", str(ranks), *command]
+    done = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.mpi
+def test_two_ranks_reproduce_the_serial_run(tmp_path):
+    serial, parallel = _run(tmp_path, 1), _run(tmp_path, 2)
+    assert parallel["mpi_ranks"] == 2 and parallel["steps"] == serial["steps"] == 50
+    for name, stats in serial["final"].items():
+        for key in ("integral", "min", "max"):
+            assert parallel["final"][name][key] == pytest.approx(stats[key], rel=1e-10, abs=1e-12), (name, key)
+
+
+@pytest.mark.mpi
+def test_skfem_refuses_more_than_one_rank(tmp_path):
+    command = ["mpirun", "-n", "2", sys.executable, "-m", "primordia.cli", *ARGS, "--backend", "skfem",
+               "--out", str(tmp_path / "sk")]
+    done = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=300)
+    assert done.returncode != 0
+    errors = [line for line in done.stderr.splitlines() if line.startswith("primordia: error:")]
+    assert len(errors) == 1 and "serial" in errors[0], done.stderr[-2000:]
+    assert "Traceback" not in done.stderr

@@ -1,0 +1,186 @@
+"""The exponentially fitted (Scharfetter-Gummel / EAFE) transport operator (primordia.coupling.edge_flux).
+
+The operator is assembled through the backend interface only, so it is checked
+on every backend: its sign pattern and zero column sums (hence positivity and
+conservation), its reduction to the Galerkin stiffness matrix when chi = 0,
+and its exact discrete equilibrium m ~ exp(chi a / D) for constant chi.
+"""
+
+from __future__ import annotations
+
+import decimal
+
+import numpy as np
+import pytest
+import scipy.sparse
+import ufl
+
+from primordia.core.mesh import MeshData
+from primordia.core.meshes import rectangle
+from primordia.core.plugins import get_plugin_manager, registry
+from primordia.coupling.discretisation import Discretisation
+from primordia.coupling.edge_flux import ExponentiallyFittedFlux, bernoulli
+
+BACKENDS = ["fenicsx", "skfem"]
+
+
+# -- B(x) = x / (exp(x) - 1) ------------------------------------------------------------------
+
+
+def reference_bernoulli(x: float) -> float:
+    """B(x) in 80-digit decimal arithmetic (exact conversion of the binary x)."""
+    if x == 0:
+        return 1.0
+    with decimal.localcontext() as context:
+        context.prec = 80
+        exact = decimal.Decimal(x)
+        return float(exact / (exact.exp() - 1))
+
+
+def test_bernoulli_at_zero_is_one():
+    assert bernoulli(0.0) == 1.0
+    assert bernoulli(np.array([0.0, -0.0])).tolist() == [1.0, 1.0]
+
+
+@pytest.mark.parametrize("magnitude", [1e-14, 1e-10, 1e-7, 9.99e-7, 1e-6, 1.01e-6, 1e-5, 1e-3, 0.1])
+def test_bernoulli_is_accurate_near_zero(magnitude):
+    """Both sides of the switch to the Taylor series at |x| = 1e-6, to a few ulps."""
+    for x in (magnitude, -magnitude):
+        assert bernoulli(x) == pytest.approx(reference_bernoulli(x), rel=4e-16, abs=0), x
+
+
+@pytest.mark.parametrize("magnitude", [1.0, 5.0, 20.0, 50.0, 200.0, 700.0])
+def test_bernoulli_is_accurate_for_large_arguments(magnitude):
+    assert bernoulli(magnitude) == pytest.approx(reference_bernoulli(magnitude), rel=1e-14, abs=0)
+    assert bernoulli(-magnitude) == pytest.approx(reference_bernoulli(-magnitude), rel=1e-14, abs=0)
+
+
+def test_bernoulli_beyond_overflow_is_finite_and_right():
+    with np.errstate(over="ignore"):
+        values = bernoulli(np.array([800.0, 1e4, -800.0, -1e4]))
+    assert np.all(np.isfinite(values))
+    assert values[0] >= 0 and values[1] >= 0 and values[0] < 1e-300
+    np.testing.assert_array_equal(values[2:], [800.0, 1e4])
+
+
+def test_bernoulli_identity_b_minus_x_is_b_x_plus_x():
+    """B(-x) = B(x) + x: the upwind and downwind weights of an edge differ by the Peclet number."""
+    x = np.concatenate([-np.logspace(-12, 2.5, 200), np.logspace(-12, 2.5, 200)])
+    np.testing.assert_allclose(bernoulli(-x) - bernoulli(x), x, rtol=1e-12, atol=1e-15)
+
+
+# -- the operator -----------------------------------------------------------------------------------
+
+
+def make_backend(name: str):
+    from mpi4py import MPI
+
+    entries = {key: entry for key, (entry, _) in registry("backends").items()}
+    return get_plugin_manager().hook.primordia_select_backend(name=name, entries=entries, comm=MPI.COMM_WORLD)
+
+
+def discretisation(backend_name: str, mesh: MeshData) -> Discretisation:
+    disc = Discretisation(make_backend(backend_name), mesh)
+    for name in ("m", "f"):
+        disc.add_field(name, disc.space(1), owner="test")
+    return disc
+
+
+def set_previous(disc, name: str, values) -> None:
+    array = disc.backend.local_array(disc.previous(name))
+    array[:] = values(array.size) if callable(values) else values
+
+
+def dense(matrix) -> np.ndarray:
+    indptr, columns, values = matrix.getValuesCSR()
+    return scipy.sparse.csr_matrix((values, columns, indptr), shape=matrix.getSize()).toarray()
+
+
+def fitted_operator(disc, diffusivity: float, sensitivity) -> np.ndarray:
+    operator = ExponentiallyFittedFlux(disc, "m", "f", diffusivity=diffusivity, sensitivity=sensitivity)
+    operator.update()
+    return dense(operator.matrix())
+
+
+def stiffness(disc) -> np.ndarray:
+    space = disc.field("m").ufl_function_space()
+    u, v = ufl.TrialFunction(space), ufl.TestFunction(space)
+    return dense(disc.backend.assemble_matrix(ufl.inner(ufl.grad(u), ufl.grad(v)) * disc.dx))
+
+
+MESHES = {
+    "right": rectangle((0.0, 0.0), (2.0, 1.0), (7, 4), diagonal="right"),
+    "crossed": rectangle((0.0, 0.0), (1.0, 1.0), (4, 4), diagonal="crossed"),
+}
+
+
+@pytest.mark.parametrize("mesh_name", list(MESHES))
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_off_diagonals_are_non_positive_and_columns_sum_to_zero(backend, mesh_name):
+    disc = discretisation(backend, MESHES[mesh_name])
+    rng = np.random.default_rng(3)
+    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
+    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))  # Peclet numbers up to ~100 with D = 0.05
+    A = fitted_operator(disc, diffusivity=0.05, sensitivity=lambda m: 4.0 * np.exp(-m))
+    off = A - np.diag(np.diag(A))
+    scale = np.abs(A).max()
+    assert np.all(off <= 0.0)
+    assert np.all(np.diag(A) > 0.0)
+    np.testing.assert_allclose(A.sum(axis=0), 0.0, atol=1e-13 * scale)  # conservation: 1^T A = 0
+    assert np.abs(A.sum(axis=1)).max() > 1e-3 * scale  # rows do not: the flux is not symmetric
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_with_the_lumped_mass_it_is_an_m_matrix(backend):
+    """(M_L/dt + A)^{-1} >= 0 entrywise: a non-negative m^n gives a non-negative m^{n+1} for any dt."""
+    disc = discretisation(backend, MESHES["right"])
+    rng = np.random.default_rng(5)
+    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
+    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))
+    A = fitted_operator(disc, diffusivity=0.05, sensitivity=lambda m: 4.0 * np.exp(-m))
+    space = disc.field("m").ufl_function_space()
+    lumped = disc.backend.assemble_vector(ufl.TestFunction(space) * disc.dx_lumped).getArray().copy()
+    assert lumped.sum() == pytest.approx(2.0)  # |Omega|
+    for dt in (1e-3, 0.2, 1e3):
+        inverse = np.linalg.inv(np.diag(lumped / dt) + A)
+        assert inverse.min() >= -1e-12 * np.abs(inverse).max(), dt
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_reduces_to_the_galerkin_stiffness_when_chi_is_zero(backend):
+    disc = discretisation(backend, MESHES["right"])
+    rng = np.random.default_rng(9)
+    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
+    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))
+    diffusivity = 0.3
+    A = fitted_operator(disc, diffusivity, sensitivity=lambda m: np.zeros_like(m))
+    S = stiffness(disc)
+    np.testing.assert_allclose(A, diffusivity * S, rtol=0, atol=1e-13 * np.abs(S).max())
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_boltzmann_distribution_is_the_exact_discrete_equilibrium(backend):
+    """For constant chi the edge flux vanishes iff m_j / m_i = exp(chi (a_j - a_i) / D)."""
+    disc = discretisation(backend, MESHES["crossed"])
+    rng = np.random.default_rng(13)
+    chi, diffusivity = 2.0, 0.4
+    attractant = rng.uniform(0.0, 1.0, disc.backend.local_array(disc.previous("f")).size)
+    set_previous(disc, "f", attractant)
+    set_previous(disc, "m", np.exp(chi * attractant / diffusivity))
+    A = fitted_operator(disc, diffusivity, sensitivity=lambda m: np.full_like(m, chi))
+    equilibrium = np.exp(chi * attractant / diffusivity)
+    residual = A @ equilibrium
+    assert np.abs(residual).max() < 1e-12 * np.abs(A).max() * equilibrium.max()
+    # not true of a non-equilibrium density
+    assert np.abs(A @ np.ones_like(equilibrium)).max() > 1e-2 * np.abs(A).max()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_obtuse_meshes_are_warned_about(backend):
+    base = rectangle((0.0, 0.0), (1.0, 1.0), (3, 3))
+    points = base.points.copy()
+    interior = np.flatnonzero((points[:, 0] > 0) & (points[:, 0] < 1) & (points[:, 1] > 0) & (points[:, 1] < 1))
+    points[interior[0]] += (0.15, -0.12)  # skews the triangles around one vertex past 90 degrees
+    disc = discretisation(backend, MeshData(points, base.cells, base.boundaries))
+    with pytest.warns(UserWarning, match="obtuse"):
+        ExponentiallyFittedFlux(disc, "m", "f", diffusivity=1.0, sensitivity=lambda m: m)

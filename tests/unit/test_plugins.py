@@ -1,0 +1,264 @@
+"""The plugin registry (primordia.core.plugins, primordia.core.selection, ``primordia plugins``).
+
+Built-ins register through the same hooks as third parties; entry points of the
+group ``primordia`` are loaded once; a broken plugin is one warning and is
+skipped; the ``firstresult`` choosers can be overridden; unknown names raise
+:class:`PluginError` naming what is registered.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+
+import pytest
+
+from primordia.core.errors import PluginError, PrimordiaError
+from primordia.core.meshes import rectangle
+from primordia.core.plugins import get_plugin_manager, hookimpl, lookup, registry
+from primordia.coupling.orchestrator import Simulation
+from primordia.coupling.splitting import Sequential
+from primordia.model import Model
+
+BUILT_IN = "primordia (built-in)"
+
+#: A third-party kinetics: nothing reacts, and the rest state is e, f, b = 1/2, 1/4, 1/8.
+FROZEN_KINETICS = """\
+from primordia.core.plugins import hookimpl
+from primordia.physics.kinetics.base import Kinetics
+
+
+class Frozen(Kinetics):
+    name = "frozen"
+
+    def split_rates(self, c, t, ops):
+        return {species: (0.0, 0.0) for species in self.species}
+
+    def initial_state(self, m0, t0, ops):
+        return {"e": 0.5, "f": 0.25, "b": 0.125}
+
+
+@hookimpl
+def primordia_kinetics():
+    return [Frozen]
+"""
+
+BROKEN_PLUGIN = """\
+raise RuntimeError("this plugin is broken on purpose")
+"""
+
+
+def listing(stdout: str) -> dict[str, dict[str, str]]:
+    """``primordia plugins`` output as {kind: {name: rest of the line}}."""
+    table: dict[str, dict[str, str]] = {}
+    kind = None
+    for line in stdout.splitlines():
+        if re.fullmatch(r"[a-z_]+:", line):
+            kind = line[:-1]
+            table[kind] = {}
+        elif line.startswith("  ") and kind is not None:
+            name, _, rest = line.strip().partition(" ")
+            table[kind][name] = rest.strip()
+    return table
+
+
+def small_model(**kwargs) -> Model:
+    return Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03},
+                 mesh=rectangle((0, 0), (4, 4), (6, 6)), dt=0.2, t_final=0.6,
+                 output={"pictures": False}, **kwargs)
+
+
+# -- what is registered, and from where ---------------------------------------------------
+
+
+def test_plugins_lists_every_built_in_piece_and_its_origin(primordia_cli):
+    result = primordia_cli("plugins")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    table = listing(result.stdout)
+    expected = {
+        "physics": ["chemotaxis"],
+        "kinetics": ["painter2018"],
+        "backends": ["fenicsx", "skfem"],
+        "splitting_schemes": ["sequential"],
+        "outputs": ["config", "xdmf", "series", "pictures", "summary"],
+    }
+    for kind, names in expected.items():
+        assert kind in table, f"no '{kind}:' section in\n{result.stdout}"
+        for name in names:
+            assert name in table[kind], f"{kind} {name} not listed"
+            assert table[kind][name].startswith(BUILT_IN), table[kind][name]
+    # a backend that cannot be imported is a failure, not a footnote
+    for backend in ("fenicsx", "skfem"):
+        assert table["backends"][backend].endswith("[available]"), f"{backend}: {table['backends'][backend]}"
+
+
+def test_registry_reports_built_in_origin_in_process():
+    for kind, name in [("physics", "chemotaxis"), ("kinetics", "painter2018"), ("backends", "fenicsx"),
+                       ("splitting_schemes", "sequential"), ("outputs", "summary")]:
+        piece, origin = registry(kind)[name]
+        assert piece.name == name and origin == BUILT_IN
+
+
+# -- entry points -------------------------------------------------------------------------------
+
+
+def test_an_entry_point_kinetics_is_listed_with_its_distribution(primordia_cli, plugin_distribution):
+    env = plugin_distribution("primordia-frozen-kinetics", "0.3", {"frozen_kinetics": FROZEN_KINETICS},
+                              {"frozen": "frozen_kinetics"})
+    result = primordia_cli("plugins", env=env)
+    assert result.returncode == 0, result.stderr
+    kinetics = listing(result.stdout)["kinetics"]
+    assert kinetics["frozen"] == "primordia-frozen-kinetics 0.3"
+    assert kinetics["painter2018"] == BUILT_IN
+
+
+def test_an_entry_point_kinetics_can_be_selected_in_a_run(primordia_cli, plugin_distribution, small_config,
+                                                          tmp_path):
+    env = plugin_distribution("primordia-frozen-kinetics", "0.3", {"frozen_kinetics": FROZEN_KINETICS},
+                              {"frozen": "frozen_kinetics"})
+    out = tmp_path / "out"
+    result = primordia_cli("run", small_config(), "--out", out, "--no-progress",
+                           "--set", "kinetics.name=frozen", env=env)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ""
+    with open(out / "config.toml", "rb") as stream:
+        assert tomllib.load(stream)["kinetics"]["name"] == "frozen"
+    final = json.loads((out / "summary.json").read_text())["final"]
+    # painter2018 would react; frozen leaves its own rest state untouched
+    for species, value in {"e": 0.5, "f": 0.25, "b": 0.125}.items():
+        assert final[species]["min"] == pytest.approx(value, abs=1e-12), species
+        assert final[species]["max"] == pytest.approx(value, abs=1e-12), species
+
+
+def test_a_broken_entry_point_is_one_warning_and_the_rest_works(primordia_cli, plugin_distribution,
+                                                                small_config, tmp_path):
+    plugin_distribution("primordia-broken", "1.0", {"broken_plugin": BROKEN_PLUGIN}, {"broken": "broken_plugin"})
+    env = plugin_distribution("primordia-frozen-kinetics", "0.3", {"frozen_kinetics": FROZEN_KINETICS},
+                              {"frozen": "frozen_kinetics"})
+
+    listed = primordia_cli("plugins", env=env)
+    assert listed.returncode == 0
+    warnings = listed.stderr.splitlines()
+    assert len(warnings) == 1, listed.stderr
+    assert warnings[0].startswith("primordia: warning: plugin 'broken' (primordia-broken 1.0)")
+    assert "broken on purpose" in warnings[0]
+    table = listing(listed.stdout)
+    assert "painter2018" in table["kinetics"] and "frozen" in table["kinetics"]
+
+    ran = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                        "--set", "kinetics.name=frozen", env=env)
+    assert ran.returncode == 0, ran.stderr
+    assert len(ran.stderr.splitlines()) == 1 and "plugin 'broken'" in ran.stderr
+    assert "Traceback" not in ran.stderr
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
+
+
+# -- the firstresult choosers ---------------------------------------------------------------------
+
+
+@pytest.fixture
+def registered():
+    """``registered(plugin)`` registers a plugin object for the test, unregistering it afterwards."""
+    pm = get_plugin_manager()
+    names = []
+
+    def register(plugin):
+        names.append(pm.register(plugin))
+        return plugin
+
+    yield register
+    for name in names:
+        pm.unregister(name=name)
+
+
+def test_a_plugin_backend_chooser_overrides_the_built_in_one(registered, tmp_path):
+    from primordia.backends.fenicsx import FenicsxBackend
+
+    class InstrumentedBackend(FenicsxBackend):
+        name = "fenicsx-instrumented"
+
+    class PreferInstrumented:
+        asked = []
+
+        @hookimpl
+        def primordia_select_backend(self, name, entries, comm):
+            self.asked.append(name)
+            return InstrumentedBackend(comm) if name == "fenicsx" else None
+
+    chooser = registered(PreferInstrumented())
+    sim = small_model().run(backend="fenicsx", out=tmp_path / "run")
+    assert chooser.asked == ["fenicsx"]
+    assert type(sim.backend) is InstrumentedBackend
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["backend"] == "fenicsx-instrumented"
+
+
+def test_a_chooser_returning_none_defers_to_the_built_in_one(registered, tmp_path):
+    class Abstains:
+        @hookimpl
+        def primordia_select_backend(self, name, entries, comm):
+            return None
+
+    registered(Abstains())
+    sim = Simulation(small_model(), backend="fenicsx", out_dir=tmp_path / "run").setup()
+    assert sim.backend.name == "fenicsx"
+
+
+def test_a_plugin_splitting_chooser_overrides_the_built_in_one(registered, tmp_path):
+    class CountingSequential(Sequential):
+        name = "counting"
+        steps = 0
+
+        def advance(self, sim):
+            CountingSequential.steps += 1
+            return super().advance(sim)
+
+    class PreferCounting:
+        @hookimpl
+        def primordia_select_splitting_scheme(self, name, schemes, physics):
+            return CountingSequential(physics) if name == "sequential" else None
+
+    registered(PreferCounting())
+    model = small_model()
+    sim = model.run(out=tmp_path / "run")
+    assert isinstance(sim.scheme, CountingSequential)
+    assert CountingSequential.steps == model.num_steps == 3
+
+
+# -- unknown names -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind, label, known", [
+    ("physics", "physics", "chemotaxis"), ("kinetics", "kinetics", "painter2018"),
+    ("backends", "backend", "fenicsx"), ("splitting_schemes", "splitting scheme", "sequential"),
+    ("outputs", "output", "summary"),
+])
+def test_lookup_of_an_unknown_name_names_the_registered_ones(kind, label, known):
+    with pytest.raises(PluginError, match=rf"^unknown {label} 'no_such_thing' \(registered: .*{known}"):
+        lookup(kind, "no_such_thing")
+
+
+def test_unknown_physics_raises_plugin_error():
+    with pytest.raises(PluginError, match=r"unknown physics 'elasticity_typo' \(registered: .*chemotaxis"):
+        Model(physics=["elasticity_typo"], mesh=rectangle(cells=(2, 2)), dt=1.0, t_final=1.0)
+
+
+def test_unknown_kinetics_raises_plugin_error():
+    with pytest.raises(PluginError, match=r"unknown kinetics 'painter2019' \(registered: .*painter2018"):
+        small_model(kinetics="painter2019")
+
+
+def test_unknown_backend_raises_plugin_error(tmp_path):
+    with pytest.raises(PluginError, match=r"unknown backend 'deal\.ii' \(registered: .*fenicsx.*skfem"):
+        Simulation(small_model(), backend="deal.ii", out_dir=tmp_path / "run").setup()
+
+
+def test_unknown_splitting_scheme_raises_plugin_error(tmp_path):
+    with pytest.raises(PluginError, match=r"unknown splitting scheme 'strang' \(registered: .*sequential"):
+        Simulation(small_model(coupling="strang"), out_dir=tmp_path / "run").setup()
+
+
+def test_plugin_errors_are_user_errors():
+    """The CLI prints any PrimordiaError as one line; PluginError must be one."""
+    assert issubclass(PluginError, PrimordiaError)

@@ -1,0 +1,453 @@
+"""The numpy UFL evaluator of the scikit-fem backend, checked against dolfinx / FFCx.
+
+Each form is built once per backend on the same (slightly perturbed) mesh, with
+fields interpolated from the same functions, and assembled by both: functionals
+are compared directly, vectors and matrices entry by entry after mapping the
+DOFs of one backend onto the other's (by component and node coordinates).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+import scipy.sparse
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from primordia.backends.fenicsx import FenicsxBackend
+from primordia.backends.skfem import SkfemBackend
+from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, preprocess_form, reference_quadrature
+from primordia.core.mesh import MeshData
+from primordia.core.meshes import box, rectangle
+
+#: Largest difference allowed, relative to the largest entry.
+TOLERANCE = 1e-10
+CELLS = ("triangle", "tetrahedron")
+
+
+def perturbed(data: MeshData, amplitude: float, seed: int = 1) -> MeshData:
+    """The mesh with its interior vertices moved at random: generic, non-right cells."""
+    rng = np.random.default_rng(seed)
+    points = data.points.copy()
+    low, high = points.min(axis=0), points.max(axis=0)
+    interior = np.all((points > low + 1e-9) & (points < high - 1e-9), axis=1)
+    points[interior] += amplitude * rng.uniform(-1.0, 1.0, size=(interior.sum(), data.gdim))
+    return MeshData(points, data.cells, data.boundaries)
+
+
+def mesh_data(cell: str) -> MeshData:
+    if cell == "triangle":
+        return perturbed(rectangle((0.0, 0.0), (1.0, 1.5), (3, 4)), 0.05)
+    return perturbed(box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (2, 2, 2)), 0.04)
+
+
+@dataclass
+class Setup:
+    """Spaces and fields of one backend, the same for both."""
+
+    backend: object
+    data: MeshData
+    mesh: object
+    spaces: dict = field(default_factory=dict)
+    fields: dict = field(default_factory=dict)
+
+    @property
+    def gdim(self) -> int:
+        return self.data.gdim
+
+    @property
+    def domain(self):
+        return self.mesh.ufl_domain()
+
+
+def positive(x):
+    return 0.3 + x[0] ** 2 + 0.5 * x[1]
+
+
+def wavy(x):
+    return 0.5 + 0.5 * np.sin(2.0 * x[0]) + x[1] ** 2
+
+
+def displacement(x):
+    parts = [0.1 * x[0] * x[1], 0.2 * np.sin(x[0]) - 0.05 * x[1]] + ([0.1 * x[2] ** 2 + 0.05 * x[0]] if len(x) == 3 else [])
+    return np.stack(parts)
+
+
+def setup(backend, data: MeshData) -> Setup:
+    mesh = backend.create_mesh(data)
+    s = Setup(backend, data, mesh)
+    cell = s.domain.ufl_cell()
+    P1, P2 = ufl.FiniteElement("Lagrange", cell, 1), ufl.FiniteElement("Lagrange", cell, 2)
+    s.spaces = {
+        "P1": backend.function_space(mesh, P1),
+        "P2": backend.function_space(mesh, P2),
+        "vector P1": backend.function_space(mesh, ufl.VectorElement("Lagrange", cell, 1)),
+        "vector P2": backend.function_space(mesh, ufl.VectorElement("Lagrange", cell, 2)),
+        "Taylor-Hood": backend.function_space(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, 2), P1])),
+    }
+    fields = {"m": ("P1", positive), "c": ("P2", wavy), "u": ("vector P2", displacement), "u1": ("vector P1", displacement)}
+    for name, (space, values) in fields.items():
+        s.fields[name] = backend.function(s.spaces[space], name)
+        backend.interpolate(s.fields[name], values)
+    s.fields["T"] = backend.function(backend.function_space(mesh, ufl.TensorElement("Lagrange", cell, 1)), "T")
+    backend.interpolate(s.fields["T"], lambda x: np.vstack([displacement(x) * (i + 1) for i in range(data.gdim)]))
+    s.fields["w"] = backend.function(s.spaces["Taylor-Hood"], "w")
+    if backend.name == "fenicsx":  # dolfinx interpolates into the parts of a mixed space only
+        s.fields["w"].sub(0).interpolate(lambda x: displacement(x[: data.gdim]))
+        s.fields["w"].sub(1).interpolate(lambda x: positive(x[: data.gdim]))
+    else:
+        backend.interpolate(s.fields["w"], lambda x: np.vstack([displacement(x), positive(x)[None]]))
+    s.fields["k"] = backend.constant(mesh, 1.7)
+    s.fields["a"] = backend.constant(mesh, np.linspace(0.5, 1.0, data.gdim))
+    return s
+
+
+@pytest.fixture(scope="module", params=CELLS)
+def pair(request):
+    data = mesh_data(request.param)
+    return setup(FenicsxBackend(MPI.COMM_WORLD), data), setup(SkfemBackend(), data)
+
+
+# -- DOF matching ---------------------------------------------------------------------------
+
+
+def dolfinx_dof_keys(space, gdim: int) -> np.ndarray:
+    """(component, node coordinates) of each DOF of a dolfinx space."""
+    size = space.dofmap.index_map.size_local * space.dofmap.index_map_bs
+    keys = np.empty((size, 1 + gdim))
+    leaves = []
+
+    def visit(sub, element):
+        if isinstance(element, ufl.MixedElement):  # vector, tensor and mixed elements
+            for i, sub_element in enumerate(element.sub_elements()):
+                visit(sub.sub(i), sub_element)
+        else:
+            leaves.append(sub)
+
+    visit(space, space.ufl_element())
+    for component, leaf in enumerate(leaves):
+        collapsed, parent = (space, np.arange(size)) if leaf is space else leaf.collapse()
+        parent = np.asarray(parent)
+        keys[parent, 0] = component
+        keys[parent, 1:] = collapsed.tabulate_dof_coordinates()[:, :gdim]
+    return keys
+
+
+def skfem_dof_keys(space) -> np.ndarray:
+    return np.column_stack([space.dof_component, space.dof_coordinates.T])
+
+
+def sorting(keys: np.ndarray) -> np.ndarray:
+    """DOF order by (component, coordinates); the sorted keys must match between backends."""
+    rounded = np.round(keys, 9)
+    return np.lexsort(rounded.T[::-1])
+
+
+def assembled(setup_: Setup, form):
+    """The form assembled by the setup's backend, and its DOF orders (one per argument)."""
+    backend = setup_.backend
+    spaces = [a.ufl_function_space() for a in sorted(form.arguments(), key=lambda a: a.number())]
+    keys = [dolfinx_dof_keys(s, setup_.gdim) if backend.name == "fenicsx" else skfem_dof_keys(s) for s in spaces]
+    orders = [sorting(k) for k in keys]
+    if not spaces:
+        return backend.assemble_scalar(form), orders, keys
+    if len(spaces) == 1:
+        return backend.assemble_vector(form).array.copy()[orders[0]], orders, keys
+    A = backend.assemble_matrix(form)
+    indptr, indices, values = A.getValuesCSR()
+    dense = scipy.sparse.csr_matrix((values, indices, indptr), shape=A.getSize()).toarray()
+    return dense[np.ix_(orders[0], orders[1])], orders, keys
+
+
+def assert_same(pair_, build):
+    """Assemble ``build(setup)`` with both backends and compare entry by entry."""
+    (reference, ref_orders, ref_keys), (result, orders, keys) = (assembled(s, build(s)) for s in pair_)
+    for ref_k, ref_o, k, o in zip(ref_keys, ref_orders, keys, orders):
+        np.testing.assert_allclose(np.round(ref_k[ref_o], 9), np.round(k[o], 9), atol=1e-8)
+    reference, result = np.asarray(reference), np.asarray(result)
+    scale = np.abs(reference).max()
+    assert scale > 0.0
+    difference = np.abs(result - reference).max() / scale
+    assert difference < TOLERANCE, f"relative difference {difference:.2e}"
+    return reference
+
+
+# -- forms, one or a few operators each -------------------------------------------------------
+
+
+def u_in(s, space):
+    """The trial function of a named space."""
+    return ufl.TrialFunction(s.spaces[space])
+
+
+def v_in(s, space):
+    """The test function of a named space."""
+    return ufl.TestFunction(s.spaces[space])
+
+
+def deformation_gradient(s, u=None):
+    u = s.fields["u"] if u is None else u
+    return ufl.Identity(s.gdim) + ufl.grad(u)
+
+
+def neo_hookean_energy(s, u=None):
+    F = deformation_gradient(s, u)
+    J = ufl.det(F)
+    mu, lmbda = 1.3, s.fields["k"]
+    psi = mu / 2 * (ufl.tr(F.T * F) - s.gdim) - mu * ufl.ln(J) + lmbda / 2 * ufl.ln(J) ** 2
+    return psi * ufl.dx(metadata={"quadrature_degree": 4})
+
+
+def neo_hookean_residual(s, u=None):
+    u = s.fields["u"] if u is None else u
+    return ufl.derivative(neo_hookean_energy(s, u), u, v_in(s, "vector P2"))
+
+
+LUMPED = {"quadrature_rule": "vertex", "quadrature_degree": 1}
+
+FORMS = {
+    # differential operators
+    "grad P1 matrix": lambda s: ufl.inner(ufl.grad(u_in(s, "P1")), ufl.grad(v_in(s, "P1"))) * ufl.dx,
+    "grad P2 matrix + mass": lambda s: (ufl.inner(ufl.grad(u_in(s, "P2")), ufl.grad(v_in(s, "P2")))
+                                        + u_in(s, "P2") * v_in(s, "P2")) * ufl.dx,
+    "grad of vector field": lambda s: ufl.inner(ufl.grad(u_in(s, "vector P2")), ufl.grad(v_in(s, "vector P2"))) * ufl.dx,
+    "div vector": lambda s: ufl.div(s.fields["u"]) * v_in(s, "P1") * ufl.dx,
+    "div rectangular matrix": lambda s: ufl.div(u_in(s, "vector P2")) * v_in(s, "P1") * ufl.dx,
+    "second derivatives": lambda s: (ufl.div(ufl.grad(s.fields["c"])) * v_in(s, "P2")
+                                     + ufl.inner(ufl.grad(ufl.grad(s.fields["c"])), ufl.grad(ufl.grad(v_in(s, "P2"))))) * ufl.dx,
+    # tensor algebra
+    "inner dot": lambda s: (ufl.dot(s.fields["u"], ufl.grad(v_in(s, "P2")))
+                            + ufl.inner(ufl.grad(s.fields["u"]), ufl.grad(s.fields["u"])) * v_in(s, "P2")) * ufl.dx,
+    "outer": lambda s: ufl.inner(ufl.outer(s.fields["u"], ufl.grad(s.fields["m"])), ufl.grad(v_in(s, "vector P2"))) * ufl.dx,
+    "det tr transpose": lambda s: (ufl.det(deformation_gradient(s))
+                                   + ufl.tr(deformation_gradient(s).T * deformation_gradient(s))) * v_in(s, "P1") * ufl.dx,
+    "inv": lambda s: ufl.inner(ufl.inv(deformation_gradient(s)).T, ufl.grad(v_in(s, "vector P2"))) * ufl.dx,
+    "indexed and component tensors": lambda s: ufl.inner(
+        ufl.as_tensor(ufl.grad(s.fields["u"])[ufl.i, ufl.j], (ufl.j, ufl.i))
+        + ufl.as_matrix([[s.fields["u"][j] * (i + 1) for j in range(s.gdim)] for i in range(s.gdim)]),
+        ufl.grad(v_in(s, "vector P2"))) * ufl.dx,
+    "index sums and list tensors": lambda s: (ufl.grad(s.fields["u"])[ufl.i, ufl.i] * v_in(s, "P2")
+                                              + ufl.dot(ufl.as_vector([s.fields["u"][s.gdim - 1 - i] for i in range(s.gdim)]),
+                                                        ufl.grad(v_in(s, "P2")))) * ufl.dx,
+    # math functions
+    "exp ln": lambda s: ufl.exp(-s.fields["m"]) * ufl.ln(1 + s.fields["c"] ** 2) * v_in(s, "P2") * ufl.dx,
+    "tanh sqrt power": lambda s: (ufl.tanh(s.fields["c"]) + ufl.sqrt(s.fields["m"]) + s.fields["m"] ** 3
+                                  + s.fields["c"] ** 1.5 + s.fields["m"] ** s.fields["k"]) * v_in(s, "P1") * ufl.dx,
+    "trigonometric erf atan2 abs": lambda s: (ufl.sin(s.fields["c"]) + ufl.cos(s.fields["m"]) + ufl.atan(s.fields["c"])
+                                              + ufl.erf(s.fields["m"]) + ufl.atan_2(s.fields["m"], s.fields["c"])
+                                              + abs(s.fields["c"] - 1.0) + ufl.cosh(s.fields["m"]) + ufl.sinh(s.fields["c"])
+                                              + ufl.tan(0.5 * s.fields["m"]) + ufl.asin(0.3 * s.fields["c"])
+                                              + ufl.acos(0.3 * s.fields["m"])) * v_in(s, "P1") * ufl.dx,
+    "division": lambda s: s.fields["c"] / (1 + s.fields["m"]) * ufl.div(v_in(s, "vector P1")) * ufl.dx,
+    # conditionals
+    "conditional": lambda s: (
+        ufl.conditional(ufl.lt(s.fields["c"], 0.8), s.fields["c"], 1 - s.fields["c"])
+        + ufl.conditional(ufl.And(ufl.ge(s.fields["m"], 0.5), ufl.Not(ufl.gt(s.fields["c"], 1.0))), 1.0, s.fields["m"])
+        + ufl.conditional(ufl.Or(ufl.le(s.fields["m"], 0.4), ufl.eq(s.fields["m"], 0.3)), 2.0, 3.0)
+        + ufl.conditional(ufl.ne(s.fields["c"], 0.5), s.fields["c"] ** 2, 0.0)
+        + ufl.max_value(s.fields["m"], s.fields["c"]) + ufl.min_value(s.fields["m"], s.fields["c"])) * v_in(s, "P2") * ufl.dx,
+    "derivative through a conditional": lambda s: ufl.derivative(
+        ufl.conditional(ufl.gt(s.fields["c"], 0.9), s.fields["c"] ** 2, ufl.exp(s.fields["c"])) * v_in(s, "P2") * ufl.dx,
+        s.fields["c"], u_in(s, "P2")),
+    # terminals
+    "spatial coordinate": lambda s: ufl.exp(ufl.SpatialCoordinate(s.mesh)[0]) * ufl.sin(3 * ufl.SpatialCoordinate(s.mesh)[1])
+                                    * v_in(s, "P2") * ufl.dx,
+    "spatial coordinate functional": lambda s: ufl.exp(-ufl.dot(ufl.SpatialCoordinate(s.mesh), ufl.SpatialCoordinate(s.mesh)))
+                                               * s.fields["c"] * ufl.dx,
+    "constants": lambda s: (s.fields["k"] * s.fields["m"] * v_in(s, "P1")
+                            + ufl.inner(s.fields["a"], ufl.grad(v_in(s, "P1")))) * ufl.dx,
+    # facet integrals
+    "facet normal on ds": lambda s: ufl.dot(s.fields["u"], ufl.FacetNormal(s.mesh)) * v_in(s, "P2") * ufl.ds,
+    "tagged boundaries": lambda s: (s.fields["m"] * v_in(s, "P2") * s.backend.measure("ds", s.mesh)(s.data.boundary_id("left"))
+                                    + ufl.exp(s.fields["c"]) * v_in(s, "P2") * s.backend.measure("ds", s.mesh)((2, 3))),
+    "facet matrix": lambda s: ufl.dot(ufl.grad(u_in(s, "P2")), ufl.FacetNormal(s.mesh)) * v_in(s, "P2") * ufl.ds,
+    "facet functional": lambda s: ufl.dot(ufl.SpatialCoordinate(s.mesh), ufl.FacetNormal(s.mesh)) * s.fields["m"] * ufl.ds,
+    # geometry
+    "cell size quantities": lambda s: (ufl.CellVolume(s.mesh) + ufl.CellDiameter(s.mesh) + ufl.Circumradius(s.mesh)
+                                       + ufl.MinCellEdgeLength(s.mesh) + ufl.MaxCellEdgeLength(s.mesh))
+                                      * v_in(s, "P1") * ufl.dx,
+    "jacobians": lambda s: (ufl.JacobianDeterminant(s.mesh) + ufl.Jacobian(s.mesh)[0, 1]
+                            + ufl.JacobianInverse(s.mesh)[1, 0]) * ufl.exp(s.fields["m"]) * v_in(s, "P1") * ufl.dx,
+    "facet area": lambda s: ufl.FacetArea(s.mesh) * v_in(s, "P1") * ufl.ds,
+    # nonlinear forms and their derivatives
+    "neo-Hookean energy": neo_hookean_energy,
+    "neo-Hookean residual": neo_hookean_residual,
+    "neo-Hookean tangent": lambda s: ufl.derivative(neo_hookean_residual(s), s.fields["u"], u_in(s, "vector P2")),
+    "vector P1 tangent": lambda s: ufl.derivative(ufl.derivative(neo_hookean_energy(s, s.fields["u1"]), s.fields["u1"],
+                                                                 v_in(s, "vector P1")), s.fields["u1"], u_in(s, "vector P1")),
+    # mixed spaces
+    "Taylor-Hood Stokes matrix": lambda s: (
+        ufl.inner(ufl.grad(ufl.split(u_in(s, "Taylor-Hood"))[0]), ufl.grad(ufl.split(v_in(s, "Taylor-Hood"))[0]))
+        - ufl.split(u_in(s, "Taylor-Hood"))[1] * ufl.div(ufl.split(v_in(s, "Taylor-Hood"))[0])
+        - ufl.split(v_in(s, "Taylor-Hood"))[1] * ufl.div(ufl.split(u_in(s, "Taylor-Hood"))[0])) * ufl.dx,
+    "Taylor-Hood nonlinear tangent": lambda s: ufl.derivative(
+        (ufl.exp(-ufl.split(s.fields["w"])[1]) * ufl.inner(ufl.grad(ufl.split(s.fields["w"])[0]),
+                                                            ufl.grad(ufl.split(v_in(s, "Taylor-Hood"))[0]))
+         + ufl.split(s.fields["w"])[1] ** 2 * ufl.split(v_in(s, "Taylor-Hood"))[1]) * ufl.dx,
+        s.fields["w"], u_in(s, "Taylor-Hood")),
+    "tensor field": lambda s: ufl.inner(ufl.dot(s.fields["T"], s.fields["T"].T), ufl.grad(v_in(s, "vector P1"))) * ufl.dx,
+    # vertex quadrature
+    "lumped mass": lambda s: u_in(s, "P1") * v_in(s, "P1") * ufl.dx(metadata=LUMPED),
+    "lumped nonlinear reaction": lambda s: ufl.exp(s.fields["m"]) * ufl.tanh(s.fields["m"]) * v_in(s, "P1") * ufl.dx(metadata=LUMPED),
+}
+
+
+@pytest.mark.parametrize("name", FORMS)
+def test_matches_dolfinx(pair, name):
+    assert_same(pair, FORMS[name])
+
+
+def test_constant_value_change_is_seen(pair):
+    for s in pair:
+        s.fields["k"].value = 0.25
+    try:
+        assert_same(pair, FORMS["constants"])
+    finally:
+        for s in pair:
+            s.fields["k"].value = 1.7
+
+
+def test_lumped_mass_is_diagonal_with_cell_volume_shares(pair):
+    _, s = pair
+    A = s.backend.assemble_matrix(FORMS["lumped mass"](s))
+    indptr, indices, values = A.getValuesCSR()
+    dense = scipy.sparse.csr_matrix((values, indices, indptr), shape=A.getSize()).toarray()
+    assert np.abs(dense - np.diag(np.diag(dense))).max() == 0.0
+    shares = np.zeros(s.data.num_vertices)
+    np.add.at(shares, s.data.cells, (s.data.cell_volumes() / (s.gdim + 1))[:, None])
+    np.testing.assert_allclose(np.diag(dense), shares, rtol=1e-13)
+
+
+# -- the evaluator on its own -------------------------------------------------------------------
+
+
+class ConstantsOnly:
+    """A QuadratureContext for integrands made of constants and x, on 2 entities x 3 points."""
+
+    gdim = 2
+
+    def __init__(self, points):
+        self.points = points
+
+    def constant(self, constant):
+        return constant.values
+
+    def geometry(self, quantity):
+        return self.points if quantity == "SpatialCoordinate" else None
+
+
+class Matrix(ufl.Constant):
+    def __init__(self, domain, values):
+        super().__init__(domain, shape=np.shape(values))
+        self.values = np.asarray(values, dtype=float)
+
+
+def test_free_index_bookkeeping_against_numpy():
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.triangle, 1))
+    rng = np.random.default_rng(5)
+    a, b = rng.uniform(size=(2, 2)), rng.uniform(size=(2, 2))
+    A, B = Matrix(domain, a), Matrix(domain, b)
+    x = ufl.SpatialCoordinate(domain)
+    points = rng.uniform(size=(2, 2, 3))  # (gdim, entity, point)
+    i, j, k = ufl.indices(3)
+    expression = (ufl.as_tensor(A[i, j] * B[j, k], (k, i))[1, 0] + ufl.tr(A * B.T) * x[0]
+                  + ufl.dot(ufl.as_vector((x[1], x[0])), ufl.dot(A, x)) + ufl.det(B) * ufl.exp(-x[1]))
+    expected = ((a @ b).T[1, 0] + np.trace(a @ b.T) * points[0]
+                + np.einsum("ieq,ij,jeq->eq", points[::-1], a, points) + np.linalg.det(b) * np.exp(-points[1]))
+    value = evaluate_integrand(ufl.algorithms.apply_algebra_lowering.apply_algebra_lowering(expression),
+                               ConstantsOnly(points))
+    np.testing.assert_allclose(value[0, 0], expected, rtol=1e-14)
+
+
+# -- scikit-fem only -------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module", params=CELLS)
+def skfem_setup(request):
+    return setup(SkfemBackend(), mesh_data(request.param))
+
+
+def test_neo_hookean_tangent_matches_finite_differences(skfem_setup):
+    s = skfem_setup
+    backend, u = s.backend, s.fields["u"]
+    residual = neo_hookean_residual(s)
+    tangent = backend.assemble_matrix(ufl.derivative(residual, u, u_in(s, "vector P2")))
+    direction = np.random.default_rng(3).uniform(-1.0, 1.0, u.array.size)
+    saved = u.array.copy()
+
+    def central_difference(step):
+        u.array[:] = saved + step * direction
+        forward = backend.assemble_vector(residual).array.copy()
+        u.array[:] = saved - step * direction
+        backward = backend.assemble_vector(residual).array.copy()
+        u.array[:] = saved
+        return (forward - backward) / (2 * step)
+
+    step = 1e-4  # with Richardson extrapolation: truncation error O(step^4)
+    finite_difference = (4 * central_difference(step / 2) - central_difference(step)) / 3
+    exact = tangent.createVecLeft()
+    tangent.mult(PETSc.Vec().createWithArray(direction, comm=PETSc.COMM_SELF), exact)
+    error = np.abs(exact.array - finite_difference).max() / np.abs(exact.array).max()
+    assert error < 1e-9
+
+
+def test_reproduces_scikit_fem_assembly(skfem_setup):
+    import skfem
+    from skfem.helpers import dot, grad
+
+    s = skfem_setup
+    space = s.spaces["P2"]
+    form = (ufl.inner(ufl.grad(u_in(s, "P2")), ufl.grad(v_in(s, "P2"))) + u_in(s, "P2") * v_in(s, "P2")) * ufl.dx
+    A = s.backend.assemble_matrix(form)
+    indptr, indices, values = A.getValuesCSR()
+    ours = scipy.sparse.csr_matrix((values, indices, indptr), shape=A.getSize())
+
+    @skfem.BilinearForm
+    def reference(u, v, _):
+        return dot(grad(u), grad(v)) + u * v
+
+    theirs = reference.assemble(skfem.Basis(s.mesh.skfem, space.skfem_element, intorder=4))
+    assert abs(ours - theirs).max() < 1e-12 * abs(theirs).max()
+
+
+def test_unsupported_operator_is_named(skfem_setup):
+    s = skfem_setup
+    with pytest.raises(UnsupportedUFL, match="'BesselJ' is not supported by the scikit-fem backend"):
+        s.backend.assemble_scalar(ufl.bessel_J(1, s.fields["m"]) * ufl.dx)
+
+
+def test_interior_facet_integrals_are_unsupported(skfem_setup):
+    s = skfem_setup
+    with pytest.raises(UnsupportedUFL, match="dS"):
+        s.backend.assemble_scalar(ufl.avg(s.fields["m"]) * ufl.dS)
+
+
+def test_cell_subdomains_are_unsupported(skfem_setup):
+    s = skfem_setup
+    with pytest.raises(UnsupportedUFL, match="subdomain"):
+        s.backend.assemble_scalar(s.fields["m"] * ufl.dx(1))
+
+
+def test_quadrature_degree_is_ffcx_estimate():
+    mesh = SkfemBackend().create_mesh(mesh_data("triangle"))
+    cell = mesh.ufl_cell()
+    v = ufl.TestFunction(SkfemBackend().function_space(mesh, ufl.FiniteElement("Lagrange", cell, 2)))
+    plans = preprocess_form(ufl.exp(ufl.SpatialCoordinate(mesh)[0]) * v * ufl.dx
+                            + v * ufl.dx(metadata={"quadrature_degree": 7}))
+    assert sorted(p.degree for p in plans) == [5, 7]  # exp(x): degree 1 + 2, times P2
+
+
+@pytest.mark.parametrize("cellname", ["interval", "triangle", "tetrahedron"])
+@pytest.mark.parametrize("degree", [1, 2, 4, 6])
+def test_fallback_quadrature_without_basix_is_exact(monkeypatch, cellname, degree):
+    monkeypatch.setitem(sys.modules, "basix", None)
+    points, weights = reference_quadrature(cellname, degree)
+    tdim = points.shape[1]
+    # integral of x^degree over the reference simplex: degree! / (degree + tdim)!
+    exact = math.factorial(degree) / math.factorial(degree + tdim)
+    assert np.isclose(weights @ points[:, 0] ** degree, exact, rtol=1e-13)
