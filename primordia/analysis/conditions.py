@@ -178,6 +178,12 @@ def coupled_conditions(params, theta_variant: str = "corrected") -> Conditions:
     ``3.7:theta_2``, ``3.7:theta_3``, ``3.7b``, ``3.7c``, ``3.8`` (as printed),
     ``discriminant`` (of the cubic), and ``3.4c``, ``3.5c``, ``3.6c`` (X_c < 0,
     Y_c < 0, 16 X_c^2 - 60 alpha Y_c > 0: the discriminant of d_0'/K^2).
+
+    ``seed_region``: with the seed's theta, "(3.7) violated" (the cubic
+    d_0'/K has a root with Re >= 0, necessary for d_0 < 0); with the corrected
+    theta (theta_1 = 0, so the cubic always has the root 0), the same reading
+    of d_0'/K^2: "(theta_3 < 0 or theta_2 < 0) and theta_3^2 > 4 theta_4 theta_2",
+    i.e. ((3.4c) or (3.5c)) and (3.6c), necessary like (3.4)-(3.6).
     """
     c = _as_coefficients(params)
     t1, t2, t3, t4 = theta(c, theta_variant)
@@ -197,14 +203,17 @@ def coupled_conditions(params, theta_variant: str = "corrected") -> Conditions:
     satisfied = {name: value > 0 for name, value in values.items()}
     for name in ("3.4c", "3.5c"):
         satisfied[name] = values[name] < 0
-    routh_hurwitz = satisfied["3.7:theta_1"] & satisfied["3.7:theta_2"] & satisfied["3.7:theta_3"] & \
-        satisfied["3.7b"] & satisfied["3.7c"]
+    if theta_variant == "seed":  # (3.7) violated: d_0'(K)/K has a root outside the left half plane
+        seed_region = ~(satisfied["3.7:theta_1"] & satisfied["3.7:theta_2"] & satisfied["3.7:theta_3"]
+                        & satisfied["3.7b"] & satisfied["3.7c"])
+    else:  # theta_1 = 0: the same logic on d_0'/K^2 = theta_4 K^2 + theta_3 K + theta_2
+        seed_region = (satisfied["3.4c"] | satisfied["3.5c"]) & satisfied["3.6c"]
     return Conditions(
         coupled=True,
         values=values,
         satisfied=satisfied,
         region=_negative_somewhere(alpha, Xc, Yc),
-        seed_region=~routh_hurwitz,
+        seed_region=seed_region,
         notes={"theta_variant": theta_variant},
     )
 

@@ -92,13 +92,16 @@ def draw_patterning_space(ax, ds: xr.Dataset) -> None:
               frameon=False)
 
 
-def _constant_term_limits(curves, K, k_c):
-    """Show every curve's dip below zero and the critical curve's tangency, not the K^3 growth."""
-    low = float(np.nanmin(curves))
+def _constant_term_scale(ax, curves, K, k_c):
+    """Linear near the critical curve's tangency, logarithmic beyond (a_0 ~ k^6, d_0 ~ k^10 far out)."""
     critical = curves[CRITICAL_SCALES.index(1.0)]
-    near = critical[K <= max(3.0 * k_c**2, 0.2 * K.max())]
-    high = max(-low, float(np.nanmax(np.abs(near))), 1e-300)
-    return (1.15 * low if low < 0 else -0.25 * high, 1.5 * high)
+    near = np.abs(critical[(K > 0) & (K <= max(3.0 * k_c**2, 0.1 * K.max()))])
+    scale = float(np.nanmax(near)) if near.size and np.nanmax(near) > 0 else 1.0
+    if np.nanmax(np.abs(curves)) > 50 * scale:
+        ax.set_yscale("symlog", linthresh=scale)
+    else:
+        low = float(np.nanmin(curves))
+        ax.set_ylim(1.15 * low if low < 0 else -0.25 * scale, 1.5 * max(scale, -low))
 
 
 def draw_critical_curves(ax_constant, ax_dispersion, ds: xr.Dataset) -> None:
@@ -124,7 +127,7 @@ def draw_critical_curves(ax_constant, ax_dispersion, ds: xr.Dataset) -> None:
         ax.set_xlabel("k^2")
         ax.set_xlim(K.min(), K.max())
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
-    ax_constant.set_ylim(*_constant_term_limits(constant, K, ds.attrs["critical_wavenumber"]))
+    _constant_term_scale(ax_constant, constant, K, ds.attrs["critical_wavenumber"])
     ax_constant.set_ylabel(symbol)
     ax_constant.set_title(f"{symbol}(k^2) around the critical {name} (k_c = {ds.attrs['critical_wavenumber']:.3g})",
                           fontsize=10)

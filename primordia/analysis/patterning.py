@@ -203,8 +203,8 @@ def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 
             "unstable_conditions": (dims, np.asarray(found.region, dtype=np.int8), {
                 "long_name": f"{'d_0' if coupled else 'a_0'} < 0 for some k > 0 (exact criterion)", **flag}),
             "seed_conditions": (dims, np.asarray(found.seed_region, dtype=np.int8), {
-                "long_name": "region described by the seed's conditions "
-                             + ("(3.7) violated" if coupled else "((3.4) or (3.5)) and (3.6)"), **flag}),
+                "long_name": "region described by the seed's conditions: " + _seed_region_text(coupled, theta_variant),
+                **flag}),
         },
         coords={
             x.name: (x.name, x.values, {"long_name": base.declaration(x.name).description,
@@ -229,6 +229,14 @@ def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 
                    {"long_name": f"left side of seed condition ({name}); boundary where it is 0"})
     _add_critical_curves(ds, base, critical_parameter or x.name, coupled)
     return ds
+
+
+def _seed_region_text(coupled: bool, theta_variant: str) -> str:
+    if not coupled:
+        return "((3.4) or (3.5)) and (3.6)"
+    if theta_variant == "seed":
+        return "(3.7) violated, printed theta"
+    return "((3.4c) or (3.5c)) and (3.6c), i.e. (3.7)-(3.8) on d_0'/k^2 with theta_1 = 0"
 
 
 def _add_critical_curves(ds: xr.Dataset, base, name: str, coupled: bool) -> None:

@@ -147,7 +147,10 @@ class FenicsxBackend(Backend):
         mesh = space.mesh
         tdim = mesh.topology.dim
         facets = mesh.facet_tags.indices[mesh.facet_tags.values == mesh.mesh_data.boundary_id(boundary)]
-        target = space if component is None else space.sub(component)
+        target = space
+        for index in (component,) if isinstance(component, int) else (component or ()):
+            target = target.sub(index)
+        component = None if target is space else component
         collapsed = target.collapse()[0] if component is not None else space
         prescribed = fem.Function(collapsed)
         self._set_value(prescribed, value)
@@ -199,6 +202,13 @@ class FenicsxBackend(Backend):
             self._set_value(function, values)
         function.x.scatter_forward()
 
+    def interpolate_component(self, function, index: int, values) -> None:
+        sub_space, dofs = function.function_space.sub(index).collapse()
+        part = fem.Function(sub_space)
+        self.interpolate(part, values)
+        function.x.array[np.asarray(dofs)] = part.x.array
+        function.x.scatter_forward()
+
     def _vertex_map(self, space):
         """(local P1 DOF -> original MeshData vertex index) for a P1 space."""
         key = id(space)
@@ -233,7 +243,9 @@ class FenicsxBackend(Backend):
         bs = function.function_space.dofmap.index_map_bs
         function.x.array.reshape(-1, bs)[:] = np.asarray(values).reshape(len(values), bs)[original]
 
-    def vertex_values(self, function):
+    def vertex_values(self, function, component=None):
+        if component is not None:
+            function = function.sub(component).collapse()
         space = self._p1_space(function.function_space)
         if space is not function.function_space:
             p1 = fem.Function(space)

@@ -24,7 +24,7 @@ order, the same order dolfinx keeps, so quadrature points coincide with FFCx's.
 
 from __future__ import annotations
 
-import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -58,20 +58,23 @@ _LAGRANGE = {
 }
 _PIECEWISE_CONSTANT = {"triangle": skfem.ElementTriP0, "tetrahedron": skfem.ElementTetP0}
 
-#: Local facet ``i`` of a simplex is the one opposite vertex ``i`` (basix / FFCx numbering).
+
 def _facet_vertices(tdim: int) -> np.ndarray:
+    """Local vertices of each local facet: facet ``i`` is opposite vertex ``i`` (basix / FFCx numbering)."""
     return np.array([[v for v in range(tdim + 1) if v != i] for i in range(tdim + 1)])
 
 
-#: Outward normals of the reference facets (not normalised), same numbering.
 def _reference_normals(tdim: int) -> np.ndarray:
-    normals = np.vstack([np.ones((1, tdim)), -np.eye(tdim)])
-    return normals
+    """Outward normals (not normalised) of the reference cell's facets, same numbering."""
+    return np.vstack([np.ones((1, tdim)), -np.eye(tdim)])
 
 
 #: Cells per chunk are chosen so that an array of (test x trial x gdim^2 x points x cells)
 #: values, the largest an integrand of a tangent typically builds, stays below this.
 _CHUNK_VALUES = 2 ** 22
+
+#: Preprocessed forms kept (a physics module reuses a handful of forms at every step).
+_CACHED_FORMS = 256
 
 
 class _SerialComm:
@@ -296,8 +299,18 @@ class SkfemFunction(ufl.Coefficient):
     def __init__(self, space: SkfemFunctionSpace, name: str = "f"):
         super().__init__(space)
         self.name = name
-        self.array = np.zeros(space.num_dofs)
-        self.vector = PETSc.Vec().createWithArray(self.array, comm=PETSc.COMM_SELF)
+        self._array = np.zeros(space.num_dofs)
+        self._vector = PETSc.Vec().createWithArray(self._array, comm=PETSc.COMM_SELF)
+
+    @property
+    def array(self) -> np.ndarray:
+        """The DOF values (write into it; it is shared with :attr:`vector`)."""
+        return self._array
+
+    @property
+    def vector(self):
+        """The PETSc Vec viewing :attr:`array`."""
+        return self._vector
 
     @property
     def function_space(self) -> SkfemFunctionSpace:
@@ -490,11 +503,11 @@ class _Chunk:
     # -- geometry -----------------------------------------------------------------------
     def geometry(self, quantity: str) -> np.ndarray | None:
         if quantity not in self._geometry_cache:
-            compute = getattr(self, f"_geometry_{quantity}", None)
-            self._geometry_cache[quantity] = None if compute is None else compute()
+            compute = _GEOMETRY.get(quantity)
+            self._geometry_cache[quantity] = None if compute is None else compute(self)
         return self._geometry_cache[quantity]
 
-    def _geometry_SpatialCoordinate(self):
+    def spatial_coordinate(self) -> np.ndarray:
         points = self.rule.points
         jacobian = self.mesh.jacobian[self.cells]
         origin = self.mesh.origin[self.cells].T[:, :, None]
@@ -502,45 +515,38 @@ class _Chunk:
             return origin + np.einsum("eak,keq->aeq", jacobian, np.moveaxis(points[self.local_facets], 0, 1))
         return origin + np.einsum("eak,kq->aeq", jacobian, points)
 
-    def _geometry_FacetNormal(self):
+    def facet_normal(self) -> np.ndarray | None:
         if not self.rule.facet:
             return None
         reference = _reference_normals(self.mesh.tdim)[self.local_facets]       # (E, tdim)
         normal = np.einsum("eka,ek->ae", self.inverse_jacobian, reference)
         return (normal / np.linalg.norm(normal, axis=0))[:, :, None]
 
-    def _geometry_FacetArea(self):
+    def facet_area(self) -> np.ndarray | None:
         if not self.rule.facet:
             return None
         return (self._facet_scale * REFERENCE_VOLUMES[FACET_NAMES[self.mesh.cellname]])[:, None]
 
-    def _geometry_Jacobian(self):
-        return np.moveaxis(self.mesh.jacobian[self.cells], 0, -1)[..., None]
-
-    def _geometry_JacobianInverse(self):
-        return np.moveaxis(self.inverse_jacobian, 0, -1)[..., None]
-
-    def _geometry_JacobianDeterminant(self):
-        return self.mesh.determinant[self.cells][:, None]
-
     @cached_property
-    def _cell_quantities(self):
+    def cell_quantities(self) -> dict[str, np.ndarray]:
         return cell_quantities(self.mesh.mesh_data.points[self.mesh.mesh_data.cells[self.cells]])
 
-    def _geometry_CellVolume(self):
-        return self._cell_quantities["CellVolume"][:, None]
 
-    def _geometry_Circumradius(self):
-        return self._cell_quantities["Circumradius"][:, None]
+def _cell_quantity(name: str):
+    return lambda chunk: chunk.cell_quantities[name][:, None]
 
-    def _geometry_CellDiameter(self):
-        return self._cell_quantities["CellDiameter"][:, None]
 
-    def _geometry_MinCellEdgeLength(self):
-        return self._cell_quantities["MinCellEdgeLength"][:, None]
-
-    def _geometry_MaxCellEdgeLength(self):
-        return self._cell_quantities["MaxCellEdgeLength"][:, None]
+#: Geometric quantities by UFL class name: arrays (*shape, E, Q or 1).
+_GEOMETRY = {
+    "SpatialCoordinate": _Chunk.spatial_coordinate,
+    "FacetNormal": _Chunk.facet_normal,
+    "FacetArea": _Chunk.facet_area,
+    "Jacobian": lambda chunk: np.moveaxis(chunk.mesh.jacobian[chunk.cells], 0, -1)[..., None],
+    "JacobianInverse": lambda chunk: np.moveaxis(chunk.inverse_jacobian, 0, -1)[..., None],
+    "JacobianDeterminant": lambda chunk: chunk.mesh.determinant[chunk.cells][:, None],
+    **{name: _cell_quantity(name) for name in
+       ("CellVolume", "Circumradius", "CellDiameter", "MinCellEdgeLength", "MaxCellEdgeLength")},
+}
 
 
 # ---------------------------------------------------------------------------------------
@@ -579,7 +585,7 @@ class SkfemBackend(Backend):
             raise PrimordiaError("the skfem backend is serial: run it without mpirun "
                                  "(or choose --backend fenicsx for parallel runs)")
         super().__init__(comm)
-        self._plans: dict[int, tuple[ufl.Form, list[IntegralPlan]]] = {}
+        self._plans: OrderedDict[int, tuple[ufl.Form, list[IntegralPlan]]] = OrderedDict()
         self._rules: dict[tuple, _Rule] = {}
         self._patterns: dict[tuple[int, int], tuple] = {}
 
@@ -603,14 +609,18 @@ class SkfemBackend(Backend):
 
     # -- integration --------------------------------------------------------------------
     def _form_plans(self, form: ufl.Form) -> list[IntegralPlan]:
+        """The preprocessed integrals of ``form``, kept for the most recently used forms."""
         hit = self._plans.get(id(form))
         if hit is None or hit[0] is not form:
             hit = (form, preprocess_form(form))
             self._plans[id(form)] = hit
+            if len(self._plans) > _CACHED_FORMS:
+                self._plans.popitem(last=False)
+        self._plans.move_to_end(id(form))
         return hit[1]
 
     def _rule(self, mesh: SkfemMesh, plan: IntegralPlan) -> _Rule:
-        key = (id(mesh), plan.integral_type, plan.degree, plan.rule)
+        key = (mesh.cellname, plan.integral_type, plan.degree, plan.rule)
         if key not in self._rules:
             self._rules[key] = _Rule(mesh, plan)
         return self._rules[key]
@@ -670,7 +680,7 @@ class SkfemBackend(Backend):
             unique, positions = np.unique(keys.ravel(), return_inverse=True)
             row, col = np.divmod(unique, trial.num_dofs)
             indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=test.num_dofs))])
-            positions = positions.reshape(keys.shape).astype(np.int64)
+            positions = positions.reshape(keys.shape).astype(np.int32 if len(unique) < 2 ** 31 else np.int64)
             hit = (test, trial, indptr.astype(PETSc.IntType), col.astype(PETSc.IntType), positions, row, col)
             self._patterns[key] = hit
         return hit[2:]

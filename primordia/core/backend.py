@@ -142,8 +142,14 @@ class Backend(ABC):
 
     @abstractmethod
     def dirichlet_bc(self, space, boundary: str, value: PointFunction | float | Sequence[float],
-                     component: int | None = None) -> BoundaryCondition:
-        """Fix ``space`` (or one component of it) on the named boundary."""
+                     component: int | tuple[int, ...] | None = None) -> BoundaryCondition:
+        """Fix ``space`` (or a sub-space of it) on the named boundary.
+
+        ``component`` selects a sub-space: an int, or a path through nested
+        sub-spaces, e.g. ``(0, 1)`` = the y-component of the first field of a
+        mixed (u, p) space.  ``value`` is a number, a sequence (vector
+        sub-spaces) or a point function of x (shape (gdim, n)).
+        """
 
     @abstractmethod
     def update_dirichlet_bc(self, bc: BoundaryCondition, value) -> None:
@@ -171,12 +177,21 @@ class Backend(ABC):
         """Set ``function`` to the interpolant of ``values`` (Lagrange nodes)."""
 
     @abstractmethod
+    def interpolate_component(self, function, index: int, values: PointFunction | float) -> None:
+        """Set sub-function ``index`` of a mixed ``function`` to the interpolant of ``values``."""
+
+    @abstractmethod
     def set_vertex_values(self, function, values: np.ndarray) -> None:
         """Set a P1 ``function`` from values given at every MeshData vertex (global order)."""
 
     @abstractmethod
-    def vertex_values(self, function) -> np.ndarray | None:
-        """Values at all MeshData vertices, gathered on rank 0 (``None`` elsewhere)."""
+    def vertex_values(self, function, component: int | None = None) -> np.ndarray | None:
+        """Values at all MeshData vertices, gathered on rank 0 (``None`` elsewhere).
+
+        ``component`` selects one sub-function of a mixed function.  Scalars give
+        shape (n_vertices,), vectors (n_vertices, value_size); higher-degree
+        fields are interpolated to P1 first.
+        """
 
     # -- sizes --------------------------------------------------------------------------
     @abstractmethod

@@ -6,16 +6,37 @@ current value and its value at the start of the step (``previous``).  It is
 also where couplings meet: a module adds a term to another module's balance
 law with :meth:`contribute`, and reads a field another module owns with
 :meth:`field` (a missing provider is named).
+
+Fields are stored in *groups*: the fields of a group are solved together and
+live in one backend function (a mixed function when the group has several
+fields, e.g. displacement and pore pressure).  ``field``, ``previous``,
+``rate`` and ``test`` return UFL expressions either way, so a physics module
+reads the same whether its fields are alone, grouped with each other, or all
+in one monolithic group (the splitting scheme decides the grouping).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import ufl
 
 from primordia.core.errors import ConfigError
+
+
+@dataclass
+class _Group:
+    name: str
+    fields: list[str]
+    space: object
+    current: object
+    previous: object
+    rate: object | None = None
+
+    def index(self, field: str) -> int | None:
+        return None if len(self.fields) == 1 else self.fields.index(field)
 
 
 class Discretisation:
@@ -33,45 +54,116 @@ class Discretisation:
         self.time = 0.0
         self.t = backend.constant(self.mesh, 0.0)  # time at the end of the current step
         self.dt = backend.constant(self.mesh, 1.0)
-        self._spaces: dict[tuple, object] = {}
-        self._current: dict[str, object] = {}
-        self._previous: dict[str, object] = {}
+        self._groups: dict[str, _Group] = {}
+        self._group_of: dict[str, str] = {}
         self._owner: dict[str, str] = {}
+        self._specs: dict[str, object] = {}
+        self._splits: dict[tuple[str, str], tuple] = {}
+        self._provided: dict[str, tuple[object, str]] = {}
         self._contributions: dict[str, list[Callable]] = defaultdict(list)
 
     # -- spaces and fields --------------------------------------------------------------
-    def space(self, degree: int = 1, vector: bool = False):
-        key = (degree, vector)
-        if key not in self._spaces:
-            element = (ufl.VectorElement("Lagrange", self.cell, degree) if vector
-                       else ufl.FiniteElement("Lagrange", self.cell, degree))
-            self._spaces[key] = self.backend.function_space(self.mesh, element)
-        return self._spaces[key]
+    def element(self, spec) -> ufl.FiniteElementBase:
+        if spec.vector:
+            return ufl.VectorElement("Lagrange", self.cell, spec.degree)
+        return ufl.FiniteElement("Lagrange", self.cell, spec.degree)
 
-    def add_field(self, name: str, space, owner: str):
-        if name in self._current:
-            raise ConfigError(f"field '{name}' is provided by both {self._owner[name]} and {owner}")
-        self._current[name] = self.backend.function(space, name)
-        self._previous[name] = self.backend.function(space, f"{name}_previous")
-        self._owner[name] = owner
-        return self._current[name]
+    def add_group(self, name: str, specs: list, owners: dict[str, str]) -> None:
+        """Create the function holding the fields ``specs`` (solved together)."""
+        for spec in specs:
+            if spec.name in self._group_of or spec.name in self._provided:
+                raise ConfigError(f"field '{spec.name}' is provided by both {self.owner(spec.name)} "
+                                  f"and {owners[spec.name]}")
+        elements = [self.element(spec) for spec in specs]
+        element = elements[0] if len(elements) == 1 else ufl.MixedElement(elements)
+        space = self.backend.function_space(self.mesh, element)
+        group = _Group(name, [s.name for s in specs], space,
+                       self.backend.function(space, name), self.backend.function(space, f"{name}_previous"))
+        self._groups[name] = group
+        for spec in specs:
+            self._group_of[spec.name] = name
+            self._owner[spec.name] = owners[spec.name]
+            self._specs[spec.name] = spec
+
+    def _group(self, name: str) -> _Group:
+        if name not in self._group_of:
+            provided = ", ".join(list(self._group_of) + list(self._provided)) or "none"
+            raise ConfigError(f"field '{name}' is required but no physics module of this model provides it "
+                              f"(provided: {provided})")
+        return self._groups[self._group_of[name]]
+
+    def _component(self, name: str, function, kind: str):
+        group = self._group(name)
+        index = group.index(name)
+        if index is None:
+            return function
+        key = (group.name, kind)
+        if key not in self._splits:
+            self._splits[key] = ufl.split(function)
+        return self._splits[key][index]
 
     def field(self, name: str):
-        try:
-            return self._current[name]
-        except KeyError:
-            raise ConfigError(f"field '{name}' is required but no physics module of this model provides it "
-                              f"(provided: {', '.join(self._current) or 'none'})") from None
+        """The current value of a field (or a quantity another module provides)."""
+        if name in self._provided:
+            return self._provided[name][0]
+        group = self._group(name)
+        return self._component(name, group.current, "current")
 
     def previous(self, name: str):
-        self.field(name)
-        return self._previous[name]
+        """The value of a field at the start of the step."""
+        group = self._group(name)
+        return self._component(name, group.previous, "previous")
+
+    def rate(self, name: str):
+        """(field at the end - at the start of the last completed step) / dt: e.g. the solid velocity."""
+        group = self._group(name)
+        if group.rate is None:
+            group.rate = self.backend.function(group.space, f"{group.name}_rate")
+        return self._component(name, group.rate, "rate")
+
+    def test(self, name: str):
+        """The test function of a field's balance law."""
+        group = self._group(name)
+        key = (group.name, "test")
+        if key not in self._splits:
+            test = ufl.TestFunction(group.space)
+            self._splits[key] = (test,) if len(group.fields) == 1 else ufl.split(test)
+        index = group.index(name)
+        return self._splits[key][0 if index is None else index]
+
+    def unknown(self, name: str):
+        """The backend function solved for when ``name``'s balance law is solved."""
+        return self._group(name).current
+
+    def function_of(self, name: str) -> tuple[object, int | None]:
+        """(backend function, component index or None) holding a field, for output."""
+        group = self._group(name)
+        return group.current, group.index(name)
+
+    def is_alone(self, name: str) -> bool:
+        """Whether a field is a whole backend function (nodal arrays can be read directly)."""
+        return len(self._group(name).fields) == 1
+
+    def spec(self, name: str):
+        self._group(name)
+        return self._specs[name]
 
     def field_names(self) -> list[str]:
-        return list(self._current)
+        return list(self._group_of)
+
+    def groups(self) -> list[str]:
+        return list(self._groups)
 
     def owner(self, name: str) -> str:
+        if name in self._provided:
+            return self._provided[name][1]
         return self._owner[name]
+
+    def provide(self, name: str, expression, owner: str) -> None:
+        """Offer a derived quantity (a UFL expression) to other modules under ``name``."""
+        if name in self._group_of or name in self._provided:
+            raise ConfigError(f"'{name}' is provided by both {self.owner(name)} and {owner}")
+        self._provided[name] = (expression, owner)
 
     # -- measures -------------------------------------------------------------------------
     def ds(self, boundary: str | None = None):
@@ -87,16 +179,33 @@ class Discretisation:
 
     # -- values ---------------------------------------------------------------------------
     def set_vertex_values(self, name: str, values):
-        self.backend.set_vertex_values(self.field(name), values)
+        self._require_alone(name, "set from vertex values")
+        self.backend.set_vertex_values(self.unknown(name), values)
 
     def interpolate(self, name: str, values):
-        self.backend.interpolate(self.field(name), values)
+        group = self._group(name)
+        index = group.index(name)
+        if index is None:
+            self.backend.interpolate(group.current, values)
+        else:
+            self.backend.interpolate_component(group.current, index, values)
 
-    def store_previous(self):
-        """previous <- current, for every field (start of a step)."""
-        for name, current in self._current.items():
-            previous = self._previous[name]
-            self.backend.local_array(previous)[:] = self.backend.local_array(current)
+    def _require_alone(self, name: str, what: str):
+        if not self.is_alone(name):
+            raise ConfigError(f"field '{name}' is part of a mixed group and cannot be {what}")
+
+    def store_previous(self, groups: list[str] | None = None):
+        """previous <- current, for every group (start of a step) or the given ones."""
+        for name in groups or self._groups:
+            group = self._groups[name]
+            self.backend.local_array(group.previous)[:] = self.backend.local_array(group.current)
+
+    def update_rates(self, dt: float):
+        """rate <- (current - previous) / dt for every group whose rate is used."""
+        for group in self._groups.values():
+            if group.rate is not None:
+                rate = self.backend.local_array(group.rate)
+                rate[:] = (self.backend.local_array(group.current) - self.backend.local_array(group.previous)) / dt
 
     def set_time(self, t: float, dt: float):
         self.time = t

@@ -38,12 +38,12 @@ class Simulation:
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> "Simulation":
         self._choose_backend()
+        self._choose_splitting()
         self._discretise()
         self._create_fields()
         self._setup_physics()
         self._initialise_fields()
         self._create_solvers()
-        self._choose_splitting()
         self._attach_outputs()
         return self
 
@@ -63,9 +63,9 @@ class Simulation:
         self.disc.set_time(self.time, self.dt)
 
     def _create_fields(self):
-        for physics in self.model.physics_objects:
-            for spec in physics.fields():
-                self.disc.add_field(spec.name, self.disc.space(spec.degree, spec.vector), owner=physics.name)
+        owners = {spec.name: physics.name for physics in self.model.physics_objects for spec in physics.fields()}
+        for group, specs in self.scheme.field_groups(self.model.physics_objects).items():
+            self.disc.add_group(group, specs, owners)
 
     def _setup_physics(self):
         for physics in self.model.physics_objects:
@@ -79,11 +79,18 @@ class Simulation:
         self.disc.store_previous()
 
     def _create_solvers(self):
-        self.solvers = [SubproblemSolver(self.backend, sub, overrides=self.model.solver.get(sub.prefix[:-1]))
-                        for physics in self.model.physics_objects for sub in physics.subproblems()]
-        self._integrals = {name: ufl.inner(self.disc.field(name), self.disc.field(name)) ** 0.5 * self.disc.dx
-                           if self.disc.field(name).ufl_shape else self.disc.field(name) * self.disc.dx
+        self.scheme.build(self)
+        self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
+
+    @staticmethod
+    def _integrand(field):
+        """The field itself, or its magnitude for vectors (the integral reported in outputs)."""
+        return ufl.sqrt(ufl.inner(field, field)) if field.ufl_shape else field
+
+    def solver_for(self, subproblem) -> SubproblemSolver:
+        """A solver for ``subproblem`` with the config's ``[solver.PREFIX]`` options."""
+        return SubproblemSolver(self.backend, subproblem, overrides=self.model.solver.get(subproblem.prefix[:-1]))
 
     def _choose_splitting(self):
         pm = get_plugin_manager()
@@ -131,6 +138,8 @@ class Simulation:
         for physics in self.model.physics_objects:
             physics.before_step(t_next, self.dt)
         stats = self.scheme.advance(self)
+        self.disc.set_time(t_next, self.dt)  # a scheme may have changed dt for its sub-steps
+        self.disc.update_rates(self.dt)
         for name, solve in stats.items():
             self.iterations.setdefault(name, []).append(solve.linear_iterations)
         self.step_index += 1
@@ -155,33 +164,38 @@ class Simulation:
     def vertex_values(self) -> dict:
         """All fields at the MeshData vertices (rank 0; None elsewhere), cached per step."""
         if self._vertex_cache is None or self._vertex_cache[0] != self.step_index:
-            values = {name: self.backend.vertex_values(self.disc.field(name)) for name in self.disc.field_names()}
+            values = {name: self.backend.vertex_values(*self.disc.function_of(name))
+                      for name in self.disc.field_names()}
             self._vertex_cache = (self.step_index, values)
         return self._vertex_cache[1]
 
     def field_statistics(self) -> dict[str, dict[str, float]]:
-        stats = {}
-        for name in self.disc.field_names():
-            field = self.disc.field(name)
-            layout = self.backend.dof_layout(field.ufl_function_space())
-            owned = self.backend.local_array(field)[:layout.num_owned]
-            local_min = owned.min() if owned.size else np.inf
-            local_max = owned.max() if owned.size else -np.inf
-            stats[name] = {
-                "integral": self.backend.assemble_scalar(self._integrals[name]),
-                "min": self.comm.allreduce(local_min, op=_mpi_op("MIN")),
-                "max": self.comm.allreduce(local_max, op=_mpi_op("MAX")),
-            }
-        return stats
+        """Integral (of the magnitude, for vectors), min and max over the vertices of every field."""
+        values = self.vertex_values()
+        extremes = None
+        if self.is_root:
+            extremes = {name: (float(np.min(v)), float(np.max(v))) for name, v in values.items()}
+        extremes = self.comm.bcast(extremes, root=0)
+        return {name: {"integral": self.backend.assemble_scalar(self._integrals[name]),
+                       "min": extremes[name][0], "max": extremes[name][1]}
+                for name in self.disc.field_names()}
 
     def iteration_counts(self) -> dict[str, float]:
         """Linear iterations of the last step per subproblem."""
         return {f"{name.replace('.', '_')}_linear_iterations": float(its[-1])
                 for name, its in self.iterations.items() if its}
 
+    def _group_representatives(self) -> dict[str, str]:
+        """One field name per group (to reach the group's function space)."""
+        first = {}
+        for name in self.disc.field_names():
+            first.setdefault(self.disc.unknown(name).name, name)
+        return first
+
     def summary(self, status: str) -> dict:
         wall = clock.perf_counter() - self.wall_start
-        field_space = {name: self.disc.field(name).ufl_function_space() for name in self.disc.field_names()}
+        field_space = {group: self.disc.unknown(group_field).ufl_function_space()
+                       for group, group_field in self._group_representatives().items()}
         return {
             "status": status,
             "backend": self.backend.name,
@@ -200,10 +214,6 @@ class Simulation:
         }
 
 
-def _mpi_op(name: str):
-    from mpi4py import MPI
-
-    return getattr(MPI, name)
 
 
 class _NoBar:

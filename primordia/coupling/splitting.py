@@ -22,6 +22,18 @@ class SplittingScheme(ABC):
     def __init__(self, physics: list):
         self.physics = physics
 
+    def field_groups(self, physics: list) -> dict[str, list]:
+        """Which fields are solved together: by default, as each module groups its own."""
+        groups: dict[str, list] = {}
+        for module in physics:
+            for spec in module.fields():
+                groups.setdefault(spec.group or spec.name, []).append(spec)
+        return groups
+
+    def build(self, sim) -> None:
+        """Create the solvers (default: one per subproblem, in model order)."""
+        sim.solvers = [sim.solver_for(sub) for module in self.physics for sub in module.subproblems()]
+
     @abstractmethod
     def advance(self, sim) -> dict:
         """Advance all fields from ``sim.time`` by ``sim.dt``; return solver statistics."""

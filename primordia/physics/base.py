@@ -34,6 +34,8 @@ class FieldSpec:
     shape: tuple[int, ...] = ()  # () scalar, ("gdim",) vector via vector=True
     vector: bool = False
     description: str = ""
+    #: Fields with the same group are solved together (one mixed function); None: alone.
+    group: str | None = None
 
 
 @dataclass

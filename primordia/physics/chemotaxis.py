@@ -134,7 +134,11 @@ class Chemotaxis(Physics):
 
     def setup(self, disc):
         self.disc = disc
-        self.tests = {s.name: ufl.TestFunction(disc.field(s.name).ufl_function_space()) for s in SPECIES}
+        if self.opts["flux_scheme"] == "exponential_fitting":
+            for species in SPECIES:
+                if species.attractant and not (disc.is_alone(species.name) and disc.is_alone(species.attractant)):
+                    raise ConfigError("flux_scheme = \"exponential_fitting\" needs the species as separate fields; "
+                                      "with a monolithic scheme use physics.chemotaxis.flux_scheme = \"galerkin\"")
 
     def initialise(self, disc):
         """Seed eq. (2.5) plus the seeded perturbation of m."""
@@ -154,7 +158,7 @@ class Chemotaxis(Physics):
     def species_residual(self, species: Species, reactions) -> ufl.Form:
         """The residual of one species: the terms of its balance law (+ contributed couplings)."""
         disc = self.disc
-        c, c_previous, test = disc.field(species.name), disc.previous(species.name), self.tests[species.name]
+        c, c_previous, test = disc.field(species.name), disc.previous(species.name), disc.test(species.name)
         residual = accumulation(c, c_previous, test, disc.dt, disc.dx_lumped)
         production, loss_rate = reactions[species.name]
         if production != 0 or loss_rate != 0:
@@ -177,7 +181,7 @@ class Chemotaxis(Physics):
         reactions = self._reactions()
         problems = []
         for species in SPECIES:
-            unknown = self.disc.field(species.name)
+            unknown = self.disc.unknown(species.name)
             residual = self.species_residual(species, reactions)
             jacobian = ufl.derivative(residual, unknown)
             operator = None
