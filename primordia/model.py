@@ -25,7 +25,8 @@ from primordia.core.mesh import MeshData
 from primordia.core.parameters import ParameterSet
 from primordia.core.plugins import lookup
 
-DEFAULT_OUTPUT = {"times": None, "snapshot_fields": None, "series_every": 10, "pictures": True}
+DEFAULT_OUTPUT = {"times": None, "snapshot_fields": None, "series_every": 10, "pictures": True,
+                  "displacement_scale": 1.0}
 
 
 class Model:
@@ -108,6 +109,9 @@ class Model:
             if abs(round((t - self.t_start) / self.dt) * self.dt - (t - self.t_start)) > 1e-9 * max(1.0, t):
                 raise ConfigError(f"output time {t:g} is not a multiple of dt = {self.dt:g} after t_start")
         output["times"] = sorted(float(t) for t in times)
+        scale = output["displacement_scale"]
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or scale < 0:
+            raise ConfigError(f"output.displacement_scale must be a number >= 0, got {scale!r}")
         every = output["series_every"]
         if not isinstance(every, int) or isinstance(every, bool) or every < 1:
             raise ConfigError(f"output.series_every must be a positive integer (steps), got {every!r}")
@@ -162,7 +166,7 @@ class Model:
             resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.opts}
         if self.solver:
             resolved["solver"] = copy.deepcopy(self.solver)
-        return resolved
+        return _without_none(resolved)
 
     def run(self, backend: str | None = None, out: str | Path = "out/run", progress: bool = False, comm=None):
         """Set up and run; returns the finished :class:`~primordia.coupling.orchestrator.Simulation`."""
@@ -172,6 +176,15 @@ class Model:
         sim.setup()
         sim.run(progress=progress)
         return sim
+
+
+def _without_none(value):
+    """TOML has no null: unset options (None) are left out of the resolved config."""
+    if isinstance(value, dict):
+        return {k: _without_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list):
+        return [_without_none(v) for v in value]
+    return value
 
 
 def _as_list(value, where: str) -> list[str]:

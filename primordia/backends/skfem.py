@@ -238,18 +238,23 @@ class SkfemFunctionSpace(ufl.FunctionSpace):
                              if c == component)
             local = np.array([i for _, i, _ in entries])
             self.blocks.append(_Block(component, entries[0][2], local, self.cell_dofs[:, local]))
-        self.sub_components = self._sub_components(element)
 
-    @staticmethod
-    def _sub_components(element) -> list[range]:
-        """Flat components of each sub-space (what ``component=i`` selects, like ``V.sub(i)``)."""
-        if isinstance(element, (ufl.VectorElement, ufl.TensorElement)):
-            return [range(i, i + 1) for i in range(int(np.prod(element.value_shape())))]
-        if isinstance(element, ufl.MixedElement):
-            sizes = [int(np.prod(s.value_shape())) for s in element.sub_elements()]
-            starts = np.cumsum([0] + sizes)
-            return [range(int(starts[i]), int(starts[i + 1])) for i in range(len(sizes))]
-        return []
+    def sub_space(self, path: int | Sequence[int] | None) -> tuple[range, tuple[int, ...]]:
+        """Flat components and value shape of a sub-space, like dolfinx's ``V.sub(i).sub(j)``.
+
+        ``path`` is an index or a path of indices through nested sub-elements:
+        ``(0, 1)`` is the y-component of the first field of a mixed space.
+        """
+        path = () if path is None else (path,) if isinstance(path, (int, np.integer)) else tuple(path)
+        element, start = self.ufl_element(), 0
+        for index in path:
+            parts = element.sub_elements() if isinstance(element, ufl.MixedElement) else []
+            if not 0 <= index < len(parts):
+                raise PrimordiaError(f"component {path} does not exist in a space with elements {self.ufl_element()}")
+            start += sum(int(np.prod(part.value_shape())) for part in parts[:index])
+            element = parts[index]
+        shape = tuple(element.value_shape())
+        return range(start, start + int(np.prod(shape))), shape
 
     @cached_property
     def basis(self) -> skfem.CellBasis:
@@ -775,12 +780,7 @@ class SkfemBackend(Backend):
         mesh = space.mesh
         mesh.mesh_data.boundary_id(boundary)  # one-line MeshError for unknown names
         cells, local_facets = mesh.boundary_facets[boundary]
-        if component is None:
-            components = range(0, space.value_size)
-        elif 0 <= component < len(space.sub_components):
-            components = space.sub_components[component]
-        else:
-            raise PrimordiaError(f"component {component} does not exist in a space of value shape {space.value_shape}")
+        components, _ = space.sub_space(component)
         dofs = []
         for block in space.blocks:
             if block.component not in components:
@@ -831,6 +831,13 @@ class SkfemBackend(Backend):
         dofs = np.arange(space.num_dofs)
         function.array[:] = self._values_at(space, dofs, space.dof_component, space.value_size, values)
 
+    def interpolate_component(self, function, index: int, values) -> None:
+        space = function.function_space
+        components, _ = space.sub_space(index)
+        dofs = np.flatnonzero(np.isin(space.dof_component, components))
+        position = space.dof_component[dofs] - components.start
+        function.array[dofs] = self._values_at(space, dofs, position, len(components), values)
+
     def set_vertex_values(self, function, values: np.ndarray) -> None:
         space = function.function_space
         if any(block.element.maxdeg != 1 for block in space.blocks):
@@ -841,14 +848,17 @@ class SkfemBackend(Backend):
             local = space.vertex_local_dofs(block)
             function.array[block.cell_dofs[:, local]] = values[cells, block.component]
 
-    def vertex_values(self, function) -> np.ndarray:
+    def vertex_values(self, function, component=None) -> np.ndarray:
+        """Values at the vertices: the vertex DOFs (a P2 field's P1 interpolant), in MeshData order."""
         space = function.function_space
+        components, shape = space.sub_space(component)
         data = space.mesh.mesh_data
-        result = np.empty((data.num_vertices, space.value_size))
+        result = np.empty((data.num_vertices, len(components)))
         for block in space.blocks:
-            local = space.vertex_local_dofs(block)
-            result[data.cells, block.component] = function.array[block.cell_dofs[:, local]]
-        return result[:, 0] if space.value_shape == () else result
+            if block.component in components:
+                local = space.vertex_local_dofs(block)
+                result[data.cells, block.component - components.start] = function.array[block.cell_dofs[:, local]]
+        return result[:, 0] if shape == () else result
 
     # -- sizes --------------------------------------------------------------------------
     def num_cells(self, mesh) -> int:

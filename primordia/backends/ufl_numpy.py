@@ -228,7 +228,6 @@ class _Evaluator:
     def __init__(self, context: QuadratureContext):
         self.context = context
         self._memo: dict[int, tuple[object, np.ndarray]] = {}
-        self._letters: dict[int, str] = {}
 
     def value(self, o) -> np.ndarray:
         hit = self._memo.get(id(o))
@@ -265,24 +264,13 @@ class _Evaluator:
         return result
 
     # -- helpers -----------------------------------------------------------------------
-    def _letter(self, count: int) -> str:
-        if count not in self._letters:
-            if len(self._letters) == len(_INDEX_LETTERS):
-                raise unsupported("expression with more than 48 distinct indices")
-            self._letters[count] = _INDEX_LETTERS[len(self._letters)]
-        return self._letters[count]
-
-    def _subscripts(self, counts) -> str:
-        return "".join(self._letter(c) for c in counts)
-
     @staticmethod
-    def _align(array: np.ndarray, free: tuple, target: tuple, rank: int = 0) -> np.ndarray:
-        """Insert size-1 axes so ``array``'s free indices line up with ``target``."""
+    def _align(array: np.ndarray, free: tuple, target: tuple) -> np.ndarray:
+        """Insert size-1 axes so a scalar's free-index axes line up with ``target`` (a superset)."""
         if free == target:
             return array
-        head = array.shape[: 2 + rank]
-        sizes = dict(zip(free, array.shape[2 + rank: 2 + rank + len(free)]))
-        return array.reshape(head + tuple(sizes.get(i, 1) for i in target) + array.shape[-2:])
+        sizes = dict(zip(free, array.shape[2: 2 + len(free)]))
+        return array.reshape(array.shape[:2] + tuple(sizes.get(i, 1) for i in target) + array.shape[-2:])
 
     def _scalar_operands(self, o):
         """Operand values aligned to ``o``'s free indices (operators of scalars)."""
@@ -350,17 +338,16 @@ class _Evaluator:
             else:
                 kept.append(index.count())
         array = array[tuple(slicer)]
-        inputs = _ARGS + self._subscripts(kept) + self._subscripts(expression.ufl_free_indices) + _POINTS
-        output = _ARGS + self._subscripts(o.ufl_free_indices) + _POINTS
+        kept, free, out = _subscripts(kept, expression.ufl_free_indices, o.ufl_free_indices)
+        inputs, output = _ARGS + kept + free + _POINTS, _ARGS + out + _POINTS
         return array if inputs == output else np.einsum(f"{inputs}->{output}", array)
 
     def component_tensor(self, o):
         expression, multiindex = o.ufl_operands
         array = self.value(expression)
-        inputs = _ARGS + self._subscripts(expression.ufl_free_indices) + _POINTS
-        output = (_ARGS + self._subscripts(i.count() for i in multiindex)
-                  + self._subscripts(o.ufl_free_indices) + _POINTS)
-        return np.einsum(f"{inputs}->{output}", array)
+        free, shape, out = _subscripts(expression.ufl_free_indices, [i.count() for i in multiindex],
+                                       o.ufl_free_indices)
+        return np.einsum(f"{_ARGS}{free}{_POINTS}->{_ARGS}{shape}{out}{_POINTS}", array)
 
     def index_sum(self, o):
         summand, multiindex = o.ufl_operands
@@ -369,10 +356,9 @@ class _Evaluator:
         if isinstance(summand, uc.Product) and id(summand) not in self._memo:
             # a[i] * b[i] summed over i: one contraction, no (..., i, ...) temporary
             a, b = summand.ufl_operands
-            terms = _ARGS + self._subscripts(a.ufl_free_indices) + _POINTS
-            terms += "," + _ARGS + self._subscripts(b.ufl_free_indices) + _POINTS
-            output = _ARGS + self._subscripts(o.ufl_free_indices) + _POINTS
-            return np.einsum(f"{terms}->{output}", self.value(a), self.value(b))
+            first, second, out = _subscripts(a.ufl_free_indices, b.ufl_free_indices, o.ufl_free_indices)
+            return np.einsum(f"{_ARGS}{first}{_POINTS},{_ARGS}{second}{_POINTS}->{_ARGS}{out}{_POINTS}",
+                             self.value(a), self.value(b))
         array = self.value(summand)
         axis = 2 + rank + summand.ufl_free_indices.index(summed)
         return array.sum(axis=axis)
@@ -449,6 +435,18 @@ class _Evaluator:
         extra = len(o.ufl_shape) + len(o.ufl_free_indices)
         mask = mask.reshape(mask.shape[:2] + (1,) * extra + mask.shape[2:])
         return np.where(mask, self.value(true_value), self.value(false_value))
+
+
+def _subscripts(*groups) -> list[str]:
+    """einsum letters for groups of UFL index counts, one letter per distinct index."""
+    letters: dict[int, str] = {}
+    for group in groups:
+        for count in group:
+            if count not in letters:
+                if len(letters) == len(_INDEX_LETTERS):
+                    raise unsupported("operation on more than 48 free indices at once")
+                letters[count] = _INDEX_LETTERS[len(letters)]
+    return ["".join(letters[count] for count in group) for group in groups]
 
 
 def _product(values):

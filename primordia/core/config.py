@@ -34,7 +34,7 @@ SECTIONS = {
     "parameters": None,  # open: validated against the declared parameters
     "mesh": None,  # open: validated by primordia.core.meshes.mesh_from_config
     "time": {"dt", "t_final", "t_start"},
-    "output": {"times", "snapshot_fields", "series_every", "pictures"},
+    "output": {"times", "snapshot_fields", "series_every", "pictures", "displacement_scale"},
     "coupling": {"scheme"},
     "solver": None,  # open: PETSc options by prefix
 }

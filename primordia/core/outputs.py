@@ -13,6 +13,8 @@ XDMF (``fields.xdmf`` + ``fields.h5``), the scalar time series
 
 from __future__ import annotations
 
+import numpy as np
+
 from primordia.core import io
 from primordia.core.plugins import hookimpl
 
@@ -77,12 +79,22 @@ class ScalarSeriesNetcdf(Output):
 
 
 class Pictures(Output):
-    """PNGs of the snapshot fields at every snapshot time, and of every field at the end."""
+    """PNGs of the snapshot fields at every snapshot time, and of every field at the end.
+
+    Vector fields are drawn as their magnitude.  When the model has a displacement
+    ``u``, fields are drawn on the deformed configuration, magnified by
+    ``output.displacement_scale`` (stated on the picture).
+    """
 
     name = "pictures"
 
     def start(self, run):
         self.snapshots: dict[str, dict[str, object]] = {}
+        self.snapshot_displacements: dict[str, dict[str, object]] = {}
+
+    @staticmethod
+    def _scalar(values):
+        return np.linalg.norm(values, axis=1) if values.ndim == 2 else values
 
     def snapshot(self, run):
         if not run.model.output["pictures"]:
@@ -90,20 +102,30 @@ class Pictures(Output):
         values = run.vertex_values()
         if not run.is_root:
             return
+        displacement, scale = values.get("u"), run.model.output["displacement_scale"]
         for name in run.model.output["snapshot_fields"]:
             label = f"{name}, t = {run.time:g}"
-            io.plot_field(run.out_dir / f"{name}_t{run.time:07.2f}.png", run.mesh_data, values[name], title=label)
-            self.snapshots.setdefault(name, {})[label] = values[name]
+            field = self._scalar(values[name])
+            io.plot_field(run.out_dir / f"{name}_t{run.time:07.2f}.png", run.mesh_data, field, title=label,
+                          displacement=displacement, displacement_scale=scale)
+            self.snapshots.setdefault(name, {})[label] = field
+            if displacement is not None:
+                self.snapshot_displacements.setdefault(name, {})[label] = displacement
             io.plot_fields_grid(run.out_dir / f"{name}_snapshots.png", run.mesh_data, self.snapshots[name],
-                                title=f"{name} at the snapshot times")
+                                title=f"{name} at the snapshot times",
+                                displacements=self.snapshot_displacements.get(name), displacement_scale=scale)
 
     def finish(self, run, status):
         if not run.model.output["pictures"]:
             return
         values = run.vertex_values()
         if run.is_root:
-            io.plot_fields_grid(run.out_dir / "final_fields.png", run.mesh_data, values,
-                                title=f"all fields at t = {run.time:g} ({status})", shared_colour_scale=False)
+            fields = {(f"|{name}|" if v.ndim == 2 else name): self._scalar(v) for name, v in values.items()}
+            displacement = values.get("u")
+            displacements = None if displacement is None else {key: displacement for key in fields}
+            io.plot_fields_grid(run.out_dir / "final_fields.png", run.mesh_data, fields,
+                                title=f"all fields at t = {run.time:g} ({status})", shared_colour_scale=False,
+                                displacements=displacements, displacement_scale=run.model.output["displacement_scale"])
 
 
 class Summary(Output):

@@ -68,7 +68,9 @@ class Simulation:
             self.disc.add_group(group, specs, owners)
 
     def _setup_physics(self):
-        for physics in self.model.physics_objects:
+        # modules that own fields first: they provide what the pure couplings read
+        ordered = sorted(self.model.physics_objects, key=lambda module: not module.fields())
+        for physics in ordered:
             for name in physics.requires:
                 self.disc.field(name)  # names a missing provider before any assembly
             physics.setup(self.disc)
@@ -121,9 +123,11 @@ class Simulation:
                     self._notify("record")
                 if self.step_index in snapshot_steps:
                     self._notify("snapshot")
-        except (PrimordiaError, KeyboardInterrupt) as exc:
+        except BaseException as exc:  # record why the run stopped, then let the error through
             bar.close()
-            reason = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc)
+            reason = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc).splitlines()[0]
+            if not isinstance(exc, (PrimordiaError, KeyboardInterrupt)):
+                reason = f"{type(exc).__name__}: {reason}"
             self._finish(f"stopped at t = {self.time:g}: {reason}")
             raise
         bar.close()
@@ -147,9 +151,13 @@ class Simulation:
         self._check_finite()
 
     def _check_finite(self):
-        for name in self.disc.field_names():
-            if not np.all(np.isfinite(self.backend.local_array(self.disc.field(name)))):
-                raise SolverError(f"field {name} is not finite at t = {self.time:g}")
+        for group, name in self._group_representatives().items():
+            if not np.all(np.isfinite(self.backend.local_array(self.disc.unknown(name)))):
+                raise SolverError(f"a field of {group} ({', '.join(self._fields_of(group))}) "
+                                  f"is not finite at t = {self.time:g}")
+
+    def _fields_of(self, group: str) -> list[str]:
+        return [n for n in self.disc.field_names() if self.disc.unknown(n).name == group]
 
     def _notify(self, moment: str, *args):
         for output in self.outputs:

@@ -5,6 +5,9 @@ from primordia.core.plugins import hookimpl
 
 @hookimpl
 def primordia_physics():
+    from primordia.physics.active_stress import ActiveStress
     from primordia.physics.chemotaxis import Chemotaxis
+    from primordia.physics.mechanochemical import MechanoChemical
+    from primordia.physics.poroelastic_linear import LinearPoroelasticity
 
-    return [Chemotaxis]
+    return [Chemotaxis, LinearPoroelasticity, ActiveStress, MechanoChemical]

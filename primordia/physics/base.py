@@ -15,11 +15,12 @@ provider is reported by name before anything is assembled.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import ufl
+from ufl.algorithms import expand_derivatives
 
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import Parameter
@@ -131,5 +132,7 @@ class Physics(ABC):
         """Update anything time-dependent before the solves of the step ending at ``t``."""
 
 
-#: A function of an ``ops`` namespace and a state, used by kinetics-like plugins.
-StateFunction = Callable[..., Any]
+def jacobian_is_constant(jacobian: ufl.Form, disc) -> bool:
+    """True when a Jacobian reads no field and not the time: assembled and factorised once."""
+    expanded = expand_derivatives(jacobian)  # before expansion, derivative() still lists the unknown
+    return not expanded.coefficients() and disc.t not in expanded.constants()

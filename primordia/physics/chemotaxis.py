@@ -54,11 +54,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
-from ufl.algorithms import expand_derivatives
 
 from primordia.core import ops as ops_
 from primordia.core.errors import ConfigError
-from primordia.physics.base import FieldSpec, Physics, Subproblem
+from primordia.physics.base import FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.seed_parameters import CHEMOTAXIS
 
 
@@ -193,16 +192,10 @@ class Chemotaxis(Physics):
                 )
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
-                linear=True, constant_jacobian=_jacobian_is_constant(jacobian, self.disc),
+                linear=True, constant_jacobian=jacobian_is_constant(jacobian, self.disc),
                 operator=operator, petsc_options=_solver_defaults(species),
             ))
         return problems
-
-
-def _jacobian_is_constant(jacobian: ufl.Form, disc) -> bool:
-    """True when the Jacobian reads no field (only constants fixed during a run)."""
-    expanded = expand_derivatives(jacobian)  # before expansion, derivative() still lists the unknown
-    return not expanded.coefficients() and disc.t not in expanded.constants()
 
 
 def _solver_defaults(species: Species) -> dict:

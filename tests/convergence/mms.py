@@ -104,8 +104,7 @@ class ManufacturedSources(Physics):
     def initialise(self, disc):
         t0 = disc.time
         for name in SPECIES:
-            disc.backend.interpolate(
-                disc.field(name), lambda x, name=name: exact_solution(x, t0, NUMPY_MATH)[name])
+            disc.interpolate(name, lambda x, name=name: exact_solution(x, t0, NUMPY_MATH)[name])
 
     def subproblems(self):
         return []

@@ -141,6 +141,23 @@ def test_interpolate_vector(backend, data):
                                rtol=1e-14)
 
 
+def taylor_hood(backend, mesh):
+    cell = mesh.ufl_domain().ufl_cell()
+    return backend.function_space(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, 2),
+                                                          ufl.FiniteElement("Lagrange", cell, 1)]))
+
+
+def test_mixed_components(backend, data):
+    mesh = backend.create_mesh(data)
+    field = backend.function(taylor_hood(backend, mesh), "w")
+    backend.interpolate_component(field, 0, lambda x: np.stack([x[i] + i for i in range(data.gdim)]))
+    backend.interpolate_component(field, 1, lambda x: x[0] * x[1])
+    velocity, pressure = backend.vertex_values(field, 0), backend.vertex_values(field, 1)
+    assert velocity.shape == (data.num_vertices, data.gdim) and pressure.shape == (data.num_vertices,)
+    np.testing.assert_allclose(velocity, data.points + np.arange(data.gdim), rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(pressure, data.points[:, 0] * data.points[:, 1], rtol=1e-13, atol=1e-14)
+
+
 def test_petsc_vector_shares_memory(backend, data):
     mesh = backend.create_mesh(data)
     field = backend.function(lagrange(backend, mesh), "field")
@@ -299,9 +316,7 @@ def test_mixed_space_component_dirichlet_on_both_backends(data):
     for make in BACKENDS.values():
         backend = make()
         mesh = backend.create_mesh(data)
-        cell = mesh.ufl_domain().ufl_cell()
-        space = backend.function_space(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, 2),
-                                                               ufl.FiniteElement("Lagrange", cell, 1)]))
+        space = taylor_hood(backend, mesh)
         state = backend.function(space, "w")
         velocity, pressure = ufl.split(state)
         test_velocity, test_pressure = ufl.split(ufl.TestFunction(space))
@@ -310,13 +325,17 @@ def test_mixed_space_component_dirichlet_on_both_backends(data):
         jacobian = ufl.derivative(residual, state, ufl.TrialFunction(space))
         lid = [1.0] + [0.0] * (data.gdim - 1)
         walls = [backend.dirichlet_bc(space, name, 0.0, component=0) for name in data.boundaries if name != "top"]
-        bcs = walls + [backend.dirichlet_bc(space, "top", lid, component=0)]  # the last condition wins on edges
+        # the last condition wins on shared edges; the lid's normal velocity is fixed through a nested path
+        bcs = walls + [backend.dirichlet_bc(space, "top", lid, component=0),
+                       backend.dirichlet_bc(space, "top", 0.0, component=(0, 1))]
         newton_step(backend, residual, jacobian, bcs, state)
         top = backend.measure("ds", mesh)(data.boundary_id("top"))
         mismatch = ufl.dot(velocity - ufl.as_vector(lid), velocity - ufl.as_vector(lid)) * top
         assert backend.assemble_scalar(mismatch) < 1e-24
         integrals.append([backend.assemble_scalar(ufl.dot(velocity, velocity) * ufl.dx),
                           backend.assemble_scalar(pressure ** 2 * ufl.dx)])
+        lid_values = backend.vertex_values(state, 0)[np.isclose(data.points[:, 1], LENGTHS[1])]
+        np.testing.assert_allclose(lid_values, np.tile(lid, (len(lid_values), 1)), atol=1e-12)
     np.testing.assert_allclose(integrals[1], integrals[0], rtol=1e-10)
     assert integrals[0][0] > 1e-3
 

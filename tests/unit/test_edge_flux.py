@@ -20,6 +20,7 @@ from primordia.core.meshes import rectangle
 from primordia.core.plugins import get_plugin_manager, registry
 from primordia.coupling.discretisation import Discretisation
 from primordia.coupling.edge_flux import ExponentiallyFittedFlux, bernoulli
+from primordia.physics.base import FieldSpec
 
 BACKENDS = ["fenicsx", "skfem"]
 
@@ -80,9 +81,10 @@ def make_backend(name: str):
 
 
 def discretisation(backend_name: str, mesh: MeshData) -> Discretisation:
+    """A density m and an attractant f, each a P1 field of its own."""
     disc = Discretisation(make_backend(backend_name), mesh)
     for name in ("m", "f"):
-        disc.add_field(name, disc.space(1), owner="test")
+        disc.add_group(name, [FieldSpec(name)], owners={name: "test"})
     return disc
 
 

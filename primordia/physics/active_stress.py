@@ -1,0 +1,44 @@
+r"""Isotropic active stress driven by the cell density (seed eq. (2.4)).
+
+    sigma_act = (lambda + 2 mu / 3) tau m / (1 + zeta m^2) I
+
+tau > 0 dilates the tissue where cells gather, tau < 0 contracts it.  The
+module owns no field: it adds sigma_act : grad w to the momentum balance of
+the poroelasticity module, reading m from the chemotaxis module (the current
+value: with sequential splitting, the one just computed in this step).
+Requires: ``m`` (provided by chemotaxis), ``u`` and ``lame_constants`` (provided by poroelasticity).
+"""
+
+from __future__ import annotations
+
+import ufl
+
+from primordia.physics.base import Physics
+from primordia.physics.seed_parameters import ACTIVE_STRESS
+
+
+def active_stress(m, mu, lmbda, tau, zeta, dimension: int):
+    """Seed eq. (2.4): (lambda + 2 mu/3) tau m / (1 + zeta m^2) I."""
+    return (lmbda + 2.0 * mu / 3.0) * tau * m / (1.0 + zeta * m**2) * ufl.Identity(dimension)
+
+
+class ActiveStress(Physics):
+    """Adds sigma_act(m) to the total stress of the momentum balance."""
+
+    name = "active_stress"
+    parameters = ACTIVE_STRESS
+    requires = ("m", "u", "lame_constants")
+
+    def fields(self):
+        return []
+
+    def setup(self, disc):
+        mu, lmbda = disc.field("lame_constants")  # provided by the poroelasticity module
+        sigma = active_stress(disc.field("m"), mu, lmbda, self.params["tau"], self.params["zeta"], disc.gdim)
+        disc.contribute("u", lambda w: ufl.inner(sigma, ufl.grad(w)) * disc.dx)
+
+    def initialise(self, disc):
+        pass
+
+    def subproblems(self):
+        return []

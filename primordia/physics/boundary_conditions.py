@@ -1,0 +1,176 @@
+"""Boundary conditions of the poromechanics, each an object that contributes its own terms.
+
+Given per named boundary in a config::
+
+    [[physics.poroelasticity.boundary]]
+    boundary = "top"
+    type = "traction"
+    value = ["0", "s0 * sin(pi * t / t_hat)"]
+    constants = { s0 = 1500.0, t_hat = 320.0 }
+
+Kinds (seed eqs. (2.6b)-(2.6c) and beyond):
+
+* ``clamped``              u = 0                                (Dirichlet, seed (2.6b))
+* ``displacement``         u = value(x, t)                      (Dirichlet, vector formula)
+* ``normal_displacement``  u . n = value(x, t), tangential traction free
+                           (axis-aligned boundaries: fixes the normal component)
+* ``traction``             sigma n = value(x, t)                (Neumann, seed (2.6c))
+* ``fluid_flux``           (kappa/eta) grad p . n = value(x, t) (Neumann; 0 = no flux, seed (2.6b))
+* ``fluid_pressure``       p = value(x, t)                      (Dirichlet, seed (2.6c))
+
+A condition either adds weak-form terms (:meth:`terms`) or Dirichlet constraints
+(:meth:`dirichlet`) and updates its time-dependent values (:meth:`update`); the
+physics module sums whatever its conditions contribute, without asking what
+kind they are.  A new kind is a new subclass listed in :data:`KINDS`.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import ufl
+
+from primordia.core.errors import ConfigError
+from primordia.core.expressions import Formula, VectorFormula
+
+ALLOWED_KEYS = {"boundary", "type", "value", "constants"}
+
+
+class Condition:
+    """One condition on one named boundary."""
+
+    kind: ClassVar[str]
+    field: ClassVar[str]  # the field whose balance law the condition belongs to
+    vector_value: ClassVar[bool] = False
+    default_value = None
+
+    def __init__(self, boundary: str, value=None, constants=None, gdim: int = 2):
+        self.boundary = boundary
+        where = f"boundary condition '{self.kind}' on '{boundary}'"
+        if value is None:
+            value = self.default_value(gdim) if callable(self.default_value) else self.default_value
+            if value is None:
+                raise ConfigError(f"{where} needs a value")
+        if self.vector_value:
+            self.formula = VectorFormula(value, constants, where)
+            if len(self.formula) != gdim:
+                raise ConfigError(f"{where}: value needs {gdim} components, got {len(self.formula)}")
+        else:
+            self.formula = Formula(value, constants, where)
+        self._bcs = []
+
+    def terms(self, disc) -> dict[str, list]:
+        """Weak-form terms added to residuals: {field name: [form, ...]}."""
+        return {}
+
+    def dirichlet(self, disc) -> list:
+        """Dirichlet constraints (backend objects) on the field's group."""
+        return []
+
+    def update(self, disc, t: float) -> None:
+        """Refresh time-dependent prescribed values (Dirichlet kinds)."""
+
+
+class _Dirichlet(Condition):
+    """Prescribes (part of) a field; value formulas are evaluated at the DOF points."""
+
+    def _space_and_path(self, disc, extra: tuple[int, ...] = ()):
+        function, index = disc.function_of(self.field)
+        path = (() if index is None else (index,)) + extra
+        return function.ufl_function_space(), (path or None)
+
+    def _values(self, t: float):
+        return lambda x: self.formula.numpy(x, t)
+
+    def dirichlet(self, disc):
+        space, path = self._space_and_path(disc)
+        self._bcs = [disc.backend.dirichlet_bc(space, self.boundary, self._values(disc.time), component=path)]
+        return self._bcs
+
+    def update(self, disc, t):
+        if self.formula.depends_on_time():
+            for bc in self._bcs:
+                disc.backend.update_dirichlet_bc(bc, self._values(t))
+
+
+class Clamped(_Dirichlet):
+    kind, field, vector_value = "clamped", "u", True
+
+    @staticmethod
+    def default_value(gdim):
+        return ["0"] * gdim
+
+
+class Displacement(_Dirichlet):
+    kind, field, vector_value = "displacement", "u", True
+
+
+class NormalDisplacement(_Dirichlet):
+    """u . n prescribed on a boundary whose normal is a coordinate axis."""
+
+    kind, field, default_value = "normal_displacement", "u", "0"
+
+    def dirichlet(self, disc):
+        axis = _normal_axis(disc.mesh_data, self.boundary)
+        space, path = self._space_and_path(disc, (axis,))
+        self._bcs = [disc.backend.dirichlet_bc(space, self.boundary, self._values(disc.time), component=path)]
+        return self._bcs
+
+
+class Traction(Condition):
+    kind, field, vector_value = "traction", "u", True
+
+    def terms(self, disc):
+        traction = self.formula.ufl(disc.x, disc.t)
+        return {"u": [-ufl.inner(traction, disc.test("u")) * disc.ds(self.boundary)]}
+
+
+class FluidFlux(Condition):
+    kind, field, default_value = "fluid_flux", "p", "0"
+
+    def terms(self, disc):
+        flux = self.formula.ufl(disc.x, disc.t)
+        return {"p": [-flux * disc.test("p") * disc.ds(self.boundary)]}
+
+
+class FluidPressure(_Dirichlet):
+    kind, field = "fluid_pressure", "p"
+
+
+KINDS = {cls.kind: cls for cls in (Clamped, Displacement, NormalDisplacement, Traction, FluidFlux, FluidPressure)}
+
+
+def conditions_from_config(tables, mesh_data, gdim: int) -> list[Condition]:
+    """Build the conditions of a ``boundary`` list of tables, validating each."""
+    if tables is None:
+        return []
+    if not isinstance(tables, list):
+        raise ConfigError("boundary conditions must be a list of tables ([[physics.NAME.boundary]])")
+    conditions = []
+    for table in tables:
+        if not isinstance(table, dict):
+            raise ConfigError("each boundary condition must be a table with boundary and type")
+        unknown = set(table) - ALLOWED_KEYS
+        if unknown:
+            raise ConfigError(f"unknown key '{sorted(unknown)[0]}' in a boundary condition "
+                              f"(known: {', '.join(sorted(ALLOWED_KEYS))})")
+        kind = table.get("type")
+        if kind not in KINDS:
+            raise ConfigError(f"unknown boundary condition type {kind!r} (known: {', '.join(KINDS)})")
+        boundary = table.get("boundary")
+        if boundary not in mesh_data.boundaries:
+            raise ConfigError(f"boundary condition '{kind}' names boundary {boundary!r}, which the mesh lacks "
+                              f"(it has: {', '.join(mesh_data.boundaries) or 'none'})")
+        conditions.append(KINDS[kind](boundary, table.get("value"), table.get("constants"), gdim))
+    return conditions
+
+
+def _normal_axis(mesh_data, boundary: str) -> int:
+    """The coordinate axis normal to a flat, axis-aligned boundary (else a one-line error)."""
+    points = mesh_data.points[np.unique(mesh_data.boundaries[boundary])]
+    spread = points.max(axis=0) - points.min(axis=0)
+    flat = np.flatnonzero(spread <= 1e-10 * max(1.0, float(np.abs(points).max())))
+    if len(flat) != 1:
+        raise ConfigError(f"normal_displacement on '{boundary}' needs a flat boundary normal to a coordinate axis")
+    return int(flat[0])

@@ -1,0 +1,146 @@
+r"""Linear Biot poroelasticity with inertia (seed eqs. (2.1a)-(2.1c), (2.2)).
+
+Unknowns: the skeleton displacement u (vector, P1 as in the seed or P2 for a
+Taylor-Hood pair) and the pore pressure p (P1), solved together:
+
+    d/dt (C_0 p + alpha_BW div u) - div( (kappa/eta) grad p ) = 0        (2.1a)
+    rho d^2u/dt^2 - div sigma = 0                                       (2.1c)
+    sigma = lambda (div u) I + 2 mu eps(u) - p I  [+ sigma_act]           (2.1b), (2.2)
+
+with the Lame constants from (E, nu) or given directly (options
+``shear_modulus`` / ``lame_lambda``), a hydraulic conductivity kappa that may
+vary in space (option ``conductivity``, a formula of x), and boundary
+conditions per named boundary (:mod:`primordia.physics.boundary_conditions`).
+Note that, as in the seed, the pressure enters the stress with coefficient 1
+while the Biot-Willis coefficient weights the volumetric term of the mass balance.
+
+Time discretisation: backward Euler for both, with the inertial term
+rho (u^{n+1} - u^n - dt v^n) / dt^2, v^n = (u^n - u^{n-1}) / dt the solid
+velocity of the last step (``disc.rate("u")``, also the velocity that advects
+the species).  The system is linear: one exact Newton step per time step, with
+a constant matrix (assembled and factorised once, MUMPS LU by default).
+
+Active stress, the FGF sink and the advection of species are couplings declared
+in :mod:`primordia.physics.active_stress` and :mod:`primordia.physics.mechanochemical`.
+"""
+
+from __future__ import annotations
+
+import ufl
+
+from primordia.core.errors import ConfigError
+from primordia.core.expressions import Formula
+from primordia.physics.base import FieldSpec, Physics, Subproblem, jacobian_is_constant
+from primordia.physics.boundary_conditions import conditions_from_config
+from primordia.physics.seed_parameters import POROELASTICITY, lame
+
+GROUP = "poroelasticity"
+
+
+# -- the terms of seed eqs. (2.1a)-(2.1c), each a UFL integrand --------------------------------
+def strain(u):
+    """eps(u) = (grad u + grad u^T) / 2, infinitesimal strain."""
+    return ufl.sym(ufl.grad(u))
+
+
+def poroelastic_stress(u, p, mu, lmbda):
+    """sigma_poroelast = lambda (div u) I + 2 mu eps(u) - p I (seed eq. (2.2))."""
+    identity = ufl.Identity(len(u))
+    return lmbda * ufl.div(u) * identity + 2.0 * mu * strain(u) - p * identity
+
+
+def inertia(rho, u, u_previous, velocity_previous, w, dt, dx):
+    """rho d^2u/dt^2 (seed eq. (2.1c)), backward Euler on (u, v)."""
+    return rho * ufl.inner(u - u_previous - dt * velocity_previous, w) / dt**2 * dx
+
+
+def stress_divergence(sigma, w, dx):
+    """-div sigma in weak form: sigma : grad w (seed eq. (2.1c))."""
+    return ufl.inner(sigma, ufl.grad(w)) * dx
+
+
+def storage(C_0, alpha_BW, p, p_previous, u, u_previous, q, dt, dx):
+    """d/dt (C_0 p + alpha_BW div u) (seed eq. (2.1a)), backward Euler."""
+    return (C_0 * (p - p_previous) + alpha_BW * ufl.div(u - u_previous)) / dt * q * dx
+
+
+def darcy_flux(conductivity, eta, p, q, dx):
+    """-div((kappa/eta) grad p) in weak form (seed eq. (2.1a))."""
+    return conductivity / eta * ufl.inner(ufl.grad(p), ufl.grad(q)) * dx
+
+
+class LinearPoroelasticity(Physics):
+    """Seed eqs. (2.1a)-(2.1c) with (2.2) and boundary conditions (2.6b)-(2.6c)."""
+
+    name = "poroelasticity"
+    parameters = POROELASTICITY
+    options = {"displacement_degree": 1, "shear_modulus": None, "lame_lambda": None,
+               "conductivity": None, "boundary": []}
+
+    def validate_options(self):
+        if self.opts["displacement_degree"] not in (1, 2):
+            raise ConfigError("physics.poroelasticity.displacement_degree must be 1 (P1-P1, the seed's) "
+                              "or 2 (Taylor-Hood P2-P1)")
+        for key in ("shear_modulus", "lame_lambda"):
+            value = self.opts[key]
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0):
+                raise ConfigError(f"physics.poroelasticity.{key} must be a positive number, got {value!r}")
+        if self.opts["conductivity"] is not None:
+            Formula(self.opts["conductivity"], dict(self.params), "physics.poroelasticity.conductivity")
+
+    def lame(self) -> tuple[float, float]:
+        """(mu, lambda): given directly, or from E and nu."""
+        mu, lmbda = lame(self.params)
+        mu = self.opts["shear_modulus"] if self.opts["shear_modulus"] is not None else mu
+        lmbda = self.opts["lame_lambda"] if self.opts["lame_lambda"] is not None else lmbda
+        return mu, lmbda
+
+    def fields(self):
+        return [FieldSpec("u", degree=self.opts["displacement_degree"], vector=True, group=GROUP,
+                          description="skeleton displacement"),
+                FieldSpec("p", degree=1, group=GROUP, description="pore pressure")]
+
+    def setup(self, disc):
+        self.disc = disc
+        self.conditions = conditions_from_config(self.opts["boundary"], disc.mesh_data, disc.gdim)
+        self.velocity = disc.rate("u")
+        disc.provide("lame_constants", self.lame(), self.name)
+
+    def conductivity(self):
+        """kappa(x): the parameter, or the formula of option ``conductivity``."""
+        if self.opts["conductivity"] is None:
+            return self.params["kappa"]
+        return Formula(self.opts["conductivity"], dict(self.params), "conductivity").ufl(self.disc.x, self.disc.t)
+
+    def initialise(self, disc):
+        """Seed eq. (2.5): u = 0, du/dt = 0, p = 0 (fields start at zero)."""
+
+    def subproblems(self):
+        disc, prm = self.disc, self.params
+        u, p = disc.field("u"), disc.field("p")
+        u_n, p_n = disc.previous("u"), disc.previous("p")
+        w, q = disc.test("u"), disc.test("p")
+        mu, lmbda = self.lame()
+        momentum = (inertia(prm["rho"], u, u_n, self.velocity, w, disc.dt, disc.dx)
+                    + stress_divergence(poroelastic_stress(u, p, mu, lmbda), w, disc.dx))
+        mass = (storage(prm["C_0"], prm["alpha_BW"], p, p_n, u, u_n, q, disc.dt, disc.dx)
+                + darcy_flux(self.conductivity(), prm["eta"], p, q, disc.dx))
+        residual = momentum + mass
+        for condition in self.conditions:
+            for field_terms in condition.terms(disc).values():
+                for term in field_terms:
+                    residual += term
+        for name, test in (("u", w), ("p", q)):
+            for term in disc.contributions(name, test):
+                residual += term
+        bcs = [bc for condition in self.conditions for bc in condition.dirichlet(disc)]
+        unknown = disc.unknown("u")
+        jacobian = ufl.derivative(residual, unknown)
+        return [Subproblem(name=self.name, unknown=unknown, residual=residual, jacobian=jacobian, bcs=bcs,
+                           linear=True, constant_jacobian=jacobian_is_constant(jacobian, disc),
+                           petsc_options={"ksp_type": "preonly", "pc_type": "lu",
+                                          "pc_factor_mat_solver_type": "mumps"})]
+
+    def before_step(self, t, dt):
+        for condition in self.conditions:
+            condition.update(self.disc, t)
