@@ -35,12 +35,14 @@ class Model:
     def __init__(self, physics=("chemotaxis",), kinetics: str | dict | None = None, parameters=None,
                  mesh: MeshData | dict | None = None, dt: float | None = None, t_final: float | None = None,
                  t_start: float = 0.0, output: dict | None = None, physics_options: dict | None = None,
-                 coupling: str = "sequential", solver: dict | None = None, backend: str = "fenicsx",
+                 coupling: str | dict = "sequential", solver: dict | None = None, backend: str = "fenicsx",
                  name: str = "", base_dir: str | Path = "."):
         self.name = name
         self.backend = backend
         self.base_dir = Path(base_dir)
-        self.coupling = coupling
+        coupling = {"scheme": coupling} if isinstance(coupling, str) else dict(coupling)
+        self.coupling = coupling.pop("scheme", "sequential")
+        self.coupling_options = coupling
         self.solver = dict(solver or {})
         self._mesh_spec = mesh
         self.physics_classes = [lookup("physics", p) for p in _as_list(physics, "model.physics")]
@@ -68,7 +70,7 @@ class Model:
             physics=model_table.get("physics", ["chemotaxis"]), kinetics=config.get("kinetics"),
             parameters=config.get("parameters"), mesh=config["mesh"], dt=time["dt"], t_final=time["t_final"],
             t_start=time.get("t_start", 0.0), output=config.get("output"),
-            physics_options=config.get("physics"), coupling=config.get("coupling", {}).get("scheme", "sequential"),
+            physics_options=config.get("physics"), coupling=config.get("coupling", {}),
             solver=config.get("solver"), backend=model_table.get("backend", "fenicsx"),
             name=model_table.get("name", ""), base_dir=config.get("_base_dir", "."),
         )
@@ -160,7 +162,7 @@ class Model:
             "mesh": mesh,
             "time": {"t_start": self.t_start, "dt": self.dt, "t_final": self.t_final},
             "output": dict(self.output),
-            "coupling": {"scheme": self.coupling},
+            "coupling": {"scheme": self.coupling, **self.coupling_options},
         }
         if self.kinetics_object is not None:
             resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.opts}

@@ -32,7 +32,7 @@ k a wavenumber in its dimensionless length (section 2 scaling).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import scipy.linalg
@@ -41,6 +41,7 @@ import scipy.optimize
 from primordia.analysis.linearisation import (
     LinearisedCoefficients,
     _as_coefficients,
+    matrix_pencil,
     real_pencil,
     wave_vectors,
 )
@@ -135,8 +136,6 @@ def _sort_by_growth(rates):
 
 
 def _uncouple(c: LinearisedCoefficients) -> LinearisedCoefficients:
-    from dataclasses import replace
-
     return replace(c, xi_f=0.0 * np.asarray(c.xi_f))
 
 
@@ -144,10 +143,9 @@ def _homogeneous_rates(c: LinearisedCoefficients, size: int):
     """Roots of det M(phi, 0): every coupling term carries k, so M is block diagonal.
 
     The mechanics (rho phi^2 u = 0, C_0 phi p = 0) contributes only phi = 0;
-    the chemistry the eigenvalues of -M22(0, 0).
+    the chemistry the eigenvalues of -M22(0, 0).  (With rho = 0 or C_0 = 0,
+    det M(phi, 0) vanishes identically; the chemical roots are still these.)
     """
-    from primordia.analysis.linearisation import matrix_pencil
-
     M0, _, _ = matrix_pencil(c, np.zeros((1,)))
     chemistry = np.linalg.eigvals(-M0[..., 2:, 2:])  # d = 1: rows u, p come first
     zeros = np.zeros(chemistry.shape[:-1] + (size - 4,), dtype=complex)
@@ -186,8 +184,6 @@ def longitudinal_rates(params_or_coefficients, k, coupled: bool = True, method: 
 
 def _expand(c: LinearisedCoefficients, ndim: int) -> LinearisedCoefficients:
     """Append ``ndim`` unit axes to every coefficient, so it broadcasts against k."""
-    from dataclasses import fields
-
     if ndim == 0:
         return c
     values = {}
@@ -276,8 +272,8 @@ def _split_transverse(roots, c, k, d, n_transverse):
 
 
 def max_growth_rate(params_or_coefficients, k, coupled: bool = True, method: str = "auto"):
-    """max Re phi over the roots of P_1 + P_2 P_3, shape ``batch + k.shape``."""
-    return np.nanmax(longitudinal_rates(params_or_coefficients, k, coupled, method).real, axis=-1)
+    """max Re phi over the roots of P_1 + P_2 P_3, shape ``batch + k.shape`` (rounding-level values set to 0)."""
+    return max_growth_of_kind(longitudinal_rates(params_or_coefficients, k, coupled, method), "any")
 
 
 def default_wavenumbers(params_or_coefficients, n: int = 241, coupled: bool = True) -> np.ndarray:

@@ -33,7 +33,6 @@ from primordia.analysis.conditions import critical_value, most_negative_k_square
 from primordia.analysis.dispersion import (
     default_wavenumbers,
     fastest_growing_mode,
-    growth_of_kind,
     growth_rates,
     longitudinal_rates,
     max_growth_of_kind,
@@ -381,7 +380,6 @@ __all__ = [
     "as_range",
     "boundary_agreement",
     "dispersion_relation",
-    "growth_of_kind",
     "patterning_space",
     "save_dataset",
 ]

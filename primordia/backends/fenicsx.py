@@ -195,7 +195,9 @@ class FenicsxBackend(Backend):
         return DofLayout(owned_range=(start * bs, stop * bs), ghosts=np.asarray(ghosts, dtype=np.int64))
 
     def interpolate(self, function, values) -> None:
-        if callable(values):
+        if isinstance(values, fem.Function):
+            function.interpolate(values)
+        elif callable(values):
             gdim = function.function_space.mesh.geometry.dim
             function.interpolate(lambda x: values(x[:gdim]))
         else:

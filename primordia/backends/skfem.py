@@ -711,6 +711,7 @@ class SkfemBackend(Backend):
         if A is None:
             A = PETSc.Mat().createAIJ(size=(test.num_dofs, trial.num_dofs), csr=(indptr, indices, data),
                                       comm=PETSc.COMM_SELF)
+            A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)  # re-assembly keeps the pattern
         else:
             A.zeroEntries()
             A.setValuesCSR(indptr, indices, data)

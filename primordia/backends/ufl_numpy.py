@@ -6,7 +6,9 @@ hands to FFCx.  A form is first preprocessed the way FFCx 0.5 does it, with
 that ``ufl.derivative`` Newton tangents work, removal of complex nodes, grouping
 of integrals and estimation of their polynomial degree), but without function
 pullbacks or geometry lowering: integrands stay in physical space and are
-evaluated by a recursive interpreter over UFL node types (:func:`evaluate_integrand`).
+evaluated by a recursive interpreter over UFL node types
+(:func:`evaluate_integrand`; :func:`integrate_integrand` also sums over the
+quadrature points, term by term and factor by factor).
 
 Array layout
 ------------
@@ -29,7 +31,8 @@ polynomials, an integral uses the degree FFCx would use (the
 ``quadrature_degree`` metadata, else UFL's estimate from the same
 ``compute_form_data`` pass) and the same points and weights
 (``basix.make_quadrature``, FFCx's default scheme, when basix is importable;
-scikit-fem's own rules otherwise).  ``quadrature_rule="vertex"`` puts the points
+scikit-fem's own rules otherwise, except a collapsed Gauss rule for
+tetrahedra above degree 4, where scikit-fem 12's rules are inexact).  ``quadrature_rule="vertex"`` puts the points
 at the vertices with equal weights: for P1 fields this is mass lumping.
 
 What the evaluator needs from a backend is stated in :class:`QuadratureContext`.

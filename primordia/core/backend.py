@@ -173,12 +173,18 @@ class Backend(ABC):
         """Parallel layout of ``space``'s DOFs."""
 
     @abstractmethod
-    def interpolate(self, function, values: PointFunction | float) -> None:
-        """Set ``function`` to the interpolant of ``values`` (Lagrange nodes)."""
+    def interpolate(self, function, values) -> None:
+        """Set ``function`` to the interpolant of ``values`` (Lagrange nodes).
+
+        ``values``: a point function, a number, or a backend function of the same mesh.
+        """
 
     @abstractmethod
-    def interpolate_component(self, function, index: int, values: PointFunction | float) -> None:
-        """Set sub-function ``index`` of a mixed ``function`` to the interpolant of ``values``."""
+    def interpolate_component(self, function, index: int, values) -> None:
+        """Set sub-function ``index`` of a mixed ``function`` to the interpolant of ``values``.
+
+        ``values``: a point function, a number, or a backend function of the same mesh.
+        """
 
     @abstractmethod
     def set_vertex_values(self, function, values: np.ndarray) -> None:

@@ -10,7 +10,7 @@ A configuration is a nested mapping with these tables (all optional but
     [mesh]         type = "rectangle" | "box" | "file", ...
     [time]         dt, t_final, t_start
     [output]       times, snapshot_fields, series_every
-    [coupling]     scheme = "sequential"
+    [coupling]     scheme = "sequential" | "strang" | "fixed_point" | "monolithic", and its options
     [solver.PREFIX] PETSc options of one subproblem (e.g. [solver.chemotaxis_m])
 
 Every unknown table or key is reported by its dotted name; values are checked
@@ -35,7 +35,7 @@ SECTIONS = {
     "mesh": None,  # open: validated by primordia.core.meshes.mesh_from_config
     "time": {"dt", "t_final", "t_start"},
     "output": {"times", "snapshot_fields", "series_every", "pictures", "displacement_scale"},
-    "coupling": {"scheme"},
+    "coupling": None,  # open: scheme plus the scheme's own options
     "solver": None,  # open: PETSc options by prefix
 }
 

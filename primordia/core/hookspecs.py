@@ -88,10 +88,11 @@ def primordia_select_backend(name: str, entries: dict, comm):
 
 
 @hookspec(firstresult=True)
-def primordia_select_splitting_scheme(name: str, schemes: dict, physics: list):
+def primordia_select_splitting_scheme(name: str, options: dict, schemes: dict, physics: list):
     """Choose the operator-splitting scheme for a run.
 
-    ``name`` is the requested scheme (``[coupling] scheme``), ``schemes`` maps
-    registered names to classes, ``physics`` lists the run's physics objects;
-    return a scheme instance, or None to defer.
+    ``name`` is the requested scheme (``[coupling] scheme``), ``options`` the
+    rest of the ``[coupling]`` table, ``schemes`` maps registered names to
+    classes, ``physics`` lists the run's physics objects; return a scheme
+    instance, or None to defer.
     """

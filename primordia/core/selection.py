@@ -23,8 +23,8 @@ def primordia_select_backend(name, entries, comm):
 
 
 @hookimpl(trylast=True)
-def primordia_select_splitting_scheme(name, schemes, physics):
+def primordia_select_splitting_scheme(name, options, schemes, physics):
     if name not in schemes:
         known = ", ".join(sorted(schemes)) or "none"
         raise PluginError(f"unknown splitting scheme '{name}' (registered: {known})")
-    return schemes[name](physics)
+    return schemes[name](physics, **options)

@@ -154,6 +154,16 @@ class Discretisation:
     def groups(self) -> list[str]:
         return list(self._groups)
 
+    def group_function(self, group: str):
+        return self._groups[group].current
+
+    def group_of_function(self, function) -> str:
+        """The name of the group a backend function (``unknown``) holds."""
+        for name, group in self._groups.items():
+            if group.current is function:
+                return name
+        raise KeyError("not a field group of this discretisation")
+
     def owner(self, name: str) -> str:
         if name in self._provided:
             return self._provided[name][1]
@@ -179,8 +189,18 @@ class Discretisation:
 
     # -- values ---------------------------------------------------------------------------
     def set_vertex_values(self, name: str, values):
-        self._require_alone(name, "set from vertex values")
-        self.backend.set_vertex_values(self.unknown(name), values)
+        """Set a P1 field from values at every mesh vertex (MeshData order)."""
+        group = self._group(name)
+        index = group.index(name)
+        if index is None:
+            self.backend.set_vertex_values(group.current, values)
+            return
+        spec = self._specs[name]
+        if spec.degree != 1:
+            raise ConfigError(f"field '{name}' is not P1 and cannot be set from vertex values")
+        alone = self.backend.function(self.backend.function_space(self.mesh, self.element(spec)), f"{name}_vertices")
+        self.backend.set_vertex_values(alone, values)
+        self.backend.interpolate_component(group.current, index, alone)
 
     def interpolate(self, name: str, values):
         group = self._group(name)
@@ -200,9 +220,10 @@ class Discretisation:
             group = self._groups[name]
             self.backend.local_array(group.previous)[:] = self.backend.local_array(group.current)
 
-    def update_rates(self, dt: float):
-        """rate <- (current - previous) / dt for every group whose rate is used."""
-        for group in self._groups.values():
+    def update_rates(self, dt: float, groups: list[str] | None = None):
+        """rate <- (current - previous) / dt for every group (or the given ones) whose rate is used."""
+        for name in groups or self._groups:
+            group = self._groups[name]
             if group.rate is not None:
                 rate = self.backend.local_array(group.rate)
                 rate[:] = (self.backend.local_array(group.current) - self.backend.local_array(group.previous)) / dt

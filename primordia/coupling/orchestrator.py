@@ -98,7 +98,8 @@ class Simulation:
         pm = get_plugin_manager()
         schemes = {name: cls for name, (cls, _) in registry("splitting_schemes", pm).items()}
         self.scheme = pm.hook.primordia_select_splitting_scheme(
-            name=self.model.coupling, schemes=schemes, physics=self.model.physics_objects)
+            name=self.model.coupling, options=self.model.coupling_options, schemes=schemes,
+            physics=self.model.physics_objects)
 
     def _attach_outputs(self):
         if self.is_root:
@@ -135,20 +136,47 @@ class Simulation:
         return self
 
     def step(self) -> None:
-        """Advance every field by one time step ``dt``."""
-        self.disc.store_previous()
+        """Advance every field by one time step ``dt`` (the splitting scheme decides how)."""
         t_next = self.model.t_start + (self.step_index + 1) * self.dt
+        stats = self.scheme.advance(self, self.time, self.dt)
         self.disc.set_time(t_next, self.dt)
-        for physics in self.model.physics_objects:
-            physics.before_step(t_next, self.dt)
-        stats = self.scheme.advance(self)
-        self.disc.set_time(t_next, self.dt)  # a scheme may have changed dt for its sub-steps
-        self.disc.update_rates(self.dt)
         for name, solve in stats.items():
-            self.iterations.setdefault(name, []).append(solve.linear_iterations)
+            self.record_iterations(name, solve.linear_iterations)
         self.step_index += 1
         self.time = t_next
         self._check_finite()
+
+    def advance(self, solvers: list, t0: float, duration: float, inner_steps: int = 1) -> dict:
+        """Advance the fields of ``solvers`` from ``t0`` over ``duration`` in ``inner_steps`` steps.
+
+        The other fields stay frozen.  Per inner step: time-dependent data are
+        updated, the start values of these fields stored, the subproblems solved
+        in order, and the rates of these fields (e.g. the solid velocity) updated.
+        """
+        delta = duration / inner_steps
+        groups = list(dict.fromkeys(self.disc.group_of_function(s.sub.unknown) for s in solvers))
+        stats: dict = {}
+        for k in range(inner_steps):
+            t = t0 + (k + 1) * delta
+            self.disc.set_time(t, delta)
+            for physics in self.model.physics_objects:
+                physics.before_step(t, delta)
+            self.disc.store_previous(groups)
+            for solver in solvers:
+                solve = solver.solve()
+                total = stats.setdefault(solver.sub.name, solve)
+                if total is not solve:
+                    total.linear_iterations += solve.linear_iterations
+                    total.newton_iterations += solve.newton_iterations
+            self.disc.update_rates(delta, groups)
+        return stats
+
+    def group_function(self, group: str):
+        """The backend function holding a field group."""
+        return self.disc.group_function(group)
+
+    def record_iterations(self, name: str, count: float) -> None:
+        self.iterations.setdefault(name, []).append(count)
 
     def _check_finite(self):
         for group, name in self._group_representatives().items():
@@ -190,8 +218,8 @@ class Simulation:
 
     def iteration_counts(self) -> dict[str, float]:
         """Linear iterations of the last step per subproblem."""
-        return {f"{name.replace('.', '_')}_linear_iterations": float(its[-1])
-                for name, its in self.iterations.items() if its}
+        return {(name if name == "fixed_point_iterations" else f"{name.replace('.', '_')}_linear_iterations"):
+                float(its[-1]) for name, its in self.iterations.items() if its}
 
     def _group_representatives(self) -> dict[str, str]:
         """One field name per group (to reach the group's function space)."""
@@ -217,7 +245,10 @@ class Simulation:
             "wall_time_s": wall,
             "ms_per_step": 1e3 * wall / self.step_index if self.step_index else None,
             "final": self.field_statistics(),
-            "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items() if its},
+            "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items()
+                                       if its and name != "fixed_point_iterations"},
+            "mean_fixed_point_iterations": (float(np.mean(self.iterations["fixed_point_iterations"]))
+                                            if self.iterations.get("fixed_point_iterations") else None),
             "splitting_scheme": self.scheme.name,
         }
 

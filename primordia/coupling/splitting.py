@@ -1,26 +1,51 @@
 """Operator-splitting schemes: how the physics modules of a run share a time step.
 
-Each scheme is one small class with ``advance(sim)``, registered through the
+Each scheme is one small class, registered through the
 ``primordia_splitting_schemes`` hook and chosen by the ``firstresult`` hook
-``primordia_select_splitting_scheme`` from ``[coupling] scheme``.
+``primordia_select_splitting_scheme`` from ``[coupling] scheme``.  A *sub-flow*
+is the set of subproblems of one physics module (e.g. the four species solves of
+the chemotaxis, or the (u, p) solve of the poroelasticity); the others' fields are
+frozen while it runs.
 
-* ``sequential`` (Lie): every module's subproblems once, in model order, each
-  seeing the fields already updated in this step.  First order in dt in the
-  splitting error; exact when the model has a single module.
+* ``sequential`` (Lie):  A(dt) then B(dt) ...  splitting error O(dt).
+* ``strang``:            A(dt/2), B(dt), A(dt/2) for two sub-flows (the first
+  module against the rest); splitting error O(dt^2).
+* ``fixed_point``:       the seed's outer iteration (section 5.1): sweep all
+  subproblems from the start-of-step state until the relative change of every
+  field group falls below ``tolerance``; iteration counts are recorded.
+* ``monolithic``:        all fields in one (mixed) function and one Newton solve.
+
+Each sub-flow can be integrated with ``inner_steps`` backward-Euler steps
+(``[coupling] inner_steps``, default 1): with many inner steps the sub-flows
+approach the exact ones and the splitting error of the scheme is what remains.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 
+import ufl
+
+from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
+from primordia.physics.base import Subproblem
 
 
 class SplittingScheme(ABC):
     name: str
+    #: Options of the ``[coupling]`` table this scheme reads (with defaults).
+    options: dict = {"inner_steps": 1}
 
-    def __init__(self, physics: list):
+    def __init__(self, physics: list, **options):
         self.physics = physics
+        unknown = set(options) - set(self.options)
+        if unknown:
+            raise ConfigError(f"coupling scheme '{self.name}' has no option '{sorted(unknown)[0]}' "
+                              f"(its options: {', '.join(self.options) or 'none'})")
+        self.opts = {**self.options, **options}
+        inner = self.opts.get("inner_steps", 1)
+        if not isinstance(inner, int) or isinstance(inner, bool) or inner < 1:
+            raise ConfigError(f"coupling.inner_steps must be a positive integer, got {inner!r}")
 
     def field_groups(self, physics: list) -> dict[str, list]:
         """Which fields are solved together: by default, as each module groups its own."""
@@ -31,26 +56,122 @@ class SplittingScheme(ABC):
         return groups
 
     def build(self, sim) -> None:
-        """Create the solvers (default: one per subproblem, in model order)."""
-        sim.solvers = [sim.solver_for(sub) for module in self.physics for sub in module.subproblems()]
+        """Create the solvers, one per subproblem, grouped in sub-flows (one per module)."""
+        self.flows = [[sim.solver_for(sub) for sub in module.subproblems()] for module in self.physics]
+        self.flows = [flow for flow in self.flows if flow]
+        sim.solvers = [solver for flow in self.flows for solver in flow]
 
     @abstractmethod
-    def advance(self, sim) -> dict:
-        """Advance all fields from ``sim.time`` by ``sim.dt``; return solver statistics."""
+    def advance(self, sim, t0: float, dt: float) -> dict:
+        """Advance all fields from ``t0`` to ``t0 + dt``; return solver statistics by subproblem."""
 
 
 class Sequential(SplittingScheme):
-    """Lie splitting: one sweep over the modules' subproblems per step."""
+    """Lie splitting: each sub-flow over the whole step, in model order."""
 
     name = "sequential"
 
-    def advance(self, sim) -> dict:
+    def advance(self, sim, t0, dt):
         stats = {}
-        for solver in sim.solvers:
-            stats[solver.sub.name] = solver.solve()
+        for flow in self.flows:
+            stats.update(sim.advance(flow, t0, dt, self.opts["inner_steps"]))
         return stats
+
+
+class Strang(SplittingScheme):
+    """Strang splitting: first module over dt/2, the rest over dt, first module over dt/2."""
+
+    name = "strang"
+
+    def build(self, sim):
+        super().build(sim)
+        if len(self.flows) < 2:
+            raise ConfigError("the strang scheme needs at least two physics modules with subproblems")
+        self.first = self.flows[0]
+        self.rest = [solver for flow in self.flows[1:] for solver in flow]
+
+    def advance(self, sim, t0, dt):
+        inner = self.opts["inner_steps"]
+        stats = sim.advance(self.first, t0, 0.5 * dt, inner)
+        stats.update(sim.advance(self.rest, t0, dt, inner))
+        second = sim.advance(self.first, t0 + 0.5 * dt, 0.5 * dt, inner)
+        for name, solve in second.items():
+            stats[name].linear_iterations += solve.linear_iterations
+            stats[name].newton_iterations += solve.newton_iterations
+        return stats
+
+
+class FixedPoint(SplittingScheme):
+    """The seed's outer fixed-point iteration between the modules, until the fields stop changing."""
+
+    name = "fixed_point"
+    options = {"tolerance": 1e-8, "max_iterations": 50}
+
+    def __init__(self, physics, **options):
+        super().__init__(physics, **options)
+        if not isinstance(self.opts["tolerance"], (int, float)) or self.opts["tolerance"] <= 0:
+            raise ConfigError(f"coupling.tolerance must be > 0, got {self.opts['tolerance']!r}")
+
+    def advance(self, sim, t0, dt):
+        disc = sim.disc
+        disc.set_time(t0 + dt, dt)
+        for module in self.physics:
+            module.before_step(t0 + dt, dt)
+        groups = disc.groups()
+        disc.store_previous(groups)
+        stats = {}
+        for iteration in range(1, self.opts["max_iterations"] + 1):
+            before = {g: sim.backend.petsc_vector(sim.group_function(g)).copy() for g in groups}
+            for solver in sim.solvers:
+                solve = solver.solve()
+                total = stats.setdefault(solver.sub.name, solve)
+                if total is not solve:
+                    total.linear_iterations += solve.linear_iterations
+                    total.newton_iterations += solve.newton_iterations
+            change = max(_relative_change(before[g], sim.backend.petsc_vector(sim.group_function(g))) for g in groups)
+            if change < self.opts["tolerance"]:
+                break
+        else:
+            raise SolverError(f"fixed-point coupling did not converge in {self.opts['max_iterations']} iterations "
+                              f"(relative change {change:.2e} > tolerance {self.opts['tolerance']:g})")
+        disc.update_rates(dt, groups)
+        sim.record_iterations("fixed_point_iterations", iteration)
+        return stats
+
+
+class Monolithic(SplittingScheme):
+    """All fields in one mixed function, all residuals in one Newton solve."""
+
+    name = "monolithic"
+    options = {}
+
+    def field_groups(self, physics):
+        return {"monolithic": [spec for module in physics for spec in module.fields()]}
+
+    def build(self, sim):
+        subproblems = [sub for module in self.physics for sub in module.subproblems()]
+        if any(sub.operator is not None for sub in subproblems):
+            raise ConfigError("the monolithic scheme cannot include algebraic operators "
+                              "(use physics.chemotaxis.flux_scheme = \"galerkin\")")
+        unknown = subproblems[0].unknown
+        residual = sum((sub.residual for sub in subproblems[1:]), subproblems[0].residual)
+        combined = Subproblem(
+            name="monolithic", unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
+            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False,
+            petsc_options={"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"})
+        self.flows = [[sim.solver_for(combined)]]
+        sim.solvers = self.flows[0]
+
+    def advance(self, sim, t0, dt):
+        return sim.advance(self.flows[0], t0, dt, 1)
+
+
+def _relative_change(old, new) -> float:
+    difference = new.copy()
+    difference.axpy(-1.0, old)
+    return difference.norm() / max(new.norm(), 1e-300)
 
 
 @hookimpl
 def primordia_splitting_schemes():
-    return [Sequential]
+    return [Sequential, Strang, FixedPoint, Monolithic]

@@ -137,8 +137,8 @@ def test_interpolate_vector(backend, data):
     np.testing.assert_allclose(backend.vertex_values(field), data.points * np.arange(1, data.gdim + 1),
                                rtol=1e-13, atol=1e-14)
     backend.interpolate(field, np.arange(1.0, data.gdim + 1))
-    np.testing.assert_allclose(backend.vertex_values(field), np.tile(np.arange(1.0, data.gdim + 1), (data.num_vertices, 1)),
-                               rtol=1e-14)
+    expected = np.tile(np.arange(1.0, data.gdim + 1), (data.num_vertices, 1))
+    np.testing.assert_allclose(backend.vertex_values(field), expected, rtol=1e-14)
 
 
 def taylor_hood(backend, mesh):

@@ -226,17 +226,20 @@ FORMS = {
     "grad P1 matrix": lambda s: ufl.inner(ufl.grad(s.trial("P1")), ufl.grad(s.test("P1"))) * ufl.dx,
     "grad P2 matrix + mass": lambda s: (ufl.inner(ufl.grad(s.trial("P2")), ufl.grad(s.test("P2")))
                                         + s.trial("P2") * s.test("P2")) * ufl.dx,
-    "grad of vector field": lambda s: ufl.inner(ufl.grad(s.trial("vector P2")), ufl.grad(s.test("vector P2"))) * ufl.dx,
+    "grad of vector field": lambda s: ufl.inner(ufl.grad(s.trial("vector P2")), ufl.grad(s.test("vector P2")))
+                                      * ufl.dx,
     "div vector": lambda s: ufl.div(s["u"]) * s.test("P1") * ufl.dx,
     "div rectangular matrix": lambda s: ufl.div(s.trial("vector P2")) * s.test("P1") * ufl.dx,
     "second derivatives": lambda s: (ufl.div(ufl.grad(s["c"])) * s.test("P2")
-                                     + ufl.inner(ufl.grad(ufl.grad(s["c"])), ufl.grad(ufl.grad(s.test("P2"))))) * ufl.dx,
+                                     + ufl.inner(ufl.grad(ufl.grad(s["c"])), ufl.grad(ufl.grad(s.test("P2")))))
+                                    * ufl.dx,
     # tensor algebra
     "inner dot": lambda s: (ufl.dot(s["u"], ufl.grad(s.test("P2")))
                             + ufl.inner(ufl.grad(s["u"]), ufl.grad(s["u"])) * s.test("P2")) * ufl.dx,
     "outer": lambda s: ufl.inner(ufl.outer(s["u"], ufl.grad(s["m"])), ufl.grad(s.test("vector P2"))) * ufl.dx,
-    "det tr transpose": lambda s: (ufl.det(deformation_gradient(s))
-                                   + ufl.tr(deformation_gradient(s).T * deformation_gradient(s))) * s.test("P1") * ufl.dx,
+    "det tr transpose": lambda s: (ufl.det(deformation_gradient(s)) + ufl.tr(deformation_gradient(s).T
+                                                                             * deformation_gradient(s)))
+                                  * s.test("P1") * ufl.dx,
     "inv": lambda s: ufl.inner(ufl.inv(deformation_gradient(s)).T, ufl.grad(s.test("vector P2"))) * ufl.dx,
     "indexed and component tensors": lambda s: ufl.inner(
         ufl.as_tensor(ufl.grad(s["u"])[ufl.i, ufl.j], (ufl.j, ufl.i))
@@ -245,6 +248,11 @@ FORMS = {
     "index sums and list tensors": lambda s: (
         ufl.grad(s["u"])[ufl.i, ufl.i] * s.test("P2")
         + ufl.dot(ufl.as_vector([s["u"][s.gdim - 1 - i] for i in range(s.gdim)]), ufl.grad(s.test("P2")))) * ufl.dx,
+    "curl sym skew dev cofac": lambda s: (
+        ufl.inner(ufl.curl(s["u"]), ufl.curl(s.test("vector P2")))
+        + ufl.inner(ufl.sym(ufl.grad(s["u"])) + 2 * ufl.skew(ufl.nabla_grad(s["u"])) + ufl.dev(ufl.grad(s["u"]))
+                    + ufl.cofac(deformation_gradient(s)), ufl.grad(s.test("vector P2")))
+        + ufl.nabla_div(s["u"]) * ufl.div(s.test("vector P2"))) * ufl.dx,
     "tensor field": lambda s: ufl.inner(ufl.dot(s["T"], s["T"].T), ufl.grad(s.test("vector P1"))) * ufl.dx,
     # math functions
     "exp ln": lambda s: ufl.exp(-s["m"]) * ufl.ln(1 + s["c"] ** 2) * s.test("P2") * ufl.dx,
@@ -293,7 +301,8 @@ FORMS = {
     "vector P1 tangent": lambda s: ufl.derivative(
         ufl.derivative(neo_hookean_energy(s, s["u1"]), s["u1"], s.test("vector P1")), s["u1"], s.trial("vector P1")),
     # mixed spaces
-    "Taylor-Hood Stokes matrix": lambda s: stokes(*ufl.split(s.trial("Taylor-Hood")), *ufl.split(s.test("Taylor-Hood"))),
+    "Taylor-Hood Stokes matrix": lambda s: stokes(*ufl.split(s.trial("Taylor-Hood")),
+                                                  *ufl.split(s.test("Taylor-Hood"))),
     "Taylor-Hood nonlinear tangent": lambda s: ufl.derivative(
         mixed_nonlinear(*ufl.split(s["w"]), *ufl.split(s.test("Taylor-Hood"))), s["w"], s.trial("Taylor-Hood")),
     # vertex quadrature
@@ -448,11 +457,10 @@ def test_cell_subdomains_are_unsupported(skfem_setup):
         s.backend.assemble_scalar(s.fields["m"] * ufl.dx(1))
 
 
-def test_quadrature_degree_is_ffcx_estimate():
-    mesh = SkfemBackend().create_mesh(mesh_data("triangle"))
-    cell = mesh.ufl_cell()
-    v = ufl.TestFunction(SkfemBackend().function_space(mesh, ufl.FiniteElement("Lagrange", cell, 2)))
-    plans = preprocess_form(ufl.exp(ufl.SpatialCoordinate(mesh)[0]) * v * ufl.dx
+def test_quadrature_degree_is_ffcx_estimate(skfem_setup):
+    s = skfem_setup
+    v = s.test("P2")
+    plans = preprocess_form(ufl.exp(ufl.SpatialCoordinate(s.mesh)[0]) * v * ufl.dx
                             + v * ufl.dx(metadata={"quadrature_degree": 7}))
     assert sorted(p.degree for p in plans) == [5, 7]  # exp(x): degree 1 + 2, times P2
 
