@@ -26,100 +26,46 @@ NetCDF), :mod:`.figures` (seed Figures 3.1-3.3 layout), :mod:`.inputs`,
 :mod:`.cli`.
 """
 
-from primordia.analysis.conditions import (
-    Conditions,
-    CriticalValue,
-    Verdict,
-    conditions,
-    coupled_conditions,
-    coupled_verdict,
-    critical_value,
-    critical_wavenumber,
-    epithelium_verdict,
-    homogeneous_verdict,
-    patterning_region,
-    routh_hurwitz_cubic,
-    routh_hurwitz_quartic,
-    uncoupled_conditions,
-    uncoupled_verdict,
-    verdicts,
-    zero_chemotaxis_verdict,
-)
-from primordia.analysis.dispersion import (
-    FastestMode,
-    GrowthRates,
-    default_wavenumbers,
-    fastest_growing_mode,
-    growth_rates,
-    longitudinal_rates,
-    max_growth_rate,
-)
-from primordia.analysis.inputs import read_parameters
-from primordia.analysis.linearisation import (
-    LinearisedCoefficients,
-    dispersion_matrix,
-    linearise,
-    matrix_pencil,
-)
-from primordia.analysis.patterning import (
-    ParameterRange,
-    dispersion_relation,
-    patterning_space,
-    save_dataset,
-)
-from primordia.analysis.polynomials import (
-    a0,
-    characteristic_determinant,
-    chemotaxis_coefficients,
-    coupling_coefficients,
-    d0,
-    dispersion_coefficients,
-    mechanics_coefficients,
-    theta,
-    transverse_coefficients,
-)
+from __future__ import annotations
 
-__all__ = [
-    "Conditions",
-    "CriticalValue",
-    "FastestMode",
-    "GrowthRates",
-    "LinearisedCoefficients",
-    "ParameterRange",
-    "Verdict",
-    "a0",
-    "characteristic_determinant",
-    "chemotaxis_coefficients",
-    "conditions",
-    "coupled_conditions",
-    "coupled_verdict",
-    "coupling_coefficients",
-    "critical_value",
-    "critical_wavenumber",
-    "d0",
-    "default_wavenumbers",
-    "dispersion_coefficients",
-    "dispersion_matrix",
-    "dispersion_relation",
-    "epithelium_verdict",
-    "fastest_growing_mode",
-    "growth_rates",
-    "homogeneous_verdict",
-    "linearise",
-    "longitudinal_rates",
-    "matrix_pencil",
-    "max_growth_rate",
-    "mechanics_coefficients",
-    "patterning_region",
-    "patterning_space",
-    "read_parameters",
-    "routh_hurwitz_cubic",
-    "routh_hurwitz_quartic",
-    "save_dataset",
-    "theta",
-    "transverse_coefficients",
-    "uncoupled_conditions",
-    "uncoupled_verdict",
-    "verdicts",
-    "zero_chemotaxis_verdict",
-]
+import importlib
+
+# Public names and the module defining each.  They are imported on first use
+# (PEP 562), so ``primordia.analysis.cli`` - which the main CLI imports to build
+# its parser - does not pull in scipy, xarray and matplotlib for every command.
+_EXPORTS = {
+    "conditions": (
+        "Conditions", "CriticalValue", "Verdict", "coupled_conditions", "coupled_verdict",
+        "critical_value", "critical_wavenumber", "epithelium_verdict", "homogeneous_verdict", "instability_conditions",
+        "patterning_region", "routh_hurwitz_cubic", "routh_hurwitz_quartic", "uncoupled_conditions",
+        "uncoupled_verdict", "verdicts", "zero_chemotaxis_verdict",
+    ),
+    "dispersion": (
+        "FastestMode", "GrowthRates", "default_wavenumbers", "fastest_growing_mode", "growth_rates",
+        "longitudinal_rates", "max_growth_rate",
+    ),
+    "inputs": ("read_parameters",),
+    "linearisation": ("LinearisedCoefficients", "dispersion_matrix", "linearise", "matrix_pencil"),
+    "patterning": ("ParameterRange", "dispersion_relation", "patterning_space", "save_dataset"),
+    "polynomials": (
+        "a0", "characteristic_determinant", "chemotaxis_coefficients", "coupling_coefficients", "d0",
+        "dispersion_coefficients", "mechanics_coefficients", "theta", "transverse_coefficients",
+    ),
+    "figures": ("dispersion_figure", "patterning_figure"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    try:
+        module = _MODULE_OF[name]
+    except KeyError:
+        raise AttributeError(f"module 'primordia.analysis' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(f"primordia.analysis.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

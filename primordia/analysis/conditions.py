@@ -2,8 +2,9 @@
 
 What the conditions can and cannot say
 --------------------------------------
-P(phi) = P_1 + P_2 P_3 has positive leading coefficient (rho C_0) and constant
-term d_0 (a_0 c_0 when uncoupled).  Hence
+P(phi) = P_1 + P_2 P_3 has a positive leading coefficient (rho C_0, or
+((2mu + lambda) C_0 + alpha_BW) k^2 if rho = 0) and constant term d_0 = a_0 c_0 + b_0
+(a_0 c_0 when uncoupled, c_0 > 0).  Hence
 
 * d_0(K) < 0 at some K > 0  =>  a real positive root: a stationary (Turing)
   instability.  This is the criterion the seed follows ("we restrict the
@@ -43,7 +44,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.optimize
 
-from primordia.core.errors import ConfigError
 from primordia.analysis.dispersion import (
     default_wavenumbers,
     fastest_growing_mode,
@@ -59,6 +59,9 @@ from primordia.analysis.polynomials import (
     mechanics_coefficients,
     theta,
 )
+from primordia.core.errors import ConfigError
+from primordia.core.parameters import CONSTRAINTS
+
 
 # -- Routh-Hurwitz -------------------------------------------------------------------
 def routh_hurwitz_cubic(coefficients):
@@ -218,7 +221,7 @@ def coupled_conditions(params, theta_variant: str = "corrected") -> Conditions:
     )
 
 
-def conditions(params, coupled: bool = True, theta_variant: str = "corrected") -> Conditions:
+def instability_conditions(params, coupled: bool = True, theta_variant: str = "corrected") -> Conditions:
     """:func:`coupled_conditions` or :func:`uncoupled_conditions`."""
     return coupled_conditions(params, theta_variant) if coupled else uncoupled_conditions(params)
 
@@ -246,10 +249,13 @@ def critical_wavenumber(params, coupled: bool = True) -> float:
 
 
 def _scan_values(value: float, constraint: str, n: int) -> np.ndarray:
+    """1/100 to 100 times |value| (both signs unless the parameter must be >= 0), within its constraint."""
     magnitudes = np.logspace(-2, 2, n) * (abs(value) if value != 0 else 1.0)
     if constraint in ("positive", "nonnegative"):
         return magnitudes
-    return np.concatenate([-magnitudes[::-1], magnitudes])
+    scan = np.concatenate([-magnitudes[::-1], magnitudes])
+    admissible = [bool(CONSTRAINTS[constraint][1](v)) for v in scan]
+    return scan[admissible]
 
 
 def critical_value(params, name: str, coupled: bool = True, bracket=None, n_scan: int = 801):
@@ -271,7 +277,7 @@ def critical_value(params, name: str, coupled: bool = True, bracket=None, n_scan
     def minimum(v):
         trial = dict(base)
         trial[name] = v
-        return quadratic_minimum(*_quadratic(linearise(trial), coupled))[0]
+        return np.broadcast_to(quadratic_minimum(*_quadratic(linearise(trial), coupled))[0], np.shape(v))
 
     if bracket is None:
         constraint = params.declaration(name).constraint if hasattr(params, "declaration") else "any"

@@ -173,6 +173,8 @@ def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
         mu, lam = lame({"E": ds.attrs["parameter_E"], "nu": ds.attrs["parameter_nu"]})
         axes[2].plot(k, ds["d0"].values / (modulus * (2 * mu + lam) * K**3),
                      label="d_0 / ((kappa/eta)(2mu+lambda) k^6) (coupled)")
+    small_k = [abs(line.get_ydata()[0]) for line in axes[2].get_lines()]
+    axes[2].set_yscale("symlog", linthresh=max(min(small_k), 1e-12))  # the sign at small k matters
     axes[2].axhline(0.0, color="black", linewidth=0.7)
     axes[2].set_title("constant terms (negative: a real positive root)", fontsize=10)
     for ax in axes:

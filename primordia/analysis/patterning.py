@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from primordia.analysis.conditions import conditions as evaluate_conditions
+from primordia.analysis.conditions import instability_conditions as evaluate_conditions
 from primordia.analysis.conditions import critical_value, most_negative_k_squared
 from primordia.analysis.dispersion import (
     default_wavenumbers,

@@ -69,8 +69,8 @@ def _reference_normals(tdim: int) -> np.ndarray:
     return np.vstack([np.ones((1, tdim)), -np.eye(tdim)])
 
 
-#: Cells per chunk are chosen so that an array of (test x trial x gdim^2 x points x cells)
-#: values, the largest an integrand of a tangent typically builds, stays below this.
+#: Cells per chunk are chosen so that an array of (test x trial x points x cells) values,
+#: the largest an integrand of a tangent typically builds, stays below this (32 MB).
 _CHUNK_VALUES = 2 ** 22
 
 #: Preprocessed forms kept (a physics module reuses a handful of forms at every step).
@@ -666,7 +666,7 @@ class SkfemBackend(Backend):
             if len(cells) == 0:
                 continue
             rule = self._rule(mesh, plan)
-            chunk = max(1, _CHUNK_VALUES // (sizes[0] * sizes[1] * mesh.gdim ** 2 * rule.num_points))
+            chunk = max(1, _CHUNK_VALUES // (sizes[0] * sizes[1] * rule.num_points))
             whole = local_facets is None and cell_mask is None  # chunks are runs of cells: slice them
             for start in range(0, len(cells), chunk):
                 part = slice(start, min(start + chunk, len(cells)))

@@ -222,6 +222,10 @@ def integrate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContex
 
 
 _ARGS, _POINTS = "AB", "YZ"
+
+#: Below this many (test x trial x summed index x point) products per entity, one
+#: broadcast einsum beats a matrix product per entity.
+_CONTRACTION_MIN_SIZE = 2048
 _INDEX_LETTERS = string.ascii_lowercase + "CDEFGHIJKLMNOPQRSTUVWX"
 
 
@@ -245,8 +249,11 @@ class _Evaluator:
             return sum(self.integrate(term, weights) for term in o.ufl_operands)
         factors = []
         _collect_factors(o, factors)
+        contractions = [f for f in factors if isinstance(f, uc.IndexSum) and id(f) not in self._memo]
         q_varying, q_constant = [], []
         for factor in factors:
+            if len(contractions) == 1 and factor is contractions[0]:
+                continue
             value = self.value(factor)
             if value.shape[0] == 1 and value.shape[1] == 1:
                 weights = weights * value[0, 0]       # no argument: fold into the weights
@@ -254,6 +261,14 @@ class _Evaluator:
                 q_constant.append(value[..., 0])      # constant over the points: apply after the sum
             else:
                 q_varying.append(value)
+        if len(contractions) == 1:
+            if not q_varying and not q_constant:
+                result = self._contract(contractions[0], weights)
+                if result is not None:
+                    return result
+            value = self.value(contractions[0])
+            (q_constant if value.shape[-1] == 1 else q_varying).append(value[..., 0] if value.shape[-1] == 1
+                                                                       else value)
         uniform = [v for v in q_varying if v.shape[2] == 1]  # same on every entity: multiply first, it is small
         if len(uniform) > 1:
             q_varying = [v for v in q_varying if v.shape[2] != 1] + [_product(uniform)]
@@ -265,6 +280,37 @@ class _Evaluator:
         for value in q_constant:
             result = result * np.moveaxis(value, -1, 0)
         return result
+
+    def _contract(self, o, weights: np.ndarray) -> np.ndarray | None:
+        """``sum_{indices, points} a * b * weights`` for ``o`` = IndexSum(s) of Product(a, b).
+
+        With ``a`` depending on the test function only and ``b`` on the trial
+        function only (or on none), this is one matrix product per entity, over
+        the summed indices and the points at once: no (test, trial, ..., point)
+        temporary.  Returns ``None`` when the pattern does not apply or is too
+        small to gain.
+        """
+        node = o
+        while isinstance(node, uc.IndexSum):
+            node = node.ufl_operands[0]
+        if o.ufl_free_indices or not isinstance(node, uc.Product):
+            return None
+        a, b = node.ufl_operands
+        first, second = self._scalar_operands(node)
+        if first.shape[1] > 1 or second.shape[0] > 1:
+            first, second = second, first
+        if first.shape[1] > 1 or second.shape[0] > 1:
+            return None                                  # an operand depends on both arguments
+        free = np.broadcast_shapes(first.shape[2:-2], second.shape[2:-2])
+        n_test, n_trial = first.shape[0], second.shape[1]
+        entities, points = weights.shape
+        if n_test * n_trial * int(np.prod(free)) * points < _CONTRACTION_MIN_SIZE:
+            return None
+        test_part = np.broadcast_to(first[:, 0], (n_test,) + free + (entities, points))
+        trial_part = np.broadcast_to(second[0], (n_trial,) + free + (entities, points)) * weights
+        test_part = np.moveaxis(test_part, -2, 0).reshape(entities, n_test, -1)
+        trial_part = np.moveaxis(trial_part, -2, 0).reshape(entities, n_trial, -1)
+        return np.matmul(test_part, trial_part.transpose(0, 2, 1))
 
     # -- helpers -----------------------------------------------------------------------
     @staticmethod

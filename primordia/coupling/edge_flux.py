@@ -35,7 +35,8 @@ def bernoulli(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     small = np.abs(x) < 1e-6
     safe = np.where(small, 1.0, x)
-    return np.where(small, 1.0 - 0.5 * x + x * x / 12.0, safe / np.expm1(safe))
+    with np.errstate(over="ignore"):  # x >> 1: expm1 overflows and B(x) -> 0, its limit
+        return np.where(small, 1.0 - 0.5 * x + x * x / 12.0, safe / np.expm1(safe))
 
 
 class ExponentiallyFittedFlux(AlgebraicOperator):

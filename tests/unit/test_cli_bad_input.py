@@ -51,7 +51,7 @@ BAD_OVERRIDES = [
                  id="unknown-kinetics"),
     pytest.param(["--set", "model.physics=[\"chemotaxi\"]"], ["unknown physics 'chemotaxi'", "chemotaxis"],
                  id="unknown-physics"),
-    pytest.param(["--set", "coupling.scheme=strang"], ["unknown splitting scheme 'strang'", "sequential"],
+    pytest.param(["--set", "coupling.scheme=leapfrog"], ["unknown splitting scheme 'leapfrog'", "sequential"],
                  id="unknown-splitting-scheme"),
     pytest.param(["--set", "physics.chemotaxis.flux_scheme=upwind"], ["flux_scheme", "upwind"],
                  id="unknown-flux-scheme"),
@@ -123,10 +123,10 @@ from primordia.coupling.splitting import Sequential
 class FailsInStep6(Sequential):
     name = "fails_in_step_6"
 
-    def advance(self, sim):
+    def advance(self, sim, *args, **kwargs):
         if sim.step_index == 5:
             raise SolverError("chemotaxis.m: the linear solver diverged (injected in step 6)")
-        return super().advance(sim)
+        return super().advance(sim, *args, **kwargs)
 
 
 @hookimpl

@@ -210,14 +210,14 @@ def test_a_plugin_splitting_chooser_overrides_the_built_in_one(registered, tmp_p
         name = "counting"
         steps = 0
 
-        def advance(self, sim):
+        def advance(self, sim, *args, **kwargs):
             CountingSequential.steps += 1
-            return super().advance(sim)
+            return super().advance(sim, *args, **kwargs)
 
     class PreferCounting:
         @hookimpl
-        def primordia_select_splitting_scheme(self, name, schemes, physics):
-            return CountingSequential(physics) if name == "sequential" else None
+        def primordia_select_splitting_scheme(self, name, options, schemes, physics):
+            return CountingSequential(physics, **options) if name == "sequential" else None
 
     registered(PreferCounting())
     model = small_model()
@@ -255,8 +255,8 @@ def test_unknown_backend_raises_plugin_error(tmp_path):
 
 
 def test_unknown_splitting_scheme_raises_plugin_error(tmp_path):
-    with pytest.raises(PluginError, match=r"unknown splitting scheme 'strang' \(registered: .*sequential"):
-        Simulation(small_model(coupling="strang"), out_dir=tmp_path / "run").setup()
+    with pytest.raises(PluginError, match=r"unknown splitting scheme 'leapfrog' \(registered: .*sequential"):
+        Simulation(small_model(coupling="leapfrog"), out_dir=tmp_path / "run").setup()
 
 
 def test_plugin_errors_are_user_errors():

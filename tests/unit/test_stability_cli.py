@@ -113,3 +113,12 @@ def test_save_dataset_keeps_the_old_file_when_writing_fails(tmp_path, monkeypatc
         save_dataset(xr.Dataset({"a": ("x", np.arange(5.0))}), path)
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["result.nc"]
+
+
+def test_public_api_names_resolve_lazily():
+    import primordia.analysis as analysis
+
+    for name in analysis.__all__:
+        assert callable(getattr(analysis, name)), name
+    with pytest.raises(AttributeError):
+        analysis.no_such_function  # noqa: B018
