@@ -30,7 +30,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "stability",
         help="linear stability analysis: dispersion relation, k_max, patterning spaces (seed section 3)",
-        description=__doc__.split("\n\n")[1],
+        description="\n\n".join(__doc__.split("\n\n")[1:3]),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("inputs", nargs="*", metavar="[map] [CONFIG.toml]",
@@ -140,9 +140,9 @@ def _run_map(args, params, stem) -> int:
         params.declaration(args.critical)
     start = time.perf_counter()
     kind = "coupled" if args.coupled else "uncoupled"
-    print(f"primordia stability map: {x.name} x {y.name} ({x.n} x {y.n}), {kind}, parameters: {_describe(params)}")
     ds = patterning_space(x, y, params=params, coupled=args.coupled, nk=args.nk,
                           critical_parameter=args.critical, theta_variant=args.theta)
+    print(f"primordia stability map: {x.name} x {y.name} ({x.n} x {y.n}), {kind}, parameters: {_describe(params)}")
     k = ds["k"].values
     print(f"  {k.size} wavenumbers in [{k.min():.3g}, {k.max():.3g}]")
     symbol = "d_0" if args.coupled else "a_0"

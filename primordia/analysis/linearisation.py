@@ -35,9 +35,8 @@ from primordia.core.ops import NUMPY
 from primordia.physics.kinetics.painter2018 import Painter2018
 from primordia.physics.seed_parameters import lame
 
-#: Order of the unknowns after the d displacement components.
+#: Order of the unknowns after the d displacement components (rows and columns of M).
 SCALAR_UNKNOWNS = ("p", "m", "e", "f", "b")
-CHEMICAL_UNKNOWNS = ("m", "e", "f", "b")
 
 
 @dataclass(frozen=True)

@@ -121,6 +121,16 @@ class Discretisation:
             group.rate = self.backend.function(group.space, f"{group.name}_rate")
         return self._component(name, group.rate, "rate")
 
+    def set_rate(self, name: str, values) -> None:
+        """Set the rate of a field (e.g. an initial solid velocity) to the interpolant of ``values``."""
+        self.rate(name)
+        group = self._group(name)
+        index = group.index(name)
+        if index is None:
+            self.backend.interpolate(group.rate, values)
+        else:
+            self.backend.interpolate_component(group.rate, index, values)
+
     def test(self, name: str):
         """The test function of a field's balance law."""
         group = self._group(name)
