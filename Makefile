@@ -12,7 +12,7 @@ test: setup
 	.venv/bin/python -m pytest -q -p no:cacheprovider
 
 benchmark: setup
-	.venv/bin/python benchmarks/bench_ex01a.py
+	.venv/bin/python benchmarks/bench_examples.py
 
 clean:
 	rm -rf out .pytest_cache

@@ -3,7 +3,7 @@
 The same discrete scheme as primordia's chemotaxis module (lumped mass,
 exponentially fitted cell flux, IMEX species solves in the order m, e, f, b,
 same PETSc solvers), written directly against dolfinx without any framework
-layer.  Used by bench_ex01a.py; run alone:  python plain_dolfinx_ex01a.py 171 50
+layer.  Used by bench_examples.py; run alone:  python plain_dolfinx_ex01a.py 171 50
 """
 
 import sys

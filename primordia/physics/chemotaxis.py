@@ -80,6 +80,7 @@ SPECIES = (
 )
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
+PERTURBATION_SHAPES = ("random", "cosine")
 
 
 # -- the terms of seed eqs. (2.2a)-(2.2d), each a UFL integrand -------------------------------
@@ -109,7 +110,8 @@ class Chemotaxis(Physics):
     name = "chemotaxis"
     parameters = CHEMOTAXIS
     needs_kinetics = True
-    options = {"flux_scheme": "exponential_fitting", "perturbation": 0.01, "seed": 1}
+    options = {"flux_scheme": "exponential_fitting", "perturbation": 0.01, "seed": 1,
+               "perturbation_shape": "random", "wavenumber": [0.0, 0.0]}
 
     def validate_options(self):
         if self.opts["flux_scheme"] not in FLUX_SCHEMES:
@@ -120,6 +122,14 @@ class Chemotaxis(Physics):
             raise ConfigError(f"physics.chemotaxis.perturbation must be a number in [0, 1), got {amplitude!r}")
         if not isinstance(self.opts["seed"], int) or isinstance(self.opts["seed"], bool):
             raise ConfigError(f"physics.chemotaxis.seed must be an integer, got {self.opts['seed']!r}")
+        if self.opts["perturbation_shape"] not in PERTURBATION_SHAPES:
+            raise ConfigError(f"physics.chemotaxis.perturbation_shape must be one of "
+                              f"{', '.join(PERTURBATION_SHAPES)}, got {self.opts['perturbation_shape']!r}")
+        wavenumber = self.opts["wavenumber"]
+        if (not isinstance(wavenumber, list) or not 1 <= len(wavenumber) <= 3
+                or not all(isinstance(k, (int, float)) and not isinstance(k, bool) for k in wavenumber)):
+            raise ConfigError(f"physics.chemotaxis.wavenumber must be a list of numbers (k_x, k_y[, k_z]), "
+                              f"got {wavenumber!r}")
         missing = set(s.name for s in SPECIES) - set(self.kinetics.species)
         if missing:
             raise ConfigError(f"kinetics {self.kinetics.name} does not react species {sorted(missing)}")
@@ -140,15 +150,22 @@ class Chemotaxis(Physics):
                                       "with a monolithic scheme use physics.chemotaxis.flux_scheme = \"galerkin\"")
 
     def initialise(self, disc):
-        """Seed eq. (2.5) plus the seeded perturbation of m."""
+        """Seed eq. (2.5) plus the perturbation of m (seeded noise, or a cosine mode)."""
         m0 = self.params["m0"]
-        rng = np.random.default_rng(self.opts["seed"])
-        noise = rng.uniform(-1.0, 1.0, disc.mesh_data.num_vertices)
-        disc.set_vertex_values("m", m0 * (1.0 + self.opts["perturbation"] * noise))
+        disc.set_vertex_values("m", m0 * (1.0 + self.opts["perturbation"] * self._perturbation(disc.mesh_data.points)))
         t0 = disc.time
         for name in ("e", "f", "b"):
             disc.interpolate(name, lambda x, name=name: np.broadcast_to(
                 self.kinetics.initial_state(m0, t0, ops_.NUMPY.at(x))[name], x.shape[1:]).copy())
+
+    def _perturbation(self, points: np.ndarray) -> np.ndarray:
+        """Relative perturbation of m at the vertices: U(-1, 1) noise, or prod_i cos(k_i x_i)."""
+        if self.opts["perturbation_shape"] == "random":
+            return np.random.default_rng(self.opts["seed"]).uniform(-1.0, 1.0, len(points))
+        shape = np.ones(len(points))
+        for axis, k in enumerate(self.opts["wavenumber"][: points.shape[1]]):
+            shape *= np.cos(k * points[:, axis])
+        return shape
 
     def _reactions(self):
         state = {s.name: self.disc.field(s.name) for s in SPECIES}

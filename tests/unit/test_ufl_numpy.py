@@ -19,6 +19,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from primordia.backends import ufl_numpy
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.backends.skfem import SkfemBackend
 from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, preprocess_form, reference_quadrature
@@ -323,6 +324,13 @@ def mixed_nonlinear(velocity, pressure, test_velocity, test_pressure):
 
 @pytest.mark.parametrize("name", FORMS)
 def test_matches_dolfinx(pair, name):
+    assert_same(pair, FORMS[name])
+
+
+@pytest.mark.parametrize("name", FORMS)
+def test_matches_dolfinx_with_every_contraction_as_matrix_products(pair, name, monkeypatch):
+    """The per-entity matrix-product path for inner products, forced on even for small element tensors."""
+    monkeypatch.setattr(ufl_numpy, "_CONTRACTION_MIN_SIZE", 0)
     assert_same(pair, FORMS[name])
 
 

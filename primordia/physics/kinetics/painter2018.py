@@ -32,10 +32,10 @@ from primordia.core.parameters import Parameter
 from primordia.physics.kinetics.base import Kinetics
 
 PARAMETERS = (
-    Parameter("kappa_1", 0.05, "wave-driven activation rate of the epithelium"),
-    Parameter("kappa_2", 0.025, "cell-driven activation rate of the epithelium"),
-    Parameter("kappa_3", 1.0, "basal inactivation rate of the epithelium"),
-    Parameter("kappa_4", 1.0, "BMP-driven inactivation rate of the epithelium"),
+    Parameter("kappa_1", 0.05, "wave-driven activation rate of the epithelium", constraint="nonnegative"),
+    Parameter("kappa_2", 0.025, "cell-driven activation rate of the epithelium", constraint="nonnegative"),
+    Parameter("kappa_3", 1.0, "basal inactivation rate of the epithelium", constraint="nonnegative"),
+    Parameter("kappa_4", 1.0, "BMP-driven inactivation rate of the epithelium", constraint="nonnegative"),
     Parameter("K_1", 1.0, "Hill threshold of h_1"),
     Parameter("K_2", 2.0, "Hill threshold of h_2"),
     Parameter("K_3", 5.0, "Hill threshold of h_3"),

@@ -1,4 +1,4 @@
-"""Benchmark of seed example 1a: framework vs a plain dolfinx script, and backends.
+"""Benchmarks of seed examples 1a and 1b: framework vs a plain dolfinx script, backends, schemes.
 
 Prints, for 43, 86 and 171 squares per side, the time per step (ms, median of
 repeats, setup and output excluded) of
@@ -7,11 +7,12 @@ repeats, setup and output excluded) of
 * benchmarks/plain_dolfinx_ex01a.py, the same discrete scheme written directly
   against dolfinx,
 
-and the ratios framework/plain and skfem/fenicsx.  With ``--full`` it also runs
+and the ratios framework/plain and skfem/fenicsx.  ``--ex01b`` adds example 1b
+(poroelastic tissue) per backend and per splitting scheme.  With ``--full`` it also runs
 the whole example 1a (2,600 steps on the seed's 58,482-triangle mesh) through
 the CLI and reports its wall time and peak memory.
 
-    .venv/bin/python benchmarks/bench_ex01a.py [--steps 40] [--repeats 3] [--full]
+    .venv/bin/python benchmarks/bench_examples.py [--steps 40] [--repeats 3] [--sizes 43 86 171] [--ex01b] [--full]
 """
 
 from __future__ import annotations
@@ -29,11 +30,12 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 
-def framework_ms_per_step(n: int, steps: int, backend: str) -> float:
+def framework_ms_per_step(n: int, steps: int, backend: str, example: str = "ex01a", extra=()) -> float:
     from primordia.coupling.orchestrator import Simulation
     from primordia.model import Model
 
-    model = Model.from_file(ROOT / "examples/ex01a.toml", [f"mesh.cells=[{n},{n}]", "output.pictures=false"])
+    model = Model.from_file(ROOT / f"examples/{example}.toml",
+                            [f"mesh.cells=[{n},{n}]", "output.pictures=false", *extra])
     sim = Simulation(model, backend=backend, out_dir=f"/tmp/primordia-bench-{backend}-{n}")
     sim.setup()
     sim.step()  # first step: JIT / first factorisations
@@ -71,6 +73,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--sizes", type=int, nargs="+", default=[43, 86, 171])
     parser.add_argument("--full", action="store_true", help="also run the whole example 1a")
+    parser.add_argument("--ex01b", action="store_true", help="also time example 1b per backend and scheme")
     args = parser.parse_args()
 
     from primordia.core.plugins import BackendEntry
@@ -87,8 +90,30 @@ def main() -> None:
         print(row, flush=True)
     if not skfem_ok:
         print("skfem backend not importable: skipped its column")
+    if args.ex01b:
+        ex01b_table(args, skfem_ok)
     if args.full:
         full_run()
+
+
+#: Splitting schemes timed on example 1b (monolithic needs the Galerkin cell flux).
+SCHEMES = {
+    "sequential": ['coupling.scheme="sequential"'],
+    "strang": ['coupling.scheme="strang"'],
+    "fixed_point": ['coupling.scheme="fixed_point"', "coupling.tolerance=1e-8"],
+    "monolithic": ['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"'],
+}
+
+
+def ex01b_table(args, skfem_ok: bool) -> None:
+    backends = ["fenicsx"] + (["skfem"] if skfem_ok else [])
+    print("\nexample 1b (poroelastic, periodic traction): ms/step")
+    print(f"{'size':>8} {'scheme':>12} " + " ".join(f"{b:>10}" for b in backends))
+    for n in args.sizes:
+        for scheme, extra in SCHEMES.items():
+            times = [median_of(args.repeats, framework_ms_per_step, n, args.steps, b, "ex01b", extra)
+                     for b in backends]
+            print(f"{n:>5}^2 {scheme:>12} " + " ".join(f"{t:>8.2f}ms" for t in times), flush=True)
 
 
 if __name__ == "__main__":
