@@ -97,10 +97,10 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
 
     def update(self) -> None:
         c, a = self._gather(self.species), self._gather(self.attractant)
-        chi = self.sensitivity(c)
         i = self._row_column[self._row]  # gathered position of the row DOF of each entry
         j = self._entry_column  # gathered position of the column DOF of each entry
-        peclet = 0.5 * (chi[i] + chi[j]) * (a[j] - a[i]) / self.diffusivity
+        chi = self.sensitivity(0.5 * (c[i] + c[j]))  # at the edge midpoint, as quadrature would
+        peclet = chi * (a[j] - a[i]) / self.diffusivity
         scaled = self._weights * self.diffusivity
         values = -scaled * bernoulli(peclet)  # A_ij; zero at the diagonal positions (weight 0)
         row_sums = np.bincount(self._row, weights=scaled * bernoulli(-peclet), minlength=len(self._indptr) - 1)
