@@ -31,14 +31,3 @@ def test_two_ranks_reproduce_the_serial_run(tmp_path):
     for name, stats in serial["final"].items():
         for key in ("integral", "min", "max"):
             assert parallel["final"][name][key] == pytest.approx(stats[key], rel=1e-10, abs=1e-12), (name, key)
-
-
-@pytest.mark.mpi
-def test_skfem_refuses_more_than_one_rank(tmp_path):
-    command = ["mpirun", "-n", "2", sys.executable, "-m", "primordia.cli", *ARGS, "--backend", "skfem",
-               "--out", str(tmp_path / "sk")]
-    done = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=300)
-    assert done.returncode != 0
-    errors = [line for line in done.stderr.splitlines() if line.startswith("primordia: error:")]
-    assert len(errors) == 1 and "serial" in errors[0], done.stderr[-2000:]
-    assert "Traceback" not in done.stderr

@@ -174,7 +174,6 @@ def test_mechanics_polynomial_is_routh_hurwitz_stable():
 
 
 def test_sympy_derivation_matches_after_corrections():
-    pytest.importorskip("sympy")
     from primordia.analysis.derivation import report
 
     lines = report()
