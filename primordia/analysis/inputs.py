@@ -8,10 +8,9 @@ top.  Every mistake is a one-line :class:`~primordia.core.errors.ConfigError`.
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Iterable
-from pathlib import Path
 
+from primordia.core.config import load_config, parse_assignment
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import ParameterSet
 from primordia.physics.seed_parameters import seed_parameters
@@ -19,15 +18,7 @@ from primordia.physics.seed_parameters import seed_parameters
 
 def parameters_table(path) -> dict:
     """The ``[parameters]`` table of a TOML file (empty if it has none)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config file not found: {path}")
-    try:
-        with path.open("rb") as stream:
-            config = tomllib.load(stream)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML ({exc})") from None
-    table = config.get("parameters", {})
+    table = load_config(path).get("parameters", {})
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [parameters] must be a table")
     return dict(table)
@@ -35,15 +26,12 @@ def parameters_table(path) -> dict:
 
 def parse_parameter_assignment(text: str) -> tuple[str, float]:
     """``"parameters.NAME=VALUE"`` -> (NAME, VALUE as float)."""
-    key, sep, raw = str(text).partition("=")
-    section, dot, name = key.strip().partition(".")
-    if not sep or section != "parameters" or not dot or not name or "." in name:
+    keys, value = parse_assignment(str(text))
+    if keys[0] != "parameters" or len(keys) != 2:
         raise ConfigError(f"--set expects parameters.NAME=VALUE, got {text!r}")
-    try:
-        value = float(raw.strip())
-    except ValueError:
-        raise ConfigError(f"--set {key.strip()}: value must be a number, got {raw.strip()!r}") from None
-    return name, value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"--set {'.'.join(keys)}: value must be a number, got {value!r}")
+    return keys[1], float(value)
 
 
 def read_parameters(config=None, assignments: Iterable[str] = ()) -> ParameterSet:

@@ -115,3 +115,12 @@ def _kind_name(kind) -> str:
     if kind == (int, float):
         return "number"
     return getattr(kind, "__name__", str(kind))
+
+
+def merge_options(where: str, defaults, given) -> dict:
+    """``defaults`` updated with ``given``; an unknown option is one error naming it and the known ones."""
+    unknown = set(given) - set(defaults)
+    if unknown:
+        raise ConfigError(f"{where}: unknown option '{sorted(unknown)[0]}' "
+                          f"(known: {', '.join(defaults) or 'none'})")
+    return {**defaults, **given}

@@ -124,12 +124,7 @@ class Discretisation:
     def set_rate(self, name: str, values) -> None:
         """Set the rate of a field (e.g. an initial solid velocity) to the interpolant of ``values``."""
         self.rate(name)
-        group = self._group(name)
-        index = group.index(name)
-        if index is None:
-            self.backend.interpolate(group.rate, values)
-        else:
-            self.backend.interpolate_component(group.rate, index, values)
+        self._interpolate_into(self._group(name).rate, name, values)
 
     def test(self, name: str):
         """The test function of a field's balance law."""
@@ -213,12 +208,15 @@ class Discretisation:
         self.backend.interpolate_component(group.current, index, alone)
 
     def interpolate(self, name: str, values):
-        group = self._group(name)
-        index = group.index(name)
+        self._interpolate_into(self._group(name).current, name, values)
+
+    def _interpolate_into(self, function, name: str, values):
+        """Interpolate ``values`` into ``name``'s part of a group function (current, rate...)."""
+        index = self._group(name).index(name)
         if index is None:
-            self.backend.interpolate(group.current, values)
+            self.backend.interpolate(function, values)
         else:
-            self.backend.interpolate_component(group.current, index, values)
+            self.backend.interpolate_component(function, index, values)
 
     def _require_alone(self, name: str, what: str):
         if not self.is_alone(name):

@@ -26,6 +26,7 @@ from abc import ABC, abstractmethod
 
 import ufl
 
+from primordia.core.config import merge_options
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
 from primordia.physics.base import Subproblem
@@ -38,11 +39,7 @@ class SplittingScheme(ABC):
 
     def __init__(self, physics: list, **options):
         self.physics = physics
-        unknown = set(options) - set(self.options)
-        if unknown:
-            raise ConfigError(f"coupling scheme '{self.name}' has no option '{sorted(unknown)[0]}' "
-                              f"(its options: {', '.join(self.options) or 'none'})")
-        self.opts = {**self.options, **options}
+        self.opts = merge_options(f"coupling scheme '{self.name}'", self.options, options)
         inner = self.opts.get("inner_steps", 1)
         if not isinstance(inner, int) or isinstance(inner, bool) or inner < 1:
             raise ConfigError(f"coupling.inner_steps must be a positive integer, got {inner!r}")

@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import ufl
 from ufl.algorithms import expand_derivatives
 
-from primordia.core.errors import ConfigError
+from primordia.core.config import merge_options
 from primordia.core.parameters import Parameter
 
 
@@ -102,11 +102,7 @@ class Physics(ABC):
     def __init__(self, params: Mapping[str, float], kinetics=None, **options):
         self.params = params
         self.kinetics = kinetics
-        unknown = set(options) - set(self.options)
-        if unknown:
-            raise ConfigError(f"physics {self.name}: unknown option '{sorted(unknown)[0]}' "
-                              f"(known: {', '.join(self.options) or 'none'})")
-        self.opts = {**self.options, **options}
+        self.opts = merge_options(f"physics {self.name}", self.options, options)
         self.validate_options()
 
     def validate_options(self) -> None:

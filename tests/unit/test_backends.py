@@ -8,7 +8,6 @@ are imported directly: one that cannot be imported fails these tests.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path

@@ -57,7 +57,7 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["stability", "--set", "parameters.D_x=1"], "unknown parameter 'D_x'"),
     (["stability", "--set", "parameters.D_m=-1"], "parameter D_m must be > 0"),
-    (["stability", "--set", "D_m=1"], "--set expects parameters.NAME=VALUE"),
+    (["stability", "--set", "D_m=1"], "--set key must name a section and a key"),
     (["stability", "--set", "parameters.D_m=fast"], "value must be a number"),
     (["stability", "missing.toml"], "config file not found: missing.toml"),
     (["stability", "--x", "m0:0:1:3"], "--x, --y and --critical apply to 'primordia stability map'"),

@@ -22,6 +22,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from primordia.core.config import merge_options
 from primordia.core.parameters import Parameter
 
 
@@ -39,12 +40,7 @@ class Kinetics(ABC):
 
     def __init__(self, params: Mapping[str, float], **options):
         self.params = params
-        unknown = set(options) - set(self.options)
-        if unknown:
-            from primordia.core.errors import ConfigError
-
-            raise ConfigError(f"kinetics {self.name}: unknown option '{sorted(unknown)[0]}'")
-        self.opts = {**self.options, **options}
+        self.opts = merge_options(f"kinetics {self.name}", self.options, options)
 
     @abstractmethod
     def split_rates(self, c: Mapping[str, Any], t, ops) -> dict[str, tuple[Any, Any]]:
