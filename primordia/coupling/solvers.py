@@ -14,6 +14,7 @@ assembled once and its preconditioner (e.g. an LU factorisation) reused.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,9 +112,10 @@ class SubproblemSolver:
             A, changed = self._assemble_jacobian()
             if changed or iteration == 0:
                 self.ksp.setOperators(A)
+                self._last_operator = A
             if self._increment is None:
                 self._increment = A.createVecRight()
-            self.ksp.solve(b, self._increment)
+            self._solve_linear(b)
             reason = self.ksp.getConvergedReason()
             if reason < 0:
                 raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {reason}); "
@@ -130,3 +132,21 @@ class SubproblemSolver:
         if not np.isfinite(x.norm()):
             raise SolverError(f"{sub.name}: the solution is not finite")
         return stats
+
+    def _solve_linear(self, b):
+        """KSP solve; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
+        try:
+            self.ksp.solve(b, self._increment)
+            failed = self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
+        except PETSc.Error:
+            failed = True
+        pc = self.ksp.getPC()
+        if not failed or pc.getType() != "lu" or pc.getFactorSolverType() == "mumps":
+            return
+        warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=3)
+        self.ksp.setOptionsPrefix(self.sub.prefix)
+        PETSc.Options()[self.sub.prefix + "pc_factor_mat_solver_type"] = "mumps"
+        self.ksp.reset()
+        self.ksp.setFromOptions()
+        self.ksp.setOperators(self._last_operator)
+        self.ksp.solve(b, self._increment)

@@ -18,7 +18,8 @@ Time discretisation: backward Euler for both, with the inertial term
 rho (u^{n+1} - u^n - dt v^n) / dt^2, v^n = (u^n - u^{n-1}) / dt the solid
 velocity of the last step (``disc.rate("u")``, also the velocity that advects
 the species).  The system is linear: one exact Newton step per time step, with
-a constant matrix (assembled and factorised once, MUMPS LU by default).
+a constant matrix (assembled and factorised once: PETSc's LU in serial, MUMPS in
+parallel, MUMPS also whenever the unpivoted factorisation meets a zero pivot).
 
 Active stress, the FGF sink and the advection of species are couplings declared
 in :mod:`primordia.physics.active_stress` and :mod:`primordia.physics.mechanochemical`.
@@ -139,7 +140,7 @@ class LinearPoroelasticity(Physics):
         return [Subproblem(name=self.name, unknown=unknown, residual=residual, jacobian=jacobian, bcs=bcs,
                            linear=True, constant_jacobian=jacobian_is_constant(jacobian, disc),
                            petsc_options={"ksp_type": "preonly", "pc_type": "lu",
-                                          "pc_factor_mat_solver_type": "mumps"})]
+                                          "pc_factor_mat_ordering_type": "nd"})]
 
     def before_step(self, t, dt):
         for condition in self.conditions:

@@ -1,0 +1,39 @@
+"""The shared petsc4py solver layer."""
+
+import numpy as np
+import pytest
+import ufl
+
+from primordia.backends.fenicsx import FenicsxBackend
+from primordia.core.meshes import rectangle
+from primordia.coupling.solvers import SubproblemSolver
+from primordia.physics.base import Subproblem
+
+
+def _stokes(backend):
+    """Taylor-Hood Stokes: a zero pressure block, which unpivoted LU cannot factorise."""
+    mesh = backend.create_mesh(rectangle((0, 0), (1, 1), (4, 4)))
+    cell = mesh.ufl_cell()
+    space = backend.function_space(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, 2),
+                                                            ufl.FiniteElement("Lagrange", cell, 1)]))
+    state = backend.function(space, "w")
+    u, p = ufl.split(state)
+    v, q = ufl.TestFunctions(space)
+    dx = backend.measure("dx", mesh)
+    residual = (ufl.inner(ufl.grad(u), ufl.grad(v)) - p * ufl.div(v) - q * ufl.div(u)
+                - ufl.inner(ufl.as_vector([1.0, 0.0]), v)) * dx
+    bc = backend.dirichlet_bc(space, "left", [0.0, 0.0], component=0)
+    return state, Subproblem("stokes_test", state, residual, ufl.derivative(residual, state), bcs=[bc],
+                             petsc_options={"ksp_type": "preonly", "pc_type": "lu"})
+
+
+def test_a_zero_pivot_in_unpivoted_lu_falls_back_to_mumps():
+    backend = FenicsxBackend()
+    state, problem = _stokes(backend)
+    solver = SubproblemSolver(backend, problem)
+    assert solver.ksp.getPC().getFactorSolverType() == "petsc"
+    with pytest.warns(UserWarning, match="switching to MUMPS"):
+        solver.solve()
+    assert solver.ksp.getPC().getFactorSolverType() == "mumps"
+    assert solver.ksp.getConvergedReason() > 0
+    assert np.isfinite(backend.local_array(state)).all() and np.abs(backend.local_array(state)).max() > 0
