@@ -285,11 +285,6 @@ class CoupledProblem(ManufacturedProblem):
 CHEMOTAXIS = ChemotaxisProblem()
 
 
-def manufactured_sources(params, kinetics, disc) -> dict:
-    """The sources of the chemotaxis problem (see :class:`ChemotaxisProblem`)."""
-    return CHEMOTAXIS.sources(params, kinetics, disc)
-
-
 def quadrature_dx(disc):
     return disc.backend.measure("dx", disc.mesh, metadata={"quadrature_degree": QUADRATURE_DEGREE})
 

@@ -5,14 +5,15 @@ The model of seed example 1b: ``chemotaxis`` + ``poroelasticity`` (P1-P1) +
 six fields are derived in UFL from one exact solution, coupling terms included
 (solid advection u_t . grad c of m, f, b; the FGF sink xi_f div u; the active
 stress (lambda + 2 mu/3) tau m / (1 + zeta m^2) I; see ``mms.CoupledProblem``).
-The L2 error of every field at t = T on 8 x 8, 16 x 16 and 32 x 32 squares of
+The L2 error of every field at t = T on 16 x 16, 32 x 32 and 64 x 64 squares of
 the unit square must fall like h^2 (observed rates within 0.2 of 2).
 
 The exact solution makes every time discretisation *and the coupling lag* exact,
 so that only the spatial error is measured:
 
 * m, e, f, b: the steady zero-flux cosine profiles of ``mms.species_profiles``
-  (backward Euler and the lagged IMEX terms chi(m^n), grad f^n are exact);
+  (backward Euler and the lagged IMEX terms chi(m^n), grad f^n and the explicit
+  advection u_t . grad c^n are exact);
 * u = U_0(x) + t U_1(x) with div U_1 = 0 (U_1 the curl of a stream function):
   u_tt = 0, and the scheme's second difference of u is exact; the solid
   velocity is the constant U_1, so the *lagged* velocity (u^n - u^{n-1}) / dt
