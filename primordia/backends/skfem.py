@@ -802,7 +802,12 @@ class SkfemBackend(Backend):
 
     @staticmethod
     def _values_at(space, dofs: np.ndarray, position: np.ndarray, size: int, value) -> np.ndarray:
-        """Values of ``value`` (number, sequence or fn(x)) at ``dofs``, of components ``position`` < ``size``."""
+        """Values of ``value`` (number, sequence, fn(x) or a scalar field) at ``dofs``, of components ``position``."""
+        if isinstance(value, SkfemFunction):  # a field on the same mesh: evaluate it at the DOF points
+            if value.function_space.value_size != 1 or size != 1:
+                raise PrimordiaError("interpolating one field into another needs scalar fields on the skfem backend")
+            probes = value.function_space.basis.probes(space.dof_coordinates[:, dofs])
+            return np.asarray(probes @ value.array, dtype=float)
         if callable(value):
             result = np.asarray(value(space.dof_coordinates[:, dofs]), dtype=float)
             if result.ndim == 1 and size == 1:
