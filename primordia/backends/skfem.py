@@ -220,6 +220,21 @@ def _skfem_element(element, cellname: str):
     raise unsupported(type(element).__name__)
 
 
+def _evaluate_at_dofs(field, space) -> np.ndarray:
+    """A scalar ``field`` evaluated at every DOF node of ``space`` (same mesh), cell by cell.
+
+    Each target node is evaluated in a cell that holds it, from the source element's
+    basis at the node's reference coordinates: cost linear in the mesh size.
+    """
+    source = field.function_space.blocks[0]
+    values = np.empty(space.num_dofs)
+    for block in space.blocks:
+        nodes = block.element.doflocs.T  # (tdim, n_local) reference coordinates of the target nodes
+        basis = np.array([source.element.lbasis(nodes, j)[0] for j in range(source.cell_dofs.shape[1])])
+        values[block.cell_dofs] = field.array[source.cell_dofs] @ basis
+    return values
+
+
 class SkfemFunctionSpace(ufl.FunctionSpace):
     """A ``ufl.FunctionSpace`` holding the scikit-fem element, DOF numbering and blocks."""
 
@@ -806,8 +821,7 @@ class SkfemBackend(Backend):
         if isinstance(value, SkfemFunction):  # a field on the same mesh: evaluate it at the DOF points
             if value.function_space.value_size != 1 or size != 1:
                 raise PrimordiaError("interpolating one field into another needs scalar fields on the skfem backend")
-            probes = value.function_space.basis.probes(space.dof_coordinates[:, dofs])
-            return np.asarray(probes @ value.array, dtype=float)
+            return _evaluate_at_dofs(value, space)[dofs]
         if callable(value):
             result = np.asarray(value(space.dof_coordinates[:, dofs]), dtype=float)
             if result.ndim == 1 and size == 1:
