@@ -10,6 +10,9 @@ from pathlib import Path
 
 import pytest
 
+# helpers shared by the test tiers (imported as plain modules by the test files)
+sys.path.insert(0, str(Path(__file__).parent / "support"))
+
 #: The console script installed next to this interpreter (the CLI a user runs).
 PRIMORDIA = Path(sys.executable).parent / "primordia"
 

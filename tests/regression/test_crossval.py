@@ -38,6 +38,8 @@ from primordia.core.meshes import rectangle
 from primordia.core.plugins import registry
 from primordia.coupling.orchestrator import Simulation
 from primordia.model import Model
+from dof_keys import dof_keys
+from generic_meshes import perturbed
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 BACKENDS = ("fenicsx", "skfem")
@@ -45,16 +47,6 @@ BACKENDS = ("fenicsx", "skfem")
 ASSEMBLY_TOLERANCE = 1e-10
 #: Largest relative L2 difference of the example fields.
 EXAMPLE_TOLERANCE = 1e-6
-
-
-def perturbed(data: MeshData, amplitude: float, seed: int = 3) -> MeshData:
-    """The mesh with its interior vertices moved at random: generic, non-right triangles."""
-    rng = np.random.default_rng(seed)
-    points = data.points.copy()
-    low, high = points.min(axis=0), points.max(axis=0)
-    interior = np.all((points > low + 1e-9) & (points < high - 1e-9), axis=1)
-    points[interior] += amplitude * rng.uniform(-1.0, 1.0, size=(interior.sum(), data.gdim))
-    return MeshData(points, data.cells, data.boundaries)
 
 
 # -- the configurations ------------------------------------------------------------------------
@@ -98,7 +90,7 @@ class Case:
     def model(self) -> Model:
         mesh = rectangle((0.0, 0.0), (2.0, 2.0), (self.cells, self.cells))
         if self.mesh_perturbation:
-            mesh = perturbed(mesh, self.mesh_perturbation * 2.0 / self.cells)
+            mesh = perturbed(mesh, self.mesh_perturbation * 2.0 / self.cells, seed=3)
         return Model(physics=self.physics, kinetics=self.kinetics, parameters=self.parameters, mesh=mesh,
                      dt=self.dt, t_final=(self.steps + 1) * self.dt, physics_options=self.options,
                      output={"pictures": False, "series_every": 10**6})
@@ -144,30 +136,6 @@ def test_every_built_in_physics_is_cross_validated():
 
 
 # -- DOF matching ---------------------------------------------------------------------------------
-def dof_keys(backend_name: str, space, gdim: int) -> np.ndarray:
-    """(value component, node coordinates) of every DOF of a space, in the backend's numbering."""
-    if backend_name == "skfem":
-        return np.column_stack([space.dof_component, space.dof_coordinates.T])
-    size = space.dofmap.index_map.size_local * space.dofmap.index_map_bs
-    keys = np.empty((size, 1 + gdim))
-    leaves = []
-
-    def visit(sub, element):
-        if isinstance(element, ufl.MixedElement):  # vector and mixed elements: their scalar leaves
-            for i, sub_element in enumerate(element.sub_elements()):
-                visit(sub.sub(i), sub_element)
-        else:
-            leaves.append(sub)
-
-    visit(space, space.ufl_element())
-    for component, leaf in enumerate(leaves):
-        collapsed, parent = (space, np.arange(size)) if leaf is space else leaf.collapse()
-        parent = np.asarray(parent)
-        keys[parent, 0] = component
-        keys[parent, 1:] = collapsed.tabulate_dof_coordinates()[:, :gdim]
-    return keys
-
-
 class DofMap:
     """Orders of the DOFs of each space of both backends, by (component, coordinates)."""
 

@@ -25,20 +25,12 @@ from primordia.backends.skfem import SkfemBackend
 from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, preprocess_form, reference_quadrature
 from primordia.core.mesh import MeshData
 from primordia.core.meshes import box, rectangle
+from dof_keys import dolfinx_dof_keys, skfem_dof_keys
+from generic_meshes import perturbed
 
 #: Largest difference allowed, relative to the largest entry.
 TOLERANCE = 1e-10
 CELLS = ("triangle", "tetrahedron")
-
-
-def perturbed(data: MeshData, amplitude: float, seed: int = 1) -> MeshData:
-    """The mesh with its interior vertices moved at random: generic, non-right cells."""
-    rng = np.random.default_rng(seed)
-    points = data.points.copy()
-    low, high = points.min(axis=0), points.max(axis=0)
-    interior = np.all((points > low + 1e-9) & (points < high - 1e-9), axis=1)
-    points[interior] += amplitude * rng.uniform(-1.0, 1.0, size=(interior.sum(), data.gdim))
-    return MeshData(points, data.cells, data.boundaries)
 
 
 def mesh_data(cell: str) -> MeshData:
@@ -123,32 +115,6 @@ def pair(request):
 
 
 # -- DOF matching ---------------------------------------------------------------------------
-
-
-def dolfinx_dof_keys(space, gdim: int) -> np.ndarray:
-    """(component, node coordinates) of each DOF of a dolfinx space."""
-    size = space.dofmap.index_map.size_local * space.dofmap.index_map_bs
-    keys = np.empty((size, 1 + gdim))
-    leaves = []
-
-    def visit(sub, element):
-        if isinstance(element, ufl.MixedElement):  # vector, tensor and mixed elements
-            for i, sub_element in enumerate(element.sub_elements()):
-                visit(sub.sub(i), sub_element)
-        else:
-            leaves.append(sub)
-
-    visit(space, space.ufl_element())
-    for component, leaf in enumerate(leaves):
-        collapsed, parent = (space, np.arange(size)) if leaf is space else leaf.collapse()
-        parent = np.asarray(parent)
-        keys[parent, 0] = component
-        keys[parent, 1:] = collapsed.tabulate_dof_coordinates()[:, :gdim]
-    return keys
-
-
-def skfem_dof_keys(space) -> np.ndarray:
-    return np.column_stack([space.dof_component, space.dof_coordinates.T])
 
 
 def sorting(keys: np.ndarray) -> np.ndarray:
