@@ -51,6 +51,7 @@ class FenicsxBackend(Backend):
         self._compiled: dict[int, tuple[ufl.Form, object]] = {}
         self._vertex_maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._p1_spaces: dict[tuple, object] = {}
+        self._components: dict[tuple, tuple] = {}
         _silence_jit_logging()
 
     # -- mesh, spaces, fields -----------------------------------------------------------
@@ -205,11 +206,23 @@ class FenicsxBackend(Backend):
         function.x.scatter_forward()
 
     def interpolate_component(self, function, index: int, values) -> None:
-        sub_space, dofs = function.function_space.sub(index).collapse()
-        part = fem.Function(sub_space)
+        part, dofs = self._component(function, index)
         self.interpolate(part, values)
-        function.x.array[np.asarray(dofs)] = part.x.array
+        function.x.array[dofs] = part.x.array
         function.x.scatter_forward()
+
+    def _component(self, function, index: int):
+        """A scratch function in the collapsed sub-space ``index`` and its DOFs in the parent.
+
+        Collapsing builds a new space, so it is done once per (space, index): the
+        outputs ask for the components of a mixed field at every recorded time.
+        """
+        key = (id(function.function_space), index)
+        if key not in self._components:
+            sub_space, dofs = function.function_space.sub(index).collapse()
+            self._components[key] = (function.function_space, fem.Function(sub_space), np.asarray(dofs))
+        _, part, dofs = self._components[key]
+        return part, dofs
 
     def _vertex_map(self, space):
         """(local P1 DOF -> original MeshData vertex index) for a P1 space."""
@@ -247,7 +260,9 @@ class FenicsxBackend(Backend):
 
     def vertex_values(self, function, component=None):
         if component is not None:
-            function = function.sub(component).collapse()
+            part, dofs = self._component(function, component)
+            part.x.array[:] = function.x.array[dofs]
+            function = part
         space = self._p1_space(function.function_space)
         if space is not function.function_space:
             p1 = fem.Function(space)
