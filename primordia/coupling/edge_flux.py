@@ -7,8 +7,8 @@ an attractant a), the operator A with
     Pe_ij = chi_ij (a_j - a_i) / D,     B(x) = x / (exp(x) - 1),
 
 is built from the P1 stiffness matrix S of the mesh (w_ij = -S_ij, the
-"cotangent" edge weights) and vertex values of chi and a (chi_ij the mean of
-chi_i and chi_j).  A has non-positive off-diagonals and zero column sums, so
+"cotangent" edge weights) and vertex values of the species c and of a, with
+chi_ij = chi((c_i + c_j)/2), the sensitivity at the edge midpoint.  A has non-positive off-diagonals and zero column sums, so
 M_L/dt + A is an M-matrix on meshes with w_ij >= 0: the transported density
 stays non-negative and its integral is conserved exactly.  For |Pe| << 1,
 B(x) ~ 1 - x/2 and A reduces to the central (second-order) discretisation
@@ -70,7 +70,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
                           "the exponentially fitted flux no longer guarantees a non-negative density",
                           stacklevel=3)
-        self._weights = weights
+        self._scaled_weights = weights * self.diffusivity  # w_ij D
         self._row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))  # local row of each entry
         self._diag_positions = np.flatnonzero(diagonal)
         if len(self._diag_positions) != len(indptr) - 1:
@@ -86,8 +86,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._gathered = PETSc.Vec().createSeq(len(needed), comm=PETSc.COMM_SELF)
         index_set = PETSc.IS().createGeneral(needed.astype(PETSc.IntType), comm=PETSc.COMM_SELF)
         self._scatter = PETSc.Scatter().create(template, index_set, self._gathered, None)
-        # the gathered position of each local row's own DOF (its diagonal entry's column)
-        self._row_column = self._entry_column[self._diag_positions]
+        # the gathered position of the row DOF of each entry (its row's diagonal entry's column)
+        self._entry_row = self._entry_column[self._diag_positions][self._row]
 
     def _gather(self, name: str) -> np.ndarray:
         vector = self.disc.backend.petsc_vector(self.disc.previous(name))
@@ -97,13 +97,12 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
 
     def update(self) -> None:
         c, a = self._gather(self.species), self._gather(self.attractant)
-        i = self._row_column[self._row]  # gathered position of the row DOF of each entry
-        j = self._entry_column  # gathered position of the column DOF of each entry
+        i, j = self._entry_row, self._entry_column  # gathered positions of each entry's row and column DOFs
         chi = self.sensitivity(0.5 * (c[i] + c[j]))  # at the edge midpoint, as quadrature would
         peclet = chi * (a[j] - a[i]) / self.diffusivity
-        scaled = self._weights * self.diffusivity
-        values = -scaled * bernoulli(peclet)  # A_ij; zero at the diagonal positions (weight 0)
-        row_sums = np.bincount(self._row, weights=scaled * bernoulli(-peclet), minlength=len(self._indptr) - 1)
+        values = -self._scaled_weights * bernoulli(peclet)  # A_ij; zero at the diagonal positions (weight 0)
+        row_sums = np.bincount(self._row, weights=self._scaled_weights * bernoulli(-peclet),
+                               minlength=len(self._indptr) - 1)
         values[self._diag_positions] = row_sums
         self._A.setValuesCSR(self._indptr, self._columns, values)
         self._A.assemble()

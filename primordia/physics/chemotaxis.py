@@ -32,8 +32,10 @@ A_chi is the cell transport operator.  With ``flux_scheme = "exponential_fitting
 (default) it is the edge-averaged exponentially fitted (Scharfetter-Gummel,
 "EAFE", Xu & Zikatanov 1999) discretisation of the flux D_m grad m - chi m grad f,
 chi = alpha exp(-gamma m^n): for every edge ij with stiffness weight
-w_ij = -S_ij and Peclet number Pe_ij = chi_ij (f_j - f_i)/D_m (chi_ij the edge
-mean of chi at the vertices), the flux from i to j is
+w_ij = -S_ij and Peclet number Pe_ij = chi_ij (f_j - f_i)/D_m, with
+chi_ij = chi((m_i + m_j)/2) the sensitivity at the edge midpoint (the mean of
+the vertex values of chi over-sharpens steep stripes and keeps them from breaking
+into spots), the flux from i to j is
 w_ij D_m [B(-Pe_ij) m_i - B(Pe_ij) m_j], B(x) = x/(e^x - 1).
 The matrix M_L/dt + A_chi then has non-positive off-diagonals and zero column
 sums of A_chi, i.e. it is an M-matrix whenever w_ij >= 0 (weakly acute meshes,
