@@ -60,21 +60,6 @@ class DofLayout:
     def num_owned(self) -> int:
         return self.owned_range[1] - self.owned_range[0]
 
-    def global_to_local(self, indices: np.ndarray) -> np.ndarray:
-        """Local (owned + ghost) positions of global DOF indices known to this rank."""
-        indices = np.asarray(indices)
-        start, stop = self.owned_range
-        local = indices - start
-        off = (indices < start) | (indices >= stop)
-        if off.any():
-            order = np.argsort(self.ghosts)
-            sorted_ghosts = self.ghosts[order]
-            pos = np.minimum(np.searchsorted(sorted_ghosts, indices[off]), max(len(order) - 1, 0))
-            if len(order) == 0 or np.any(sorted_ghosts[pos] != indices[off]):
-                raise ValueError("global DOF indices that are neither owned nor ghosts on this rank")
-            local[off] = self.num_owned + order[pos]
-        return local
-
 
 @dataclass(frozen=True)
 class BoundaryCondition:

@@ -149,10 +149,6 @@ class Discretisation:
         """Whether a field is a whole backend function (nodal arrays can be read directly)."""
         return len(self._group(name).fields) == 1
 
-    def spec(self, name: str):
-        self._group(name)
-        return self._specs[name]
-
     def field_names(self) -> list[str]:
         return list(self._group_of)
 
@@ -161,6 +157,9 @@ class Discretisation:
 
     def group_function(self, group: str):
         return self._groups[group].current
+
+    def group_fields(self, group: str) -> list[str]:
+        return list(self._groups[group].fields)
 
     def group_of_function(self, function) -> str:
         """The name of the group a backend function (``unknown``) holds."""
@@ -205,7 +204,7 @@ class Discretisation:
             raise ConfigError(f"field '{name}' is not P1 and cannot be set from vertex values")
         alone = self.backend.function(self.backend.function_space(self.mesh, self.element(spec)), f"{name}_vertices")
         self.backend.set_vertex_values(alone, values)
-        self.backend.interpolate_component(group.current, index, alone)
+        self._interpolate_into(group.current, name, alone)
 
     def interpolate(self, name: str, values):
         self._interpolate_into(self._group(name).current, name, values)
@@ -217,10 +216,6 @@ class Discretisation:
             self.backend.interpolate(function, values)
         else:
             self.backend.interpolate_component(function, index, values)
-
-    def _require_alone(self, name: str, what: str):
-        if not self.is_alone(name):
-            raise ConfigError(f"field '{name}' is part of a mixed group and cannot be {what}")
 
     def store_previous(self, groups: list[str] | None = None):
         """previous <- current, for every group (start of a step) or the given ones."""

@@ -10,6 +10,7 @@ the forms, through ``primordia_select_backend``.
 from __future__ import annotations
 
 import time as clock
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ import ufl
 from primordia.core.errors import PrimordiaError, SolverError
 from primordia.core.plugins import get_plugin_manager, registry
 from primordia.coupling.discretisation import Discretisation
-from primordia.coupling.solvers import SubproblemSolver
+from primordia.coupling.solvers import SubproblemSolver, accumulate
 
 
 class Simulation:
@@ -32,7 +33,8 @@ class Simulation:
         self.step_index = 0
         self.time = model.t_start
         self.dt = model.dt
-        self.iterations: dict[str, list[int]] = {}
+        self.iterations: dict[str, list[int]] = {}  # linear iterations per step, by subproblem
+        self.coupling_iterations: dict[str, list[int]] = {}  # outer iterations per step, by scheme
         self._vertex_cache: tuple[int, dict] | None = None
 
     # -- setup ----------------------------------------------------------------------------
@@ -141,7 +143,7 @@ class Simulation:
         stats = self.scheme.advance(self, self.time, self.dt)
         self.disc.set_time(t_next, self.dt)
         for name, solve in stats.items():
-            self.record_iterations(name, solve.linear_iterations)
+            self.iterations.setdefault(name, []).append(solve.linear_iterations)
         self.step_index += 1
         self.time = t_next
         self._check_finite()
@@ -157,35 +159,34 @@ class Simulation:
         groups = list(dict.fromkeys(self.disc.group_of_function(s.sub.unknown) for s in solvers))
         stats: dict = {}
         for k in range(inner_steps):
-            t = t0 + (k + 1) * delta
-            self.disc.set_time(t, delta)
-            for physics in self.model.physics_objects:
-                physics.before_step(t, delta)
-            self.disc.store_previous(groups)
-            for solver in solvers:
-                solve = solver.solve()
-                total = stats.setdefault(solver.sub.name, solve)
-                if total is not solve:
-                    total.linear_iterations += solve.linear_iterations
-                    total.newton_iterations += solve.newton_iterations
-            self.disc.update_rates(delta, groups)
+            with self.substep(groups, t0 + (k + 1) * delta, delta):
+                for solver in solvers:
+                    accumulate(stats, solver.sub.name, solver.solve())
         return stats
 
-    def group_function(self, group: str):
-        """The backend function holding a field group."""
-        return self.disc.group_function(group)
+    @contextmanager
+    def substep(self, groups: list[str], t: float, dt: float):
+        """Bookkeeping around the solves that bring ``groups`` to time ``t`` over ``dt``.
 
-    def record_iterations(self, name: str, count: float) -> None:
-        self.iterations.setdefault(name, []).append(count)
+        Before: time-dependent data are updated and the start values of these
+        fields stored; after: the rates of these fields (e.g. the solid velocity).
+        """
+        self.disc.set_time(t, dt)
+        for physics in self.model.physics_objects:
+            physics.before_step(t, dt)
+        self.disc.store_previous(groups)
+        yield
+        self.disc.update_rates(dt, groups)
+
+    def record_coupling_iterations(self, scheme: str, count: int) -> None:
+        """Outer iterations a scheme needed in this step (e.g. the fixed-point iteration)."""
+        self.coupling_iterations.setdefault(scheme, []).append(count)
 
     def _check_finite(self):
-        for group, name in self._group_representatives().items():
-            if not np.all(np.isfinite(self.backend.local_array(self.disc.unknown(name)))):
-                raise SolverError(f"a field of {group} ({', '.join(self._fields_of(group))}) "
+        for group in self.disc.groups():
+            if not np.all(np.isfinite(self.backend.local_array(self.disc.group_function(group)))):
+                raise SolverError(f"a field of {group} ({', '.join(self.disc.group_fields(group))}) "
                                   f"is not finite at t = {self.time:g}")
-
-    def _fields_of(self, group: str) -> list[str]:
-        return [n for n in self.disc.field_names() if self.disc.unknown(n).name == group]
 
     def _notify(self, moment: str, *args):
         for output in self.outputs:
@@ -217,21 +218,15 @@ class Simulation:
                 for name in self.disc.field_names()}
 
     def iteration_counts(self) -> dict[str, float]:
-        """Linear iterations of the last step per subproblem."""
-        return {(name if name == "fixed_point_iterations" else f"{name.replace('.', '_')}_linear_iterations"):
-                float(its[-1]) for name, its in self.iterations.items() if its}
-
-    def _group_representatives(self) -> dict[str, str]:
-        """One field name per group (to reach the group's function space)."""
-        first = {}
-        for name in self.disc.field_names():
-            first.setdefault(self.disc.unknown(name).name, name)
-        return first
+        """Linear iterations per subproblem and outer coupling iterations, of the last step."""
+        counts = {f"{name.replace('.', '_')}_linear_iterations": float(its[-1])
+                  for name, its in self.iterations.items() if its}
+        counts.update({f"{scheme}_iterations": float(its[-1]) for scheme, its in self.coupling_iterations.items()})
+        return counts
 
     def summary(self, status: str) -> dict:
         wall = clock.perf_counter() - self.wall_start
-        field_space = {group: self.disc.unknown(group_field).ufl_function_space()
-                       for group, group_field in self._group_representatives().items()}
+        field_space = {group: self.disc.group_function(group).ufl_function_space() for group in self.disc.groups()}
         return {
             "status": status,
             "backend": self.backend.name,
@@ -245,14 +240,11 @@ class Simulation:
             "wall_time_s": wall,
             "ms_per_step": 1e3 * wall / self.step_index if self.step_index else None,
             "final": self.field_statistics(),
-            "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items()
-                                       if its and name != "fixed_point_iterations"},
-            "mean_fixed_point_iterations": (float(np.mean(self.iterations["fixed_point_iterations"]))
-                                            if self.iterations.get("fixed_point_iterations") else None),
+            "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items() if its},
+            "mean_fixed_point_iterations": (float(np.mean(self.coupling_iterations["fixed_point"]))
+                                            if self.coupling_iterations.get("fixed_point") else None),
             "splitting_scheme": self.scheme.name,
         }
-
-
 
 
 class _NoBar:

@@ -29,6 +29,17 @@ class SolveStats:
     newton_iterations: int = 0
     linear_iterations: int = 0
 
+    def __iadd__(self, other: "SolveStats") -> "SolveStats":
+        self.newton_iterations += other.newton_iterations
+        self.linear_iterations += other.linear_iterations
+        return self
+
+
+def accumulate(totals: dict[str, SolveStats], name: str, stats: SolveStats) -> None:
+    """Add one solve's statistics to the running totals of subproblem ``name``."""
+    totals.setdefault(name, SolveStats())
+    totals[name] += stats
+
 
 def set_default_options(prefix: str, defaults: dict, overrides: dict | None = None) -> None:
     """Write defaults (unless already set, e.g. on the command line) and overrides."""
@@ -112,7 +123,6 @@ class SubproblemSolver:
             A, changed = self._assemble_jacobian()
             if changed or iteration == 0:
                 self.ksp.setOperators(A)
-                self._last_operator = A
             if self._increment is None:
                 self._increment = A.createVecRight()
             self._solve_linear(b)
@@ -138,15 +148,22 @@ class SubproblemSolver:
         try:
             self.ksp.solve(b, self._increment)
             failed = self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
-        except PETSc.Error:
-            failed = True
+        except PETSc.Error as error:
+            failed, raised = True, error
+        else:
+            raised = None
         pc = self.ksp.getPC()
-        if not failed or pc.getType() != "lu" or pc.getFactorSolverType() == "mumps":
+        if not failed:
             return
+        if pc.getType() != "lu" or pc.getFactorSolverType() == "mumps":
+            if raised is None:
+                return  # a failed preconditioner set-up: reported by the caller from the KSP reason
+            raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}); "
+                              f"try other options under -{self.sub.prefix}") from None
         warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=3)
-        self.ksp.setOptionsPrefix(self.sub.prefix)
+        operators = self.ksp.getOperators()
         PETSc.Options()[self.sub.prefix + "pc_factor_mat_solver_type"] = "mumps"
         self.ksp.reset()
         self.ksp.setFromOptions()
-        self.ksp.setOperators(self._last_operator)
+        self.ksp.setOperators(*operators)
         self.ksp.solve(b, self._increment)

@@ -29,6 +29,7 @@ import ufl
 from primordia.core.config import merge_options
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
+from primordia.coupling.solvers import accumulate
 from primordia.physics.base import Subproblem
 
 
@@ -91,10 +92,8 @@ class Strang(SplittingScheme):
         inner = self.opts["inner_steps"]
         stats = sim.advance(self.first, t0, 0.5 * dt, inner)
         stats.update(sim.advance(self.rest, t0, dt, inner))
-        second = sim.advance(self.first, t0 + 0.5 * dt, 0.5 * dt, inner)
-        for name, solve in second.items():
-            stats[name].linear_iterations += solve.linear_iterations
-            stats[name].newton_iterations += solve.newton_iterations
+        for name, solve in sim.advance(self.first, t0 + 0.5 * dt, 0.5 * dt, inner).items():
+            accumulate(stats, name, solve)
         return stats
 
 
@@ -106,33 +105,28 @@ class FixedPoint(SplittingScheme):
 
     def __init__(self, physics, **options):
         super().__init__(physics, **options)
-        if not isinstance(self.opts["tolerance"], (int, float)) or self.opts["tolerance"] <= 0:
-            raise ConfigError(f"coupling.tolerance must be > 0, got {self.opts['tolerance']!r}")
+        tolerance, iterations = self.opts["tolerance"], self.opts["max_iterations"]
+        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or tolerance <= 0:
+            raise ConfigError(f"coupling.tolerance must be > 0, got {tolerance!r}")
+        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+            raise ConfigError(f"coupling.max_iterations must be a positive integer, got {iterations!r}")
 
     def advance(self, sim, t0, dt):
-        disc = sim.disc
-        disc.set_time(t0 + dt, dt)
-        for module in self.physics:
-            module.before_step(t0 + dt, dt)
-        groups = disc.groups()
-        disc.store_previous(groups)
+        groups = sim.disc.groups()
+        vectors = {g: sim.backend.petsc_vector(sim.disc.group_function(g)) for g in groups}
         stats = {}
-        for iteration in range(1, self.opts["max_iterations"] + 1):
-            before = {g: sim.backend.petsc_vector(sim.group_function(g)).copy() for g in groups}
-            for solver in sim.solvers:
-                solve = solver.solve()
-                total = stats.setdefault(solver.sub.name, solve)
-                if total is not solve:
-                    total.linear_iterations += solve.linear_iterations
-                    total.newton_iterations += solve.newton_iterations
-            change = max(_relative_change(before[g], sim.backend.petsc_vector(sim.group_function(g))) for g in groups)
-            if change < self.opts["tolerance"]:
-                break
-        else:
-            raise SolverError(f"fixed-point coupling did not converge in {self.opts['max_iterations']} iterations "
-                              f"(relative change {change:.2e} > tolerance {self.opts['tolerance']:g})")
-        disc.update_rates(dt, groups)
-        sim.record_iterations("fixed_point_iterations", iteration)
+        with sim.substep(groups, t0 + dt, dt):
+            for iteration in range(1, self.opts["max_iterations"] + 1):
+                before = {g: vector.copy() for g, vector in vectors.items()}
+                for solver in sim.solvers:
+                    accumulate(stats, solver.sub.name, solver.solve())
+                change = max(_relative_change(before[g], vectors[g]) for g in groups)
+                if change < self.opts["tolerance"]:
+                    break
+            else:
+                raise SolverError(f"fixed-point coupling did not converge in {self.opts['max_iterations']} "
+                                  f"iterations (relative change {change:.2e} > tolerance {self.opts['tolerance']:g})")
+        sim.record_coupling_iterations(self.name, iteration)
         return stats
 
 

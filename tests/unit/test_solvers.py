@@ -37,3 +37,18 @@ def test_a_zero_pivot_in_unpivoted_lu_falls_back_to_mumps():
     assert solver.ksp.getPC().getFactorSolverType() == "mumps"
     assert solver.ksp.getConvergedReason() > 0
     assert np.isfinite(backend.local_array(state)).all() and np.abs(backend.local_array(state)).max() > 0
+
+
+def test_a_petsc_error_in_an_iterative_solve_is_one_solver_error_not_swallowed():
+    from primordia.core.errors import SolverError
+
+    backend = FenicsxBackend()
+    mesh = backend.create_mesh(rectangle((0, 0), (1, 1), (4, 4)))
+    space = backend.function_space(mesh, ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1))
+    u, v = backend.function(space, "u"), ufl.TestFunction(space)
+    residual = (ufl.inner(ufl.grad(u), ufl.grad(v)) + u * v - v) * backend.measure("dx", mesh)
+    problem = Subproblem("raising_test", u, residual, ufl.derivative(residual, u),
+                         petsc_options={"ksp_type": "gmres", "pc_type": "jacobi", "ksp_max_it": 1,
+                                        "ksp_error_if_not_converged": True})
+    with pytest.raises(SolverError, match="^raising_test: the linear solve failed"):
+        SubproblemSolver(backend, problem).solve()
