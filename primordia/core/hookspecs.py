@@ -48,9 +48,11 @@ def primordia_kinetics() -> list[type]:
 
 @hookspec
 def primordia_growth_laws() -> list[type]:
-    """Growth laws (subclasses of ``primordia.physics.growth_laws.GrowthLaw``).
+    """Growth laws of the finite-strain growth model (seed section 4, eqs. (4.13)-(4.15)).
 
-    Returns a list of classes; each has a unique ``name``.
+    Returns a list of classes; each has a unique ``name``.  Reserved: the
+    finite-strain poroelasticity that will read them is not built yet, so no
+    growth law is registered and nothing consumes this hook today.
     """
 
 

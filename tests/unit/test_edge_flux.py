@@ -93,6 +93,13 @@ def set_previous(disc, name: str, values) -> None:
     array[:] = values(array.size) if callable(values) else values
 
 
+def random_start_of_step(disc, seed: int) -> None:
+    """Random positive m^n and f^n: FGF differences give Peclet numbers up to ~100 with D = 0.05."""
+    rng = np.random.default_rng(seed)
+    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
+    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))
+
+
 def dense(matrix) -> np.ndarray:
     indptr, columns, values = matrix.getValuesCSR()
     return scipy.sparse.csr_matrix((values, columns, indptr), shape=matrix.getSize()).toarray()
@@ -120,9 +127,7 @@ MESHES = {
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_off_diagonals_are_non_positive_and_columns_sum_to_zero(backend, mesh_name):
     disc = discretisation(backend, MESHES[mesh_name])
-    rng = np.random.default_rng(3)
-    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
-    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))  # Peclet numbers up to ~100 with D = 0.05
+    random_start_of_step(disc, seed=3)
     A = fitted_operator(disc, diffusivity=0.05, sensitivity=lambda m: 4.0 * np.exp(-m))
     off = A - np.diag(np.diag(A))
     scale = np.abs(A).max()
@@ -136,9 +141,7 @@ def test_off_diagonals_are_non_positive_and_columns_sum_to_zero(backend, mesh_na
 def test_with_the_lumped_mass_it_is_an_m_matrix(backend):
     """(M_L/dt + A)^{-1} >= 0 entrywise: a non-negative m^n gives a non-negative m^{n+1} for any dt."""
     disc = discretisation(backend, MESHES["right"])
-    rng = np.random.default_rng(5)
-    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
-    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))
+    random_start_of_step(disc, seed=5)
     A = fitted_operator(disc, diffusivity=0.05, sensitivity=lambda m: 4.0 * np.exp(-m))
     space = disc.field("m").ufl_function_space()
     lumped = disc.backend.assemble_vector(ufl.TestFunction(space) * disc.dx_lumped).getArray().copy()
@@ -151,9 +154,7 @@ def test_with_the_lumped_mass_it_is_an_m_matrix(backend):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_reduces_to_the_galerkin_stiffness_when_chi_is_zero(backend):
     disc = discretisation(backend, MESHES["right"])
-    rng = np.random.default_rng(9)
-    set_previous(disc, "m", lambda n: rng.uniform(0.05, 4.0, n))
-    set_previous(disc, "f", lambda n: rng.uniform(0.0, 3.0, n))
+    random_start_of_step(disc, seed=9)
     diffusivity = 0.3
     A = fitted_operator(disc, diffusivity, sensitivity=lambda m: np.zeros_like(m))
     S = stiffness(disc)
