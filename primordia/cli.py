@@ -4,6 +4,7 @@
     primordia plugins
     primordia stability [CONFIG.toml] [--set ...] [--out DIR]
     primordia stability map --x NAME:LO:HI:N --y NAME:LO:HI:N [--coupled|--uncoupled]
+    primordia analyse RUN_DIR
 
 A user's mistake (unknown parameter, wrong sign, missing file, impossible mesh,
 unknown backend or plugin) is printed as one line ``primordia: error: ...`` and
@@ -51,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
         register = None
     if register is not None:
         register(commands)
+    from primordia.analysis.patterns.cli import register as register_analyse
+
+    register_analyse(commands)
     return parser
 
 

@@ -1,0 +1,269 @@
+"""Pattern metrics of a finished run directory, as an xarray Dataset (``metrics.nc``).
+
+A run directory (see README, "A run directory holds") has the fields at the
+output times in ``fields.xdmf`` and the resolved configuration in
+``config.toml``.  :func:`run_metrics` measures every scalar field (species) at
+every output time with :func:`~primordia.analysis.patterns.metrics.pattern_metrics`;
+when the run has a displacement ``u`` it does so twice, on the reference
+configuration ``X`` and on the current one ``x = X + u``.  Beside the
+simulated metrics it stores the linear analysis's prediction for the same
+configuration (:func:`predicted_mode`).
+
+:func:`analyse_run` also writes ``metrics.nc`` and the pictures into the run directory.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import xarray as xr
+
+from primordia.analysis.patterns.metrics import (
+    PATTERN_KINDS,
+    GriddedField,
+    MeshSampler,
+    PatternMetrics,
+    pattern_metrics,
+)
+from primordia.core.errors import ConfigError
+
+METRICS_FILE = "metrics.nc"
+
+#: The scalar metrics of one snapshot: Dataset variable, PatternMetrics attribute, long name.
+SCALAR_METRICS = (
+    ("dominant_wavelength", "dominant_wavelength", "2 pi / peak of the radially averaged power spectrum"),
+    ("dominant_wavenumber", "dominant_wavenumber", "peak of the radially averaged power spectrum"),
+    ("spectral_prominence", "prominence", "peak power / median power (noise ~1-5, patterns >> 10)"),
+    ("spot_count", "spot_count", "number of spots (compact regions above the level)"),
+    ("spacing_mean", "spacing_mean", "mean distance from a spot to its nearest neighbour"),
+    ("spacing_std", "spacing_std", "standard deviation of the nearest-neighbour distances"),
+    ("hexatic_order", "hexatic_order", "mean |psi_6| over spots away from the pattern's edge (1: hexagonal)"),
+    ("spot_fraction", "spot_fraction", "fraction of the area above the level lying in spots"),
+    ("orientation_order", "orientation_order", "nematic order of the gradient (1: parallel stripes)"),
+    ("level", "level", "threshold separating high from low phase (halfway between min and max)"),
+)
+
+
+class PredictedMode(NamedTuple):
+    """The linear analysis's fastest-growing stationary (Turing) mode; NaN where it does not apply."""
+
+    k_max: float
+    wavelength: float
+    rate: float
+    note: str = ""
+
+
+def linear_model(config: Mapping):
+    """The linear analysis's view of a configuration: (Table 3.1 parameters with its overrides, coupled?).
+
+    Coupled when ``model.physics`` has the mechano-chemical couplings; otherwise
+    the chemistry does not feel the mechanics and the uncoupled analysis applies
+    (xi_f = 0, seed section 3.4).  A ConfigError if the seed's analysis does not
+    describe the model (e.g. a plugin's kinetics with parameters of its own).
+    """
+    from primordia.physics.seed_parameters import seed_parameters
+
+    coupled = "mechanochemical" in config.get("model", {}).get("physics", ["chemotaxis"])
+    params = seed_parameters(**config.get("parameters", {}))
+    return (params if coupled else params.replace(xi_f=0.0)), coupled
+
+
+def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
+    """k_max, wavelength 2 pi / k_max and growth rate of the linear analysis for a run's configuration.
+
+    ``config``: a configuration mapping (e.g. a run's resolved ``config.toml``)
+    or a path to one; see :func:`linear_model` for what is analysed.  This is
+    the one place simulations meet the linear analysis, so a composed-model
+    analysis can replace it.
+    """
+    from primordia.analysis.dispersion import fastest_growing_mode
+
+    if not isinstance(config, Mapping):
+        from primordia.core.config import load_config
+
+        config = load_config(config)
+    try:
+        params, coupled = linear_model(config)
+    except ConfigError as error:
+        return PredictedMode(np.nan, np.nan, np.nan, f"no linear analysis for this model: {error}")
+    mode = fastest_growing_mode(params, coupled=coupled, kind="stationary")
+    return PredictedMode(mode.k_max, mode.wavelength, mode.growth_rate,
+                         "coupled" if coupled else "uncoupled (xi_f = 0)")
+
+
+@dataclass(frozen=True)
+class RunFields:
+    """The vertex fields of a run directory at its output times."""
+
+    directory: Path
+    points: np.ndarray  #: (n_vertices, 2), reference configuration
+    triangles: np.ndarray  #: (n_cells, 3)
+    times: tuple[float, ...]
+    snapshots: tuple[dict[str, np.ndarray], ...]  #: per time, field name -> vertex values
+    config: dict  #: the resolved config.toml (empty if absent)
+    status: str  #: summary.json's status, or "unknown"
+
+    @property
+    def scalar_fields(self) -> list[str]:
+        return [name for name, values in self.snapshots[0].items() if values.ndim == 1]
+
+    @property
+    def configurations(self) -> tuple[str, ...]:
+        return ("reference", "current") if "u" in self.snapshots[0] else ("reference",)
+
+    def points_in(self, configuration: str, index: int) -> np.ndarray:
+        """Vertex coordinates in the reference configuration, or the current one X + u at output ``index``."""
+        if configuration == "reference":
+            return self.points
+        return self.points + self.snapshots[index]["u"][:, : self.points.shape[1]]
+
+
+def read_run(directory: str | Path) -> RunFields:
+    """The mesh, output times and fields of a run directory; a missing or empty one is a ConfigError."""
+    import json
+
+    import meshio
+
+    directory = Path(directory)
+    xdmf = directory / "fields.xdmf"
+    if not xdmf.is_file():
+        raise ConfigError(f"{directory}: no fields.xdmf (not a run directory, or the run wrote no output time yet)")
+    reader = meshio.xdmf.TimeSeriesReader(str(xdmf))
+    points, blocks = reader.read_points_cells()
+    triangles = [block.data for block in blocks if block.type == "triangle"]
+    if not triangles:
+        raise ConfigError(f"{xdmf}: pattern metrics need a triangle mesh (2D); found {[b.type for b in blocks]}")
+    times, snapshots = [], []
+    for index in range(reader.num_steps):
+        t, fields, _ = reader.read_data(index)
+        times.append(float(t))
+        snapshots.append({name: np.asarray(values) for name, values in fields.items()})
+    if not snapshots:
+        raise ConfigError(f"{xdmf}: no output time written")
+    config_path, summary_path = directory / "config.toml", directory / "summary.json"
+    config = tomllib.loads(config_path.read_text()) if config_path.is_file() else {}
+    status = json.loads(summary_path.read_text()).get("status", "unknown") if summary_path.is_file() else "unknown"
+    return RunFields(directory, np.asarray(points)[:, :2], triangles[0], tuple(times), tuple(snapshots),
+                     config, status)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """The metrics of one field at one output time in one configuration, and the grid they were measured on."""
+
+    time: float
+    configuration: str
+    species: str
+    metrics: PatternMetrics
+    grid: GriddedField
+
+
+def measure(run: RunFields, species: Sequence[str] | None = None) -> list[Measurement]:
+    """:func:`pattern_metrics` of each species at each output time in each configuration."""
+    names = _chosen_species(run, species)
+    found = []
+    reference = MeshSampler(run.points, run.triangles)
+    for index, (t, fields) in enumerate(zip(run.times, run.snapshots)):
+        for configuration in run.configurations:
+            sampler = (reference if configuration == "reference"
+                       else MeshSampler(run.points_in(configuration, index), run.triangles))
+            for name in names:
+                grid = sampler(fields[name])
+                found.append(Measurement(t, configuration, name, pattern_metrics(grid, sampler.resolution), grid))
+    return found
+
+
+def _chosen_species(run: RunFields, species: Sequence[str] | None) -> list[str]:
+    available = run.scalar_fields
+    if not species:
+        return available
+    for name in species:
+        if name not in available:
+            raise ConfigError(f"{run.directory}: no scalar field '{name}' (fields: {', '.join(available)})")
+    return list(species)
+
+
+def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predicted: PredictedMode) -> xr.Dataset:
+    """The measurements as a Dataset over (time, configuration, species), spots padded along ``spot``."""
+    times = sorted({m.time for m in measurements})
+    configurations = [c for c in run.configurations if any(m.configuration == c for m in measurements)]
+    species = list(dict.fromkeys(m.species for m in measurements))
+    shape = (len(times), len(configurations), len(species))
+    dims = ("time", "configuration", "species")
+    spots = max(1, max(m.metrics.spot_count for m in measurements))  # NetCDF3: no zero-length dimension
+    wavenumbers = measurements[0].metrics.wavenumbers
+    scalars = {name: np.full(shape, np.nan) for name, _, _ in SCALAR_METRICS}
+    kind = np.zeros(shape, dtype=np.int8)
+    spot_arrays = {name: np.full(shape + (spots,), np.nan) for name in ("spot_x", "spot_y", "spot_area")}
+    spectrum = np.full(shape + (wavenumbers.size,), np.nan)
+    for m in measurements:
+        at = (times.index(m.time), configurations.index(m.configuration), species.index(m.species))
+        for name, attribute, _ in SCALAR_METRICS:
+            scalars[name][at] = getattr(m.metrics, attribute)
+        kind[at] = PATTERN_KINDS.index(m.metrics.kind)
+        count = m.metrics.spot_count
+        spot_arrays["spot_x"][at][:count] = m.metrics.spot_centres[:, 0]
+        spot_arrays["spot_y"][at][:count] = m.metrics.spot_centres[:, 1]
+        spot_arrays["spot_area"][at][:count] = m.metrics.spot_areas
+        spectrum[at] = np.interp(wavenumbers, m.metrics.wavenumbers, m.metrics.power, right=np.nan)
+    ds = xr.Dataset(
+        {name: (dims, scalars[name], {"long_name": text}) for name, _, text in SCALAR_METRICS},
+        coords={"time": ("time", np.array(times), {"units": "dimensionless (seed scaling)"}),
+                "configuration": ("configuration", configurations, {
+                    "long_name": "reference: on X; current: on x = X + u"}),
+                "species": ("species", species),
+                "wavenumber": ("wavenumber", wavenumbers, {"units": "2 pi / length"})},
+    )
+    ds["pattern"] = (dims, kind, {"long_name": "pattern kind", "flag_values": np.arange(len(PATTERN_KINDS),
+                                                                                        dtype=np.int8),
+                                  "flag_meanings": " ".join(PATTERN_KINDS)})
+    for name, text in (("spot_x", "x of the spot's maximum"), ("spot_y", "y of the spot's maximum"),
+                       ("spot_area", "area of the spot above the level")):
+        ds[name] = (dims + ("spot",), spot_arrays[name], {"long_name": text + " (NaN past spot_count)"})
+    ds["power_spectrum"] = (dims + ("wavenumber",), spectrum, {
+        "long_name": "radially averaged power spectrum of the field minus its mean (Hann window)"})
+    ds["predicted_wavenumber"] = ((), predicted.k_max, {"long_name": "linear analysis: fastest stationary k"})
+    ds["predicted_wavelength"] = ((), predicted.wavelength, {"long_name": "linear analysis: 2 pi / k_max"})
+    ds["predicted_growth_rate"] = ((), predicted.rate, {"long_name": "linear analysis: Re phi at k_max"})
+    ds.attrs.update({"title": f"primordia pattern metrics of {run.directory}", "run_status": run.status,
+                     "linear_analysis": predicted.note,
+                     "method": "primordia.analysis.patterns.metrics (module docstring)"})
+    return ds
+
+
+def pattern_kind(ds: xr.Dataset, **where) -> np.ndarray:
+    """The ``pattern`` codes of ``ds`` (optionally ``.sel(**where)``) as their names."""
+    codes = ds["pattern"].sel(**where).values if where else ds["pattern"].values
+    codes = np.asarray(codes, dtype=int)
+    return np.asarray(PATTERN_KINDS, dtype=object)[codes.ravel()].reshape(codes.shape)
+
+
+def run_metrics(directory: str | Path, species: Sequence[str] | None = None) -> xr.Dataset:
+    """The pattern metrics of a run directory (nothing is written)."""
+    run = read_run(directory)
+    return metrics_dataset(run, measure(run, species), predicted_mode(run.config))
+
+
+def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pictures: bool = True) -> xr.Dataset:
+    """Measure a run directory, write ``metrics.nc`` and (``pictures``) ``metrics_<species>[_current].png``."""
+    from primordia.analysis.patterning import save_dataset
+
+    run = read_run(directory)
+    measurements = measure(run, species)
+    predicted = predicted_mode(run.config)
+    ds = metrics_dataset(run, measurements, predicted)
+    save_dataset(ds, run.directory / METRICS_FILE)
+    if pictures:
+        from primordia.analysis.patterns.figures import metrics_figure
+
+        for configuration in ds["configuration"].values:
+            for name in ds["species"].values:
+                chosen = [m for m in measurements if m.species == name and m.configuration == configuration]
+                suffix = "" if configuration == "reference" else f"_{configuration}"
+                metrics_figure(chosen, predicted, run.directory / f"metrics_{name}{suffix}.png")
+    return ds

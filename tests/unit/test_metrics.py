@@ -1,0 +1,196 @@
+"""Pattern metrics on synthetic fields with known answers (primordia.analysis.patterns).
+
+Each field is given at the vertices of a triangle mesh of (0, 20)^2, as a run writes it:
+* a hexagonal lattice of Gaussian spots at spacing a: count, centres, areas, spacing a,
+  |psi_6| = 1, dominant wavelength sqrt(3) a / 2 (the distance between rows), kind "spots";
+* plane stripes of wavelength lambda: wavelength lambda, no spots, kind "stripes";
+* a random superposition of waves of one wavelength, saturated: a labyrinth;
+* white noise (large and small amplitude) and a constant: kind "none", no spots;
+* point sets with known |psi_6|: a square lattice (0), random points (well below 1);
+* a run directory written like a run's, with a displacement u = (s - 1) X: the spacing is
+  a on the reference configuration and s a on the current one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from primordia.analysis.patterns.metrics import (
+    hexatic_order,
+    mesh_pattern_metrics,
+    nearest_neighbour_distances,
+)
+from primordia.analysis.patterns.run import analyse_run, pattern_kind, predicted_mode
+from primordia.core import io
+from primordia.core.meshes import rectangle
+
+SIDE = 20.0
+MESH = rectangle((0.0, 0.0), (SIDE, SIDE), cells=(100, 100))
+
+
+def hexagonal_lattice(spacing: float, margin: float) -> np.ndarray:
+    """Lattice points (rows along x, rows sqrt(3)/2 spacing apart) inside [margin, SIDE - margin]^2."""
+    rows = np.arange(0.0, SIDE, spacing * np.sqrt(3) / 2)
+    points = [(x, y) for j, y in enumerate(rows) for x in np.arange(0.0, SIDE, spacing) + (j % 2) * spacing / 2]
+    points = np.array(points)
+    inside = np.all((points >= margin) & (points <= SIDE - margin), axis=1)
+    return points[inside]
+
+
+def gaussian_spots(points: np.ndarray, centres: np.ndarray, width: float) -> np.ndarray:
+    squared = ((points[:, None, :] - centres[None, :, :]) ** 2).sum(axis=-1)
+    return np.exp(-squared / (2 * width**2)).sum(axis=1)
+
+
+def measure(values):
+    return mesh_pattern_metrics(MESH.points, MESH.cells, values)[0]
+
+
+@pytest.mark.parametrize("spacing", [2.5, 3.5])
+def test_hexagonal_lattice_of_spots(spacing):
+    width = spacing / 6
+    centres = hexagonal_lattice(spacing, margin=3 * width)
+    metrics = measure(gaussian_spots(MESH.points, centres, width))
+    assert metrics.kind == "spots"
+    assert metrics.spot_count == len(centres)
+    # every detected centre sits on a lattice point
+    offsets = np.min(np.linalg.norm(metrics.spot_centres[:, None] - centres[None], axis=-1), axis=1)
+    assert offsets.max() < 0.02 * spacing
+    assert metrics.spacing_mean == pytest.approx(spacing, rel=0.01)
+    assert metrics.spacing_std < 0.01 * spacing
+    assert metrics.hexatic_order > 0.99
+    assert metrics.dominant_wavelength == pytest.approx(np.sqrt(3) / 2 * spacing, rel=0.03)
+    # area above half the maximum: a disc of radius width sqrt(2 ln 2)
+    assert np.median(metrics.spot_areas) == pytest.approx(2 * np.pi * np.log(2) * width**2, rel=0.1)
+
+
+def test_stripes_of_known_wavelength():
+    wavelength, angle = 3.0, np.deg2rad(30)
+    direction = np.array([np.cos(angle), np.sin(angle)])
+    metrics = measure(np.cos(2 * np.pi / wavelength * MESH.points @ direction))
+    assert metrics.kind == "stripes"
+    assert metrics.dominant_wavelength == pytest.approx(wavelength, rel=0.02)
+    assert metrics.spot_count == 0
+    assert metrics.orientation_order > 0.9
+
+
+def test_labyrinth_from_random_waves_of_one_wavelength():
+    wavelength = 3.0
+    rng = np.random.default_rng(3)
+    field = np.zeros(MESH.num_vertices)
+    for angle, phase in zip(rng.uniform(0, np.pi, 40), rng.uniform(0, 2 * np.pi, 40)):
+        field += np.cos(2 * np.pi / wavelength * MESH.points @ [np.cos(angle), np.sin(angle)] + phase)
+    metrics = measure(np.tanh(3 * field))
+    assert metrics.kind == "labyrinth"
+    assert metrics.dominant_wavelength == pytest.approx(wavelength, rel=0.05)
+    assert metrics.spot_fraction < 0.5
+    assert metrics.orientation_order < 0.5
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_noise_is_no_pattern(seed):
+    rng = np.random.default_rng(seed)
+    for field in (rng.normal(size=MESH.num_vertices),  # white noise
+                  0.75 * (1 + 0.01 * rng.uniform(-1, 1, MESH.num_vertices))):  # a run's initial m
+        metrics = measure(field)
+        assert metrics.kind == "none"
+        assert metrics.prominence < 5
+        assert metrics.spot_count == 0
+        assert np.isnan(metrics.spacing_mean) and np.isnan(metrics.hexatic_order)
+
+
+def test_uniform_field_is_no_pattern():
+    metrics = measure(np.full(MESH.num_vertices, 0.75))
+    assert metrics.kind == "none"
+    assert np.isnan(metrics.dominant_wavelength)
+
+
+def test_a_lone_front_is_no_pattern():
+    """A smooth front (the priming wave) has no spectral peak of its own: not stripes."""
+    metrics = measure(np.tanh(MESH.points[:, 1] - 8.0))
+    assert metrics.kind == "none"
+
+
+def test_hexatic_order_of_known_point_sets():
+    hexagonal = hexagonal_lattice(2.0, margin=0.0)
+    assert hexatic_order(hexagonal)[0] == pytest.approx(1.0, abs=1e-9)
+    # square: the four bonds at 0, 90, 180, 270 degrees cancel in exp(6 i theta); only Delaunay's diagonals remain
+    square = np.array([(x, y) for x in range(10) for y in range(10)], dtype=float)
+    assert hexatic_order(square)[0] < 0.1
+    scattered = np.random.default_rng(0).uniform(0, SIDE, (300, 2))
+    assert 0.2 < hexatic_order(scattered)[0] < 0.5
+    assert np.isnan(hexatic_order(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))[0])
+
+
+def test_nearest_neighbour_distances():
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 3.0]])
+    assert nearest_neighbour_distances(points) == pytest.approx([1.0, 1.0, 3.0])
+    assert nearest_neighbour_distances(points[:1]).size == 0
+
+
+def write_run(directory, stretch: float, spacing: float = 3.0):
+    """A run directory as ``primordia run`` writes it: spots in m, noise in b, displacement u = (s - 1) X."""
+    width = spacing / 6
+    spots = gaussian_spots(MESH.points, hexagonal_lattice(spacing, 3 * width), width)
+    noise = 0.5 + 0.01 * np.random.default_rng(0).uniform(-1, 1, MESH.num_vertices)
+    series = io.XdmfSeries(directory, MESH)
+    for t, amplitude in ((10.0, 0.5), (20.0, 1.0)):
+        series.write(t, {"m": amplitude * spots, "b": noise, "u": (stretch - 1.0) * MESH.points})
+    io.write_toml(directory / "config.toml", {"model": {"physics": ["chemotaxis"]},
+                                              "parameters": {"m0": 0.75, "D_m": 0.03}})
+    io.write_json(directory / "summary.json", {"status": "completed"})
+
+
+def test_run_directory_in_reference_and_current_configuration(tmp_path):
+    stretch, spacing = 1.2, 3.0
+    write_run(tmp_path, stretch, spacing)
+    ds = analyse_run(tmp_path)
+    assert set(ds["configuration"].values) == {"reference", "current"}
+    assert list(ds["time"].values) == [10.0, 20.0]
+    m = ds.sel(species="m", time=20.0)
+    assert float(m["spacing_mean"].sel(configuration="reference")) == pytest.approx(spacing, rel=0.01)
+    assert float(m["spacing_mean"].sel(configuration="current")) == pytest.approx(stretch * spacing, rel=0.01)
+    assert pattern_kind(ds, species="b").ravel().tolist() == ["none"] * 4
+    assert pattern_kind(ds, species="m", time=20.0, configuration="current").item() == "spots"
+    # the linear analysis of the same config (uncoupled: no mechano-chemical couplings)
+    assert float(ds["predicted_wavenumber"]) == pytest.approx(2.784, abs=1e-3)
+    # written, and readable with every spot
+    saved = xr.open_dataset(tmp_path / "metrics.nc")
+    count = int(saved["spot_count"].sel(species="m", time=20.0, configuration="reference"))
+    assert count > 20
+    assert np.isfinite(saved["spot_x"].sel(species="m", time=20.0, configuration="reference").values).sum() == count
+    saved.close()
+    for picture in ("metrics_m.png", "metrics_m_current.png", "metrics_b.png"):
+        assert (tmp_path / picture).stat().st_size > 10_000
+
+
+def test_predicted_mode_of_example_1a():
+    mode = predicted_mode("examples/ex01a.toml")  # primordia stability examples/ex01a.toml --uncoupled
+    assert mode.k_max == pytest.approx(2.784, abs=1e-3)
+    assert mode.wavelength == pytest.approx(2.257, abs=1e-3)
+    assert mode.rate > 0
+    assert "uncoupled" in mode.note
+    assert "uncoupled" not in predicted_mode("examples/ex01b.toml").note
+
+
+def test_analyse_command(tmp_path, primordia_cli):
+    write_run(tmp_path, stretch=1.0)
+    result = primordia_cli("analyse", tmp_path, "--species", "m", "--no-pictures")
+    assert result.returncode == 0, result.stderr
+    assert "t = 20 m (reference): spots" in result.stdout
+    assert "k_max = 2.784" in result.stdout
+    assert (tmp_path / "metrics.nc").is_file() and not (tmp_path / "metrics_m.png").exists()
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["analyse", "no/such/run"], "no fields.xdmf"),
+    (["analyse", "RUN", "--species", "q"], "no scalar field 'q'"),
+])
+def test_analyse_bad_input_is_one_line(tmp_path, primordia_cli, arguments, message):
+    write_run(tmp_path, stretch=1.0)
+    result = primordia_cli(*[str(tmp_path) if a == "RUN" else a for a in arguments])
+    assert result.returncode == 2
+    assert result.stderr.startswith("primordia: error: ") and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
