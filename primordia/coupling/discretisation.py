@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import ufl
 
 from primordia.core.errors import ConfigError
+from primordia.physics.kinematics import MOTIONLESS, Kinematics
 
 
 @dataclass
@@ -61,6 +62,7 @@ class Discretisation:
         self._splits: dict[tuple[str, str], tuple] = {}
         self._provided: dict[str, tuple[object, str]] = {}
         self._contributions: dict[str, list[Callable]] = defaultdict(list)
+        self._kinematics: tuple[Kinematics, str] | None = None
 
     # -- spaces and fields --------------------------------------------------------------
     def element(self, spec) -> ufl.FiniteElementBase:
@@ -179,17 +181,41 @@ class Discretisation:
             raise ConfigError(f"'{name}' is provided by both {self.owner(name)} and {owner}")
         self._provided[name] = (expression, owner)
 
+    # -- kinematics -----------------------------------------------------------------------
+    def provide_kinematics(self, kinematics: Kinematics, owner: str) -> None:
+        """Declare how the tissue moves (a mechanics module does this in ``setup``)."""
+        if self._kinematics is not None:
+            raise ConfigError(f"the motion of the tissue is described by both {self._kinematics[1]} and {owner}")
+        self._kinematics = (kinematics, owner)
+
+    @property
+    def kinematics(self) -> Kinematics:
+        """The tissue's motion as provided by the mechanics module; motionless without one.
+
+        Read it when building forms (``subproblems``), after every module's ``setup``.
+        """
+        return MOTIONLESS if self._kinematics is None else self._kinematics[0]
+
     # -- measures -------------------------------------------------------------------------
     def ds(self, boundary: str | None = None):
         return self._ds if boundary is None else self._ds(self.mesh_data.boundary_id(boundary))
 
+    def dx_degree(self, degree: int | None):
+        """``dx`` with a fixed quadrature degree (``None``: the backend's estimate)."""
+        return self.dx if degree is None else self.dx(metadata={"quadrature_degree": int(degree)})
+
+    def ds_degree(self, degree: int | None, boundary: str | None = None):
+        """``ds`` (on ``boundary``) with a fixed quadrature degree (``None``: the backend's estimate)."""
+        measure = self.ds(boundary)
+        return measure if degree is None else measure(metadata={"quadrature_degree": int(degree)})
+
     # -- couplings ------------------------------------------------------------------------
     def contribute(self, field_name: str, term: Callable):
-        """Add ``term(test)`` (a UFL form) to the residual of ``field_name``'s balance law."""
+        """Add ``term(test)`` (a UFL form, or None for nothing) to the residual of ``field_name``'s balance law."""
         self._contributions[field_name].append(term)
 
     def contributions(self, field_name: str, test) -> list:
-        return [term(test) for term in self._contributions[field_name]]
+        return [form for form in (term(test) for term in self._contributions[field_name]) if form is not None]
 
     # -- values ---------------------------------------------------------------------------
     def set_vertex_values(self, name: str, values):

@@ -46,35 +46,47 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
     is the start-of-step value (``disc.previous``), as the IMEX scheme requires.
     """
 
-    def __init__(self, disc, species: str, attractant: str, diffusivity: float, sensitivity):
+    def __init__(self, disc, species: str, attractant: str, diffusivity: float, sensitivity,
+                 metric=None, quadrature_degree: int | None = None):
         self.disc, self.species, self.attractant = disc, species, attractant
         self.diffusivity = float(diffusivity)
         self.sensitivity = sensitivity
         backend = disc.backend
         space = disc.field(species).ufl_function_space()
         trial, test = ufl.TrialFunction(space), ufl.TestFunction(space)
-        stiffness = backend.assemble_matrix(ufl.inner(ufl.grad(trial), ufl.grad(test)) * disc.dx)
+        gradient = ufl.grad(trial) if metric is None else ufl.dot(metric, ufl.grad(trial))
+        self._stiffness_form = ufl.inner(gradient, ufl.grad(test)) * disc.dx_degree(quadrature_degree)
+        self._moving = metric is not None  # the metric follows the deformation: reassemble at every update
+        self.negative_weights = 0  # edges with w_ij < 0 at the last update (0: an M-matrix)
+        stiffness = backend.assemble_matrix(self._stiffness_form)
+        self._stiffness = stiffness.duplicate(copy=True) if self._moving else None
         self._A = stiffness
         self._prepare_edges(stiffness)
         self._prepare_gather(backend.petsc_vector(disc.previous(species)))
+        if self.negative_weights and not self._moving:
+            warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
+                          "the exponentially fitted flux no longer guarantees a non-negative density",
+                          stacklevel=3)
 
     def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
         start = stiffness.getOwnershipRange()[0]
         rows_global = np.repeat(np.arange(len(indptr) - 1) + start, np.diff(indptr))
         self._indptr, self._columns = indptr, columns
-        diagonal = columns == rows_global
-        weights = np.where(diagonal, 0.0, -values)
-        scale = self.disc.backend.comm.allreduce(float(np.abs(values).max(initial=0.0)), op=_max_op())
-        if self.disc.backend.comm.allreduce(int((weights < -1e-12 * scale).sum())):
-            warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
-                          "the exponentially fitted flux no longer guarantees a non-negative density",
-                          stacklevel=3)
-        self._scaled_weights = weights * self.diffusivity  # w_ij D
+        self._diagonal = columns == rows_global
         self._row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))  # local row of each entry
-        self._diag_positions = np.flatnonzero(diagonal)
+        self._diag_positions = np.flatnonzero(self._diagonal)
         if len(self._diag_positions) != len(indptr) - 1:
             raise ValueError("the stiffness matrix lacks diagonal entries")
+        self._set_weights(values)
+
+    def _set_weights(self, values):
+        """Edge weights w_ij = -S_ij (scaled by D), and how many are negative (not an M-matrix)."""
+        weights = np.where(self._diagonal, 0.0, -values)
+        comm = self.disc.backend.comm
+        scale = comm.allreduce(float(np.abs(values).max(initial=0.0)), op=_max_op())
+        self.negative_weights = comm.allreduce(int((weights < -1e-12 * scale).sum())) // 2  # each edge twice
+        self._scaled_weights = weights * self.diffusivity  # w_ij D
 
     def _prepare_gather(self, template):
         """A scatter bringing the values at every column of the local rows to this rank.
@@ -96,6 +108,9 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         return self._gathered.getArray(readonly=True).copy()
 
     def update(self) -> None:
+        if self._moving:
+            self.disc.backend.assemble_matrix(self._stiffness_form, A=self._stiffness)
+            self._set_weights(self._stiffness.getValuesCSR()[2])
         c, a = self._gather(self.species), self._gather(self.attractant)
         i, j = self._entry_row, self._entry_column  # gathered positions of each entry's row and column DOFs
         chi = self.sensitivity(0.5 * (c[i] + c[j]))  # at the edge midpoint, as quadrature would

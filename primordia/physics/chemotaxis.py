@@ -59,7 +59,7 @@ import ufl
 
 from primordia.core import ops as ops_
 from primordia.core.errors import ConfigError
-from primordia.physics.base import FieldSpec, Physics, Subproblem, jacobian_is_constant
+from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.seed_parameters import CHEMOTAXIS
 
 
@@ -82,28 +82,49 @@ SPECIES = (
 )
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
+ACCUMULATIONS = ("material", "conservative")
 PERTURBATION_SHAPES = ("random", "cosine")
 
 
-# -- the terms of seed eqs. (2.2a)-(2.2d), each a UFL integrand -------------------------------
-def accumulation(c, c_previous, test, dt, dx_lumped):
-    """d c / d t by backward Euler, lumped: (c - c^n)/dt v."""
-    return (c - c_previous) / dt * test * dx_lumped
+# -- the terms of seed eqs. (2.2a)-(2.2d) / (4.17a)-(4.17d), each a UFL integrand ---------------
+# J (volume ratio) and K (metric J C^-1) come from the kinematics the mechanics provides
+# (primordia.physics.kinematics): J = 1 and K = None (identity) without finite strain, so the
+# small-strain forms are exactly the terms of (2.2a)-(2.2d).
+def accumulation(c, c_previous, test, dt, dx_lumped, volume_ratio=1, volume_ratio_previous=None):
+    """d c / d t by backward Euler, lumped, on the reference configuration.
+
+    ``volume_ratio_previous`` None: J (c - c^n)/dt v, the seed's (4.17a) times J (material form:
+    c is carried with the tissue and keeps its value as the tissue grows); otherwise
+    (J c - J^n c^n)/dt v, the conservative form (the amount J c is what is balanced).
+    """
+    if volume_ratio_previous is None:
+        return _times(volume_ratio, c - c_previous) / dt * test * dx_lumped
+    return (volume_ratio * c - volume_ratio_previous * c_previous) / dt * test * dx_lumped
 
 
-def diffusive_flux(diffusivity, c, test, dx):
-    """-div(D grad c) in weak form: D grad c . grad v."""
-    return diffusivity * ufl.inner(ufl.grad(c), ufl.grad(test)) * dx
+def diffusive_flux(diffusivity, c, test, dx, metric=None):
+    """-div(D grad c) in weak form: D grad c . grad v (seed (2.2a)); D J C^-1 Grad c . Grad v (4.17a)."""
+    return diffusivity * ufl.inner(_pulled_back(metric, ufl.grad(c)), ufl.grad(test)) * dx
 
 
-def chemotactic_flux(sensitivity, c, attractant, test, dx):
-    """+div(chi c grad f) in weak form (seed eq. (2.2a)): -chi c grad f . grad v."""
-    return -sensitivity * c * ufl.inner(ufl.grad(attractant), ufl.grad(test)) * dx
+def chemotactic_flux(sensitivity, c, attractant, test, dx, metric=None):
+    """+div(chi c grad f) in weak form (seed (2.2a)): -chi c grad f . grad v; with J C^-1 in (4.17a)."""
+    return -sensitivity * c * ufl.inner(_pulled_back(metric, ufl.grad(attractant)), ufl.grad(test)) * dx
 
 
-def reaction(production, loss_rate, c, test, dx_lumped):
-    """-R = -(P - L c), lumped (seed eqs. (2.2b)-(2.2d))."""
-    return -(production - loss_rate * c) * test * dx_lumped
+def reaction(production, loss_rate, c, test, dx_lumped, volume_ratio=1):
+    """-R = -(P - L c), lumped (seed (2.2b)-(2.2d)); times J on the reference configuration (4.17b-d)."""
+    return -_times(volume_ratio, production - loss_rate * c) * test * dx_lumped
+
+
+def _pulled_back(metric, gradient):
+    """K grad c, or grad c itself when the metric is the identity (``None``)."""
+    return gradient if metric is None else ufl.dot(metric, gradient)
+
+
+def _times(factor, expression):
+    """``factor * expression``, leaving the expression untouched for the identity factor 1."""
+    return expression if isinstance(factor, (int, float)) and factor == 1 else factor * expression
 
 
 class Chemotaxis(Physics):
@@ -113,7 +134,7 @@ class Chemotaxis(Physics):
     parameters = CHEMOTAXIS
     needs_kinetics = True
     options = {"flux_scheme": "exponential_fitting", "perturbation": 0.01, "seed": 1,
-               "perturbation_shape": "random", "wavenumber": [0.0, 0.0]}
+               "perturbation_shape": "random", "wavenumber": [0.0, 0.0], "accumulation": "material"}
 
     def validate_options(self):
         if self.opts["flux_scheme"] not in FLUX_SCHEMES:
@@ -124,6 +145,9 @@ class Chemotaxis(Physics):
             raise ConfigError(f"physics.chemotaxis.perturbation must be a number in [0, 1), got {amplitude!r}")
         if not isinstance(self.opts["seed"], int) or isinstance(self.opts["seed"], bool):
             raise ConfigError(f"physics.chemotaxis.seed must be an integer, got {self.opts['seed']!r}")
+        if self.opts["accumulation"] not in ACCUMULATIONS:
+            raise ConfigError(f"physics.chemotaxis.accumulation must be one of {', '.join(ACCUMULATIONS)}, "
+                              f"got {self.opts['accumulation']!r}")
         if self.opts["perturbation_shape"] not in PERTURBATION_SHAPES:
             raise ConfigError(f"physics.chemotaxis.perturbation_shape must be one of "
                               f"{', '.join(PERTURBATION_SHAPES)}, got {self.opts['perturbation_shape']!r}")
@@ -174,21 +198,36 @@ class Chemotaxis(Physics):
         return self.kinetics.split_rates(state, self.disc.t, ops_.UFL.at(self.disc.x))
 
     def species_residual(self, species: Species, reactions) -> ufl.Form:
-        """The residual of one species: the terms of its balance law (+ contributed couplings)."""
-        disc = self.disc
+        """The residual of one species: the terms of its balance law (+ contributed couplings).
+
+        Read on the kinematics of the run (J, J C^-1: seed (4.17a)-(4.17d) multiplied by J), which
+        are the identity without finite strain (seed (2.2a)-(2.2d)).
+        """
+        disc, motion = self.disc, self.disc.kinematics
+        dx = disc.dx_degree(motion.quadrature_degree) if motion.moves else disc.dx
         c, c_previous, test = disc.field(species.name), disc.previous(species.name), disc.test(species.name)
-        residual = accumulation(c, c_previous, test, disc.dt, disc.dx_lumped)
+        conservative = self.opts["accumulation"] == "conservative" and species.diffusivity is not None
+        residual = accumulation(c, c_previous, test, disc.dt, disc.dx_lumped, motion.volume_ratio,
+                                motion.volume_ratio_previous if conservative else None)  # (2.3a-d), (4.17a-d)
         production, loss_rate = reactions[species.name]
         if production != 0 or loss_rate != 0:
-            residual += reaction(production, loss_rate, c, test, disc.dx_lumped)
+            residual += reaction(production, loss_rate, c, test, disc.dx_lumped, motion.volume_ratio)
         if species.diffusivity is not None and not self._fitted(species):
-            residual += diffusive_flux(self.params[species.diffusivity], c, test, disc.dx)
+            residual += diffusive_flux(self.params[species.diffusivity], c, test, dx, motion.metric)
         if species.attractant is not None and not self._fitted(species):
             chi = self.sensitivity(disc.previous(species.name), ops_.UFL)
-            residual += chemotactic_flux(chi, c, disc.previous(species.attractant), test, disc.dx)
+            residual += chemotactic_flux(chi, c, disc.previous(species.attractant), test, dx, motion.metric)
         for term in disc.contributions(species.name, test):
             residual += term
         return residual
+
+    def diagnostics(self):
+        """On a moving reference configuration: the cells it holds, int J m dX (lumped, as the accumulation)."""
+        motion = self.disc.kinematics
+        if not motion.finite_strain:
+            return []
+        return [Diagnostic("cell_amount", "integral", motion.volume_ratio * self.disc.field("m") * self.disc.dx_lumped,
+                           "cells in the current configuration, int J m dX over the reference one")]
 
     def _fitted(self, species: Species) -> bool:
         return species.attractant is not None and self.opts["flux_scheme"] == "exponential_fitting"
@@ -204,10 +243,12 @@ class Chemotaxis(Physics):
             jacobian = ufl.derivative(residual, unknown)
             operator = None
             if self._fitted(species):
+                motion = self.disc.kinematics
                 operator = ExponentiallyFittedFlux(
                     self.disc, species.name, species.attractant,
                     diffusivity=self.params[species.diffusivity],
                     sensitivity=lambda m: self.sensitivity(m, ops_.NUMPY),
+                    metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,

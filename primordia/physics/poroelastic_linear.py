@@ -33,6 +33,7 @@ from primordia.core.errors import ConfigError
 from primordia.core.expressions import Formula
 from primordia.physics.base import FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.boundary_conditions import conditions_from_config
+from primordia.physics.kinematics import Kinematics
 from primordia.physics.seed_parameters import POROELASTICITY, lame
 
 GROUP = "poroelasticity"
@@ -106,6 +107,9 @@ class LinearPoroelasticity(Physics):
         self.conditions = conditions_from_config(self.opts["boundary"], disc.mesh_data, disc.gdim)
         self.velocity = disc.rate("u")
         disc.provide("lame_constants", self.lame(), self.name)
+        # small strain: the species are advected by u_t and the FGF sink reads div u (seed (2.3a), (2.3c))
+        disc.provide_kinematics(Kinematics(volume_change=ufl.div(disc.field("u")), velocity=self.velocity),
+                                self.name)
 
     def conductivity(self):
         """kappa(x): the parameter, or the formula of option ``conductivity``."""
