@@ -1,15 +1,31 @@
 """One petsc4py solver layer for every backend.
 
-A :class:`SubproblemSolver` solves ``residual(unknown) = 0`` by Newton's method
-with a PETSc KSP configured from the options database under the subproblem's
-prefix (e.g. ``-chemotaxis_m_ksp_type gmres``).  Defaults come from the
-physics (``Subproblem.petsc_options``), then the config's ``[solver.PREFIX]``
-table, then the command line, each overriding the previous one.  MUMPS and
-hypre are available through the usual ``pc_factor_mat_solver_type`` /
-``pc_type hypre`` options.
+:func:`SubproblemSolver` solves ``residual(unknown) = 0`` for one
+:class:`~primordia.physics.base.Subproblem`, with PETSc objects configured from
+the options database under the subproblem's prefix (e.g.
+``-chemotaxis_m_ksp_type gmres``, ``-poroelastic_growth_snes_linesearch_type bt``).
+Defaults come from this layer (:data:`NEWTON_DEFAULTS`), then the physics
+(``Subproblem.petsc_options``), then the config's ``[solver.PREFIX]`` table,
+then the command line, each overriding the previous one.  MUMPS and hypre are
+available through the usual ``pc_factor_mat_solver_type`` / ``pc_type hypre``
+options.
 
-Linear subproblems take one Newton step (exact); a constant Jacobian is
-assembled once and its preconditioner (e.g. an LU factorisation) reused.
+Two paths:
+
+* **linear** subproblems (an affine residual: one Newton step is exact) take a
+  KSP solve, :class:`LinearSolver`; a constant Jacobian is assembled once and its
+  preconditioner (e.g. an LU factorisation) reused.  This is the fast path of
+  the chemotaxis species and of linear poroelasticity.
+* **nonlinear** subproblems go through PETSc SNES, :class:`NewtonSolver`: Newton
+  with a backtracking line search and the seed's tolerances (section 5.1: 1e-7 on
+  the relative or the absolute l2 norm of the residual), every option
+  overridable.  The Jacobian is the UFL derivative of the residual; a separate
+  preconditioning form (``Subproblem.preconditioner``) is assembled into the
+  preconditioning matrix when given.  A failure raises a :class:`SolverError`
+  naming SNES's reason.
+
+Dirichlet conditions follow the backend contract (lifted residual, identity
+rows), so the Newton update lands exactly on the prescribed values.
 """
 
 from __future__ import annotations
@@ -23,15 +39,30 @@ from petsc4py import PETSc
 from primordia.core.errors import SolverError
 from primordia.coupling.edge_flux import apply_operator
 
+#: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
+NEWTON_DEFAULTS = {
+    "snes_type": "newtonls",
+    "snes_linesearch_type": "bt",
+    "snes_rtol": 1e-7,
+    "snes_atol": 1e-7,
+    "snes_stol": 0.0,
+    "snes_max_it": 25,
+}
+
 
 @dataclass
 class SolveStats:
+    """What one or more solves of a subproblem cost, and how the last one ended."""
+
     newton_iterations: int = 0
     linear_iterations: int = 0
+    #: PETSc's converged reason of the last solve (KSP for linear, SNES for nonlinear subproblems).
+    reason: int = 0
 
     def __iadd__(self, other: "SolveStats") -> "SolveStats":
         self.newton_iterations += other.newton_iterations
         self.linear_iterations += other.linear_iterations
+        self.reason = other.reason
         return self
 
 
@@ -64,23 +95,36 @@ def _option_text(value) -> str:
     return str(value)
 
 
-class SubproblemSolver:
-    """Newton + KSP for one :class:`~primordia.physics.base.Subproblem`."""
+def _reason_names(enum) -> dict[int, str]:
+    return {getattr(enum, name): name for name in dir(enum) if name.isupper()}
 
-    def __init__(self, backend, subproblem, overrides: dict | None = None,
-                 rtol: float = 1e-8, atol: float = 1e-10, max_iterations: int = 25):
+
+SNES_REASONS = _reason_names(PETSc.SNES.ConvergedReason)
+KSP_REASONS = _reason_names(PETSc.KSP.ConvergedReason)
+
+
+def SubproblemSolver(backend, subproblem, overrides: dict | None = None):
+    """The solver for ``subproblem``: a KSP solve when it is linear, SNES (Newton) otherwise."""
+    cls = LinearSolver if subproblem.linear else NewtonSolver
+    return cls(backend, subproblem, overrides)
+
+
+class _Solver:
+    """What both paths share: options, the algebraic operator, assembly of residual and tangent."""
+
+    defaults: dict = {}
+
+    def __init__(self, backend, subproblem, overrides: dict | None = None):
         self.backend, self.sub = backend, subproblem
-        self.rtol, self.atol, self.max_iterations = rtol, atol, max_iterations
-        set_default_options(subproblem.prefix, _parallel_safe(subproblem.petsc_options, backend.comm), overrides)
-        self.ksp = PETSc.KSP().create(backend.comm)
-        self.ksp.setOptionsPrefix(subproblem.prefix)
-        self.ksp.setFromOptions()
+        set_default_options(subproblem.prefix,
+                            _parallel_safe({**self.defaults, **subproblem.petsc_options}, backend.comm), overrides)
         self._jacobian = None  # assembled UFL Jacobian
         self._combined = None  # UFL Jacobian + algebraic operator
+        self._preconditioner = None  # assembled preconditioning form, when the subproblem has one
         self._residual = None
-        self._increment = None
 
     def _assemble_jacobian(self):
+        """The tangent (with the algebraic operator added) and whether it changed."""
         sub, backend = self.sub, self.backend
         if self._jacobian is None or not sub.constant_jacobian:
             self._jacobian = backend.assemble_matrix(sub.jacobian, sub.bcs, A=self._jacobian)
@@ -97,51 +141,57 @@ class SubproblemSolver:
         self._combined.axpy(1.0, self._jacobian, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         return self._combined, True
 
-    def _assemble_residual(self, x):
+    def _assemble_preconditioner(self, tangent):
+        """The preconditioning matrix: the tangent itself, or the subproblem's own form."""
+        if self.sub.preconditioner is None:
+            return tangent
+        self._preconditioner = self.backend.assemble_matrix(self.sub.preconditioner, self.sub.bcs,
+                                                            A=self._preconditioner)
+        return self._preconditioner
+
+    def _assemble_residual(self, x, b=None):
         sub = self.sub
-        self._residual = self.backend.assemble_residual(sub.residual, sub.jacobian, sub.bcs,
-                                                        sub.unknown, b=self._residual)
+        b = self.backend.assemble_residual(sub.residual, sub.jacobian, sub.bcs, sub.unknown,
+                                           b=b if b is not None else self._residual)
         if sub.operator is not None:
-            apply_operator(sub.operator, x, self._residual)
-        return self._residual
+            apply_operator(sub.operator, x, b)
+        return b
+
+
+class LinearSolver(_Solver):
+    """One exact Newton step, x <- x - J^{-1} F(x), for an affine residual (a KSP solve)."""
+
+    def __init__(self, backend, subproblem, overrides: dict | None = None):
+        super().__init__(backend, subproblem, overrides)
+        self.ksp = PETSc.KSP().create(backend.comm)
+        self.ksp.setOptionsPrefix(subproblem.prefix)
+        self.ksp.setFromOptions()
+        self._increment = None
 
     def solve(self) -> SolveStats:
         sub, backend = self.sub, self.backend
-        stats = SolveStats()
         x = backend.petsc_vector(sub.unknown)
         if sub.operator is not None:
             sub.operator.update()
-        first_norm = None
-        for iteration in range(self.max_iterations):
-            b = self._assemble_residual(x)
-            norm = b.norm()
-            if not np.isfinite(norm):
-                raise SolverError(f"{sub.name}: the residual is not finite")
-            first_norm = norm if first_norm is None else first_norm
-            if iteration > 0 and (norm < self.atol or norm < self.rtol * first_norm):
-                break
-            A, changed = self._assemble_jacobian()
-            if changed or iteration == 0:
-                self.ksp.setOperators(A)
-            if self._increment is None:
-                self._increment = A.createVecRight()
-            self._solve_linear(b)
-            reason = self.ksp.getConvergedReason()
-            if reason < 0:
-                raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {reason}); "
-                                  f"try other options under -{sub.prefix}")
-            stats.linear_iterations += max(self.ksp.getIterationNumber(), 1)
-            x.axpy(-1.0, self._increment)
-            backend.update_ghosts(sub.unknown)
-            stats.newton_iterations += 1
-            if sub.linear:
-                break
-        else:
-            raise SolverError(f"{sub.name}: Newton did not converge in {self.max_iterations} iterations "
-                              f"(residual {norm:.3e}, initial {first_norm:.3e})")
+        b = self._residual = self._assemble_residual(x)
+        if not np.isfinite(b.norm()):
+            raise SolverError(f"{sub.name}: the residual is not finite")
+        A, changed = self._assemble_jacobian()
+        if changed or self._increment is None:
+            self.ksp.setOperators(A, self._assemble_preconditioner(A))
+        if self._increment is None:
+            self._increment = A.createVecRight()
+        self._solve_linear(b)
+        reason = self.ksp.getConvergedReason()
+        if reason < 0:
+            raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {KSP_REASONS.get(reason, reason)}); "
+                              f"try other options under -{sub.prefix}")
+        x.axpy(-1.0, self._increment)
+        backend.update_ghosts(sub.unknown)
         if not np.isfinite(x.norm()):
             raise SolverError(f"{sub.name}: the solution is not finite")
-        return stats
+        return SolveStats(newton_iterations=1, linear_iterations=max(self.ksp.getIterationNumber(), 1),
+                          reason=reason)
 
     def _solve_linear(self, b):
         """KSP solve; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
@@ -167,3 +217,85 @@ class SubproblemSolver:
         self.ksp.setFromOptions()
         self.ksp.setOperators(*operators)
         self.ksp.solve(b, self._increment)
+
+
+class NewtonSolver(_Solver):
+    """PETSc SNES on the subproblem's residual and its UFL tangent (seed section 5.1)."""
+
+    defaults = NEWTON_DEFAULTS
+
+    def __init__(self, backend, subproblem, overrides: dict | None = None):
+        super().__init__(backend, subproblem, overrides)
+        self.snes = PETSc.SNES().create(backend.comm)
+        self.snes.setOptionsPrefix(subproblem.prefix)
+        state = backend.petsc_vector(subproblem.unknown)
+        # SNES iterates on its own vector: its line search evaluates F at trial points, which are
+        # copied into the unknown's function only while the residual is assembled
+        self._x = state.copy()
+        self._F = state.duplicate()
+        self.snes.setFunction(self._function, self._F)
+        self._tangent_matrices = None
+        self.snes.setFromOptions()
+        self.ksp = self.snes.getKSP()
+        self.history: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
+
+    # -- SNES callbacks ----------------------------------------------------------------------
+    def _load(self, x) -> None:
+        """Put the iterate ``x`` into the unknown's function (owned values and ghosts)."""
+        state = self.backend.petsc_vector(self.sub.unknown)
+        if x.handle != state.handle:
+            x.copy(state)
+        self.backend.update_ghosts(self.sub.unknown)
+
+    def _function(self, snes, x, F) -> None:
+        self._load(x)
+        self._assemble_residual(self.backend.petsc_vector(self.sub.unknown), b=F)
+
+    def _tangent(self, snes, x, J, P) -> None:
+        self._load(x)
+        self._assemble_jacobian()  # into the matrices handed to SNES (same objects)
+        if self.sub.preconditioner is not None:
+            self._assemble_preconditioner(None)
+
+    def _attach_tangent(self) -> None:
+        """Create the tangent (and preconditioning) matrices once, at the initial state."""
+        tangent, _ = self._assemble_jacobian()
+        preconditioner = self._assemble_preconditioner(tangent)
+        self.snes.setJacobian(self._tangent, tangent, preconditioner)
+        self._tangent_matrices = (tangent, preconditioner)
+
+    # -- one solve ---------------------------------------------------------------------------
+    def solve(self) -> SolveStats:
+        sub, backend = self.sub, self.backend
+        state = backend.petsc_vector(sub.unknown)
+        if sub.operator is not None:
+            sub.operator.update()
+        if self._tangent_matrices is None:
+            self._attach_tangent()
+        state.copy(self._x)
+        self.snes.setConvergenceHistory(length=self.snes.getTolerances()[3] + 1, reset=True)
+        try:
+            self.snes.solve(None, self._x)
+        except PETSc.Error as error:
+            raise SolverError(f"{sub.name}: the nonlinear solve failed (PETSc error {error.ierr}); "
+                              f"try other options under -{sub.prefix}") from None
+        self.history = tuple(np.array(h) for h in self.snes.getConvergenceHistory())
+        reason = self.snes.getConvergedReason()
+        if reason < 0:
+            self._load(self._x)  # leave the last iterate in the field, for the record
+            raise SolverError(self._failure(reason))
+        self._load(self._x)
+        if not np.isfinite(state.norm()):
+            raise SolverError(f"{sub.name}: the solution is not finite")
+        return SolveStats(newton_iterations=self.snes.getIterationNumber(),
+                          linear_iterations=self.snes.getLinearSolveIterations(), reason=reason)
+
+    def _failure(self, reason: int) -> str:
+        """One line: which solve, why SNES stopped, how far it got, where to change options."""
+        residuals = self.history[0]
+        progress = (f", residual {residuals[-1]:.3e} from {residuals[0]:.3e}" if len(residuals) else "")
+        detail = SNES_REASONS.get(reason, str(reason))
+        if reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE:
+            detail += f" (KSP: {KSP_REASONS.get(self.ksp.getConvergedReason(), self.ksp.getConvergedReason())})"
+        return (f"{self.sub.name}: Newton did not converge: {detail} after {self.snes.getIterationNumber()} "
+                f"iterations{progress}; options under -{self.sub.prefix}")
