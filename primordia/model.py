@@ -36,7 +36,7 @@ class Model:
                  mesh: MeshData | dict | None = None, dt: float | None = None, t_final: float | None = None,
                  t_start: float = 0.0, output: dict | None = None, physics_options: dict | None = None,
                  coupling: str | dict = "sequential", solver: dict | None = None, backend: str = "fenicsx",
-                 name: str = "", base_dir: str | Path = "."):
+                 name: str = "", base_dir: str | Path = ".", growth_law: str | dict | None = None):
         self.name = name
         self.backend = backend
         self.base_dir = Path(base_dir)
@@ -49,6 +49,9 @@ class Model:
         self.kinetics_spec = _kinetics_table(kinetics, self.physics_classes)
         self.kinetics_class = (lookup("kinetics", self.kinetics_spec["name"])
                                if self.kinetics_spec is not None else None)
+        self.growth_law_spec = _growth_law_table(growth_law, self.physics_classes)
+        self.growth_law_class = (lookup("growth_laws", self.growth_law_spec["name"])
+                                 if self.growth_law_spec is not None else None)
         self.parameters = self._parameter_set(parameters or {})
         self.physics_options = self._physics_options(physics_options or {})
         self.t_start, self.dt, self.t_final = _time(t_start, dt, t_final)
@@ -73,6 +76,7 @@ class Model:
             physics_options=config.get("physics"), coupling=config.get("coupling", {}),
             solver=config.get("solver"), backend=model_table.get("backend", "fenicsx"),
             name=model_table.get("name", ""), base_dir=config.get("_base_dir", "."),
+            growth_law=config.get("growth_law"),
         )
 
     @classmethod
@@ -82,8 +86,9 @@ class Model:
     # -- validation pieces -------------------------------------------------------------------
     def _parameter_set(self, overrides: dict) -> ParameterSet:
         declarations = [p for cls in self.physics_classes for p in cls.parameters]
-        if self.kinetics_class is not None:
-            declarations += list(self.kinetics_class.parameters)
+        for piece in (self.kinetics_class, self.growth_law_class):
+            if piece is not None:
+                declarations += list(piece.parameters)
         if not isinstance(overrides, dict):
             raise ConfigError("[parameters] must be a table of name = value")
         return ParameterSet(declarations, overrides)
@@ -124,8 +129,15 @@ class Model:
         if self.kinetics_class is not None:
             options = {k: v for k, v in self.kinetics_spec.items() if k != "name"}
             self.kinetics_object = self.kinetics_class(self.parameters, **options)
-        self.physics_objects = [cls(self.parameters, kinetics=self.kinetics_object, **self.physics_options[cls.name])
+        self.growth_law_object = None
+        if self.growth_law_class is not None:
+            options = {k: v for k, v in self.growth_law_spec.items() if k != "name"}
+            self.growth_law_object = self.growth_law_class(self.parameters, **options)
+        self.physics_objects = [cls(self.parameters, kinetics=self.kinetics_object, growth_law=self.growth_law_object,
+                                    **self.physics_options[cls.name])
                                 for cls in self.physics_classes]
+        for module in self.physics_objects:
+            module.check_composition(self.physics_objects)
         fields = [f.name for p in self.physics_objects for f in p.fields()]
         snapshot = self.output["snapshot_fields"]
         if snapshot is None:
@@ -166,6 +178,8 @@ class Model:
         }
         if self.kinetics_object is not None:
             resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.opts}
+        if self.growth_law_object is not None:
+            resolved["growth_law"] = {"name": self.growth_law_object.name, **self.growth_law_object.opts}
         if self.solver:
             resolved["solver"] = copy.deepcopy(self.solver)
         return _without_none(resolved)
@@ -209,6 +223,27 @@ def _kinetics_table(kinetics, physics_classes) -> dict | None:
     if not isinstance(kinetics, dict):
         raise ConfigError("[kinetics] must be a table with a name")
     return {"name": "painter2018", **kinetics}
+
+
+def _growth_law_table(growth_law, physics_classes) -> dict | None:
+    """The ``[growth_law]`` table (name + options) when a module needs one; refused when none does."""
+    needing = [cls.name for cls in physics_classes if cls.needs_growth_law]
+    if not needing:
+        if growth_law:
+            raise ConfigError("[growth_law] is given but no physics module of this model grows "
+                              "(add poroelastic_growth to model.physics)")
+        return None
+    if growth_law is None:
+        from primordia.core.plugins import registry
+
+        known = ", ".join(sorted(registry("growth_laws"))) or "none"
+        raise ConfigError(f"physics {needing[0]} needs a growth law: add [growth_law] name = \"...\" "
+                          f"(registered: {known})")
+    if isinstance(growth_law, str):
+        return {"name": growth_law}
+    if not isinstance(growth_law, dict) or not isinstance(growth_law.get("name"), str):
+        raise ConfigError("[growth_law] must be a table with a name (e.g. name = \"seed2d\")")
+    return dict(growth_law)
 
 
 def _time(t_start, dt, t_final) -> tuple[float, float, float]:

@@ -24,6 +24,13 @@ from dolfinx import fem
 from petsc4py import PETSc
 
 
+def basix_reference_vertices(cell_name: str) -> np.ndarray:
+    """Vertices of the reference cell (basix numbering), the points where extrema are sampled."""
+    import basix
+
+    return np.asarray(basix.geometry(basix.cell.string_to_type(cell_name)), dtype=float)
+
+
 class _QuietBuild(logging.Filter):
     """Drop the compiler chatter setuptools logs at INFO while FFCx JIT-compiles."""
 
@@ -128,6 +135,21 @@ class FenicsxBackend(Backend):
 
     def assemble_scalar(self, form) -> float:
         return self.comm.allreduce(fem.assemble_scalar(self._form(form)))
+
+    def extrema(self, expression, mesh) -> tuple[float, float]:
+        from mpi4py import MPI
+
+        key = id(expression)
+        hit = self._compiled.get(key)
+        if hit is None or hit[0] is not expression:
+            vertices = basix_reference_vertices(mesh.topology.cell_name())
+            hit = (expression, fem.Expression(expression, vertices))
+            self._compiled[key] = hit
+        cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
+        values = hit[1].eval(cells)
+        low = float(values.min()) if values.size else np.inf
+        high = float(values.max()) if values.size else -np.inf
+        return self.comm.allreduce(low, op=MPI.MIN), self.comm.allreduce(high, op=MPI.MAX)
 
     def assemble_residual(self, residual, jacobian, bcs, state, b=None):
         compiled = self._form(residual)

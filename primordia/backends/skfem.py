@@ -40,6 +40,7 @@ from primordia.backends.ufl_numpy import (
     IntegralPlan,
     UnsupportedUFL,
     cell_quantities,
+    evaluate_integrand,
     integrate_integrand,
     preprocess_form,
     reference_quadrature,
@@ -879,6 +880,20 @@ class SkfemBackend(Backend):
                 local = space.vertex_local_dofs(block)
                 result[data.cells, block.component - components.start] = function.array[block.cell_dofs[:, local]]
         return result[:, 0] if shape == () else result
+
+    def extrema(self, expression, mesh) -> tuple[float, float]:
+        from ufl.algorithms.apply_algebra_lowering import apply_algebra_lowering
+        from ufl.algorithms.apply_derivatives import apply_derivatives
+
+        plan = IntegralPlan("cell", None, apply_derivatives(apply_algebra_lowering(expression)), 1, "vertex")
+        rule = self._rule(mesh, plan)
+        low, high = np.inf, -np.inf
+        chunk = max(1, _CHUNK_VALUES // rule.num_points)
+        for start in range(0, mesh.mesh_data.num_cells, chunk):
+            context = _Chunk(mesh, rule, slice(start, min(start + chunk, mesh.mesh_data.num_cells)), None)
+            values = evaluate_integrand(plan.integrand, context)
+            low, high = min(low, float(values.min())), max(high, float(values.max()))
+        return low, high
 
     # -- sizes --------------------------------------------------------------------------
     def num_cells(self, mesh) -> int:

@@ -121,6 +121,14 @@ class Backend(ABC):
         """Assemble a functional, summed over all ranks."""
 
     @abstractmethod
+    def extrema(self, expression, mesh) -> tuple[float, float]:
+        """Minimum and maximum of a scalar UFL expression over the vertices of every cell, on all ranks.
+
+        Evaluated cell by cell (so an expression discontinuous across cells, such
+        as det(I + grad u), is sampled on each side of a vertex).
+        """
+
+    @abstractmethod
     def assemble_residual(self, residual: ufl.Form, jacobian: ufl.Form, bcs: Sequence[BoundaryCondition],
                           state, b=None):
         """The Newton right-hand side F(state) with lifting (see module docstring)."""

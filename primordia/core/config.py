@@ -5,6 +5,7 @@ A configuration is a nested mapping with these tables (all optional but
 
     [model]        physics = ["chemotaxis"], backend = "fenicsx", name, description
     [kinetics]     name = "painter2018", plus the kinetics' own options
+    [growth_law]   name = "seed2d" | "seed3d", plus the law's own options (directions)
     [physics.NAME] options of one physics module
     [parameters]   model constants by their seed names (Table 3.1)
     [mesh]         type = "rectangle" | "box" | "file", ...
@@ -30,6 +31,7 @@ from primordia.core.errors import ConfigError
 SECTIONS = {
     "model": {"physics", "backend", "name", "description"},
     "kinetics": None,  # open: the kinetics validates its own options
+    "growth_law": None,  # open: the growth law validates its own options
     "physics": None,  # open: one sub-table per physics module
     "parameters": None,  # open: validated against the declared parameters
     "mesh": None,  # open: validated by primordia.core.meshes.mesh_from_config

@@ -11,7 +11,8 @@ in the group ``primordia``::
 Two kinds of hooks:
 
 * hooks that *contribute* (all answers are collected): physics modules,
-  kinetics, growth laws, backends, splitting schemes, outputs.  Each returns a
+  kinetics, growth laws, boundary-condition kinds, backends, splitting schemes,
+  outputs.  Each returns a
   list of classes (or :class:`~primordia.core.plugins.BackendEntry` for
   backends) carrying a unique ``name``.
 * hooks that *choose* (``firstresult``: the first non-None answer wins):
@@ -50,9 +51,22 @@ def primordia_kinetics() -> list[type]:
 def primordia_growth_laws() -> list[type]:
     """Growth laws of the finite-strain growth model (seed section 4, eqs. (4.13)-(4.15)).
 
-    Returns a list of classes; each has a unique ``name``.  Reserved: the
-    finite-strain poroelasticity that will read them is not built yet, so no
-    growth law is registered and nothing consumes this hook today.
+    Returns a list of classes (subclasses of ``primordia.physics.growth_laws.GrowthLaw``);
+    each has a unique ``name`` selected by ``[growth_law] name = "..."``.  A law
+    gives the growth factors gamma_i(fields, t, X) as UFL expressions; the growth
+    tensor F_g and the fluid source ell = ell_0 sum_i d gamma_i/dt are built from
+    them.  Built-in: ``seed2d`` (4.14), ``seed3d`` (4.13).
+    """
+
+
+@hookspec
+def primordia_boundary_conditions() -> list[type]:
+    """Boundary-condition kinds (subclasses of ``primordia.physics.boundary_conditions.Condition``).
+
+    Returns a list of classes; each has a unique ``kind`` used as ``type = "..."``
+    in a ``[[physics.NAME.boundary]]`` table, and contributes its own weak-form
+    terms or Dirichlet constraints.  Built-in: clamped, displacement,
+    normal_displacement, traction, robin (4.16a), fluid_flux, fluid_pressure.
     """
 
 

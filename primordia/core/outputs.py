@@ -73,6 +73,7 @@ class ScalarSeriesNetcdf(Output):
         for name, stats in run.field_statistics().items():
             row.update({f"{name}_integral": stats["integral"], f"{name}_min": stats["min"],
                         f"{name}_max": stats["max"]})
+        row.update(run.diagnostic_values())
         row.update(run.iteration_counts())
         if run.is_root and (not self.series.times or run.time > self.series.times[-1]):
             self.series.append(run.time, row)

@@ -34,6 +34,7 @@ class Simulation:
         self.time = model.t_start
         self.dt = model.dt
         self.iterations: dict[str, list[int]] = {}  # linear iterations per step, by subproblem
+        self.newton: dict[str, list[tuple[int, int]]] = {}  # (Newton iterations, SNES reason) per step, nonlinear ones
         self.coupling_iterations: dict[str, list[int]] = {}  # outer iterations per step, by scheme
         self._vertex_cache: tuple[int, dict] | None = None
 
@@ -80,12 +81,29 @@ class Simulation:
     def _initialise_fields(self):
         for physics in self.model.physics_objects:
             physics.initialise(self.disc)
+        for physics in self.model.physics_objects:
+            for subproblem in physics.initial_subproblems():
+                self._solve_initial(subproblem)
         self.disc.store_previous()
+
+    def _solve_initial(self, subproblem) -> None:
+        """One solve completing the initial state, in continuation stages when the subproblem asks for them."""
+        solver = self.solver_for(subproblem)
+        ramp, stages = subproblem.continuation or (None, 1)
+        for stage in range(1, stages + 1):
+            if ramp is not None:
+                ramp.value = stage / stages
+            try:
+                solver.solve()
+            except SolverError as error:
+                at = f" (continuation stage {stage}/{stages})" if ramp is not None else ""
+                raise SolverError(f"initial state at t = {self.time:g}{at}: {error}") from None
 
     def _create_solvers(self):
         self.scheme.build(self)
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
+        self.diagnostics = [d for physics in self.model.physics_objects for d in physics.diagnostics()]
 
     @staticmethod
     def _integrand(field):
@@ -140,10 +158,16 @@ class Simulation:
     def step(self) -> None:
         """Advance every field by one time step ``dt`` (the splitting scheme decides how)."""
         t_next = self.model.t_start + (self.step_index + 1) * self.dt
-        stats = self.scheme.advance(self, self.time, self.dt)
+        try:
+            stats = self.scheme.advance(self, self.time, self.dt)
+        except SolverError as error:
+            raise SolverError(f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g}): {error}") from None
         self.disc.set_time(t_next, self.dt)
+        nonlinear = {solver.sub.name for solver in self.solvers if not solver.sub.linear}
         for name, solve in stats.items():
             self.iterations.setdefault(name, []).append(solve.linear_iterations)
+            if name in nonlinear:
+                self.newton.setdefault(name, []).append((solve.newton_iterations, solve.reason))
         self.step_index += 1
         self.time = t_next
         self._check_finite()
@@ -217,10 +241,25 @@ class Simulation:
                        "min": extremes[name][0], "max": extremes[name][1]}
                 for name in self.disc.field_names()}
 
+    def diagnostic_values(self) -> dict[str, float]:
+        """The physics modules' derived quantities (integrals, extrema), by their recorded names."""
+        values = {}
+        for diagnostic in self.diagnostics:
+            if diagnostic.kind == "integral":
+                values[diagnostic.name] = self.backend.assemble_scalar(diagnostic.expression)
+            else:
+                low, high = self.backend.extrema(diagnostic.expression, self.disc.mesh)
+                values[f"{diagnostic.name}_min"], values[f"{diagnostic.name}_max"] = low, high
+        return values
+
     def iteration_counts(self) -> dict[str, float]:
-        """Linear iterations per subproblem and outer coupling iterations, of the last step."""
+        """Linear (and Newton) iterations per subproblem, SNES reasons and outer coupling iterations, of the last step."""
         counts = {f"{name.replace('.', '_')}_linear_iterations": float(its[-1])
                   for name, its in self.iterations.items() if its}
+        for name, record in self.newton.items():
+            if record:
+                counts[f"{name.replace('.', '_')}_newton_iterations"] = float(record[-1][0])
+                counts[f"{name.replace('.', '_')}_snes_reason"] = float(record[-1][1])
         counts.update({f"{scheme}_iterations": float(its[-1]) for scheme, its in self.coupling_iterations.items()})
         return counts
 
@@ -241,6 +280,8 @@ class Simulation:
             "ms_per_step": 1e3 * wall / self.step_index if self.step_index else None,
             "final": self.field_statistics(),
             "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items() if its},
+            "mean_newton_iterations": {name: float(np.mean([its for its, _ in record]))
+                                       for name, record in self.newton.items() if record},
             "mean_fixed_point_iterations": (float(np.mean(self.coupling_iterations["fixed_point"]))
                                             if self.coupling_iterations.get("fixed_point") else None),
             "splitting_scheme": self.scheme.name,

@@ -10,4 +10,13 @@ def primordia_physics():
     from primordia.physics.mechanochemical import MechanoChemical
     from primordia.physics.poroelastic_linear import LinearPoroelasticity
 
-    return [Chemotaxis, LinearPoroelasticity, ActiveStress, MechanoChemical]
+    from primordia.physics.poroelastic_growth import PoroelasticGrowth
+
+    return [Chemotaxis, LinearPoroelasticity, PoroelasticGrowth, ActiveStress, MechanoChemical]
+
+
+@hookimpl
+def primordia_growth_laws():
+    from primordia.physics.growth_laws import Seed2D, Seed3D
+
+    return [Seed2D, Seed3D]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ufl
 
+from primordia.core.errors import ConfigError
 from primordia.physics.base import Physics
 from primordia.physics.seed_parameters import ACTIVE_STRESS
 
@@ -31,6 +32,14 @@ class ActiveStress(Physics):
 
     def fields(self):
         return []
+
+    def check_composition(self, modules):
+        finite = [module.name for module in modules if module.finite_strain]
+        if finite:
+            raise ConfigError(
+                f"active_stress is the small-strain active stress of seed eq. (2.5) and cannot join {finite[0]}: "
+                f"its (lambda + 2 mu/3) has no value for the incompressible neo-Hookean solid of (4.11), whose "
+                f"constraint J_e = 1 would absorb an isotropic stress into psi; remove active_stress from model.physics")
 
     def setup(self, disc):
         mu, lmbda = disc.field("lame_constants")  # provided by the poroelasticity module

@@ -44,10 +44,16 @@ class Subproblem:
     """One (non)linear solve: find ``unknown`` with ``residual(unknown) = 0``.
 
     ``jacobian`` is ``ufl.derivative(residual, unknown)``.  ``linear`` marks a
-    residual affine in the unknown (one Newton step is exact);
+    residual affine in the unknown (one Newton step is exact, a KSP solve);
+    otherwise the solve is Newton's method through PETSc SNES.
     ``constant_jacobian`` marks a Jacobian that does not change between time
     steps (assembled and factorised once).  ``operator`` is an optional
     algebraic term (see :class:`AlgebraicOperator`) added to both.
+    ``preconditioner`` is an optional bilinear form assembled into the
+    preconditioning matrix instead of the Jacobian (e.g. a sparse Schur
+    complement approximation).  ``continuation`` = (constant, steps) asks for the
+    solve to be done in ``steps`` stages with the UFL ``constant`` set to
+    1/steps, 2/steps, ..., 1 (load continuation: each stage starts from the last).
     ``petsc_options`` are defaults for the options prefix ``prefix``.
     """
 
@@ -59,11 +65,29 @@ class Subproblem:
     linear: bool = True
     constant_jacobian: bool = False
     operator: "AlgebraicOperator | None" = None
+    preconditioner: ufl.Form | None = None
+    continuation: tuple[Any, int] | None = None
     petsc_options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def prefix(self) -> str:
         return self.name.replace(".", "_") + "_"
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """A derived quantity a physics module asks the run to record in its series.
+
+    ``kind`` is ``"integral"`` (``expression`` is then a functional, a UFL form
+    with its measure, recorded as ``NAME``) or ``"extrema"`` (``expression`` is a
+    UFL expression, whose minimum and maximum over the cell vertices are recorded
+    as ``NAME_min`` and ``NAME_max``).
+    """
+
+    name: str
+    kind: str
+    expression: Any
+    description: str = ""
 
 
 class AlgebraicOperator(ABC):
@@ -98,15 +122,23 @@ class Physics(ABC):
     requires: ClassVar[tuple[str, ...]] = ()
     #: Whether the module needs a reaction kinetics plugin.
     needs_kinetics: ClassVar[bool] = False
+    #: Whether the module needs a growth-law plugin (``[growth_law]``).
+    needs_growth_law: ClassVar[bool] = False
+    #: Whether the module states its balance laws at finite strain on a reference configuration.
+    finite_strain: ClassVar[bool] = False
 
-    def __init__(self, params: Mapping[str, float], kinetics=None, **options):
+    def __init__(self, params: Mapping[str, float], kinetics=None, growth_law=None, **options):
         self.params = params
         self.kinetics = kinetics
+        self.growth_law = growth_law
         self.opts = merge_options(f"physics {self.name}", self.options, options)
         self.validate_options()
 
     def validate_options(self) -> None:
         """Check ``self.opts``; raise :class:`ConfigError` naming a bad value."""
+
+    def check_composition(self, modules: list["Physics"]) -> None:
+        """Refuse, in one line (:class:`ConfigError`), a model this module cannot join."""
 
     @abstractmethod
     def fields(self) -> list[FieldSpec]:
@@ -124,8 +156,16 @@ class Physics(ABC):
     def subproblems(self) -> list[Subproblem]:
         """The solves of one time step of this module, in order."""
 
+    def initial_subproblems(self) -> list[Subproblem]:
+        """Solves that complete the initial state, run once after every module's ``initialise``."""
+        return []
+
     def before_step(self, t: float, dt: float) -> None:
         """Update anything time-dependent before the solves of the step ending at ``t``."""
+
+    def diagnostics(self) -> list[Diagnostic]:
+        """Derived quantities to record in the run's series (after ``setup``)."""
+        return []
 
 
 def jacobian_is_constant(jacobian: ufl.Form, disc) -> bool:

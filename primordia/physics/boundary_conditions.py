@@ -8,20 +8,32 @@ Given per named boundary in a config::
     value = ["0", "s0 * sin(pi * t / t_hat)"]
     constants = { s0 = 1500.0, t_hat = 320.0 }
 
-Kinds (seed eqs. (2.6b)-(2.6c) and beyond):
+Kinds (seed eqs. (2.7b)-(2.7c), (4.16a)-(4.16b) and beyond).  The same kinds
+serve the small-strain model (on the domain) and the finite-strain growth model
+(on the reference configuration Omega_0, normal N_0, first Piola-Kirchhoff
+stress P = P_e + P_f):
 
-* ``clamped``              u = 0                                (Dirichlet, seed (2.6b))
+* ``clamped``              u = 0                                (Dirichlet, seed (2.7b))
 * ``displacement``         u = value(x, t)                      (Dirichlet, vector formula)
 * ``normal_displacement``  u . n = value(x, t), tangential traction free
-                           (axis-aligned boundaries: fixes the normal component)
-* ``traction``             sigma n = value(x, t)                (Neumann, seed (2.6c))
-* ``fluid_flux``           (kappa/eta) grad p . n = value(x, t) (Neumann; 0 = no flux, seed (2.6b))
-* ``fluid_pressure``       p = value(x, t)                      (Dirichlet, seed (2.6c))
+                           (axis-aligned boundaries: fixes the normal component;
+                           u . N_0 = 0 on Gamma_0 of seed section 5.4)
+* ``traction``             sigma n = value(x, t)                (Neumann, seed (2.7c));
+                           P N_0 = value (nominal traction) at finite strain
+* ``robin``                springs: P N_0 + xi_R J F^-T u = 0 (seed (4.16a)), value = xi_R;
+                           sigma n + xi_R u = 0 at small strain
+* ``fluid_flux``           (kappa/eta) grad p . n = value(x, t) (Neumann; 0 = no flux, seed (2.7b),
+                           (4.16b) on Gamma_0 with J C^-1 Grad p . N_0)
+* ``fluid_pressure``       p = value(x, t)                      (Dirichlet, seed (2.7c); p_D of (4.16b))
 
 A condition either adds weak-form terms (:meth:`terms`) or Dirichlet constraints
 (:meth:`dirichlet`) and updates its time-dependent values (:meth:`update`); the
 physics module sums whatever its conditions contribute, without asking what
-kind they are.  A new kind is a new subclass listed in :data:`KINDS`.
+kind they are.  Kinds are plugins: each class carries its ``kind`` and is
+contributed through the ``primordia_boundary_conditions`` hook (the built-ins
+below are, by :func:`primordia_boundary_conditions`), so a new kind needs no edit here.
+Terms that depend on the deformation read it from the run's kinematics
+(``disc.kinematics``, :mod:`primordia.physics.kinematics`).
 """
 
 from __future__ import annotations
@@ -33,17 +45,27 @@ import ufl
 
 from primordia.core.errors import ConfigError
 from primordia.core.expressions import Formula, VectorFormula
+from primordia.core.plugins import hookimpl
 
 ALLOWED_KEYS = {"boundary", "type", "value", "constants"}
 
 
 class Condition:
-    """One condition on one named boundary."""
+    """One condition on one named boundary (subclass it for a new kind, with a unique ``kind``)."""
 
+    #: Name used in ``type = "..."`` of a ``[[physics.NAME.boundary]]`` table.
     kind: ClassVar[str]
-    field: ClassVar[str]  # the field whose balance law the condition belongs to
+    #: The field whose balance law the condition belongs to.
+    field: ClassVar[str]
+    #: The registry name of the kind (its ``kind``).
+    name: ClassVar[str]
     vector_value: ClassVar[bool] = False
     default_value = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "kind" in cls.__dict__:
+            cls.name = cls.kind
 
     def __init__(self, boundary: str, value=None, constants=None, gdim: int = 2):
         self.boundary = boundary
@@ -126,6 +148,24 @@ class Traction(Condition):
         return {"u": [-ufl.inner(traction, disc.test("u")) * disc.ds(self.boundary)]}
 
 
+class Robin(Condition):
+    """Springs on the boundary: seed (4.16a), (P_e + P_f) N_0 + xi_R J F^-T u = 0; value = xi_R.
+
+    Weak form: + xi_R J F^-T u . w on the boundary.  At small strain (no deformation
+    gradient in the kinematics) J F^-T = I: sigma n + xi_R u = 0.
+    """
+
+    kind, field = "robin", "u"
+
+    def terms(self, disc):
+        stiffness = self.formula.ufl(disc.x, disc.t)
+        u, w, motion = disc.field("u"), disc.test("u"), disc.kinematics
+        spring = u
+        if motion.deformation_gradient is not None:
+            spring = motion.volume_ratio * ufl.dot(ufl.inv(motion.deformation_gradient).T, u)
+        return {"u": [stiffness * ufl.inner(spring, w) * disc.ds_degree(motion.quadrature_degree, self.boundary)]}
+
+
 class FluidFlux(Condition):
     kind, field, default_value = "fluid_flux", "p", "0"
 
@@ -138,7 +178,20 @@ class FluidPressure(_Dirichlet):
     kind, field = "fluid_pressure", "p"
 
 
-KINDS = {cls.kind: cls for cls in (Clamped, Displacement, NormalDisplacement, Traction, FluidFlux, FluidPressure)}
+#: The built-in kinds, contributed through the ``primordia_boundary_conditions`` hook.
+BUILT_IN = (Clamped, Displacement, NormalDisplacement, Traction, Robin, FluidFlux, FluidPressure)
+
+
+@hookimpl
+def primordia_boundary_conditions():
+    return list(BUILT_IN)
+
+
+def condition_kinds() -> dict[str, type]:
+    """Every registered kind (built-in and plugins) by name."""
+    from primordia.core.plugins import registry
+
+    return {name: cls for name, (cls, _) in registry("boundary_conditions").items()}
 
 
 def conditions_from_config(tables, mesh_data, gdim: int) -> list[Condition]:
@@ -156,13 +209,14 @@ def conditions_from_config(tables, mesh_data, gdim: int) -> list[Condition]:
             raise ConfigError(f"unknown key '{sorted(unknown)[0]}' in a boundary condition "
                               f"(known: {', '.join(sorted(ALLOWED_KEYS))})")
         kind = table.get("type")
-        if kind not in KINDS:
-            raise ConfigError(f"unknown boundary condition type {kind!r} (known: {', '.join(KINDS)})")
+        kinds = condition_kinds()
+        if kind not in kinds:
+            raise ConfigError(f"unknown boundary condition type {kind!r} (known: {', '.join(kinds)})")
         boundary = table.get("boundary")
         if boundary not in mesh_data.boundaries:
             raise ConfigError(f"boundary condition '{kind}' names boundary {boundary!r}, which the mesh lacks "
                               f"(it has: {', '.join(mesh_data.boundaries) or 'none'})")
-        conditions.append(KINDS[kind](boundary, table.get("value"), table.get("constants"), gdim))
+        conditions.append(kinds[kind](boundary, table.get("value"), table.get("constants"), gdim))
     return conditions
 
 

@@ -82,6 +82,7 @@ class Case:
     options: dict = field(default_factory=dict)
     parameters: dict = field(default_factory=dict)
     kinetics: dict | None = None
+    growth_law: dict | None = None
     cells: int = 5
     mesh_perturbation: float = 0.0
     steps: int = 3
@@ -93,7 +94,7 @@ class Case:
             mesh = perturbed(mesh, self.mesh_perturbation * 2.0 / self.cells, seed=3)
         return Model(physics=self.physics, kinetics=self.kinetics, parameters=self.parameters, mesh=mesh,
                      dt=self.dt, t_final=(self.steps + 1) * self.dt, physics_options=self.options,
-                     output={"pictures": False, "series_every": 10**6})
+                     output={"pictures": False, "series_every": 10**6}, growth_law=self.growth_law)
 
 
 def _chemotaxis(flux_scheme: str) -> dict:
@@ -105,6 +106,16 @@ def _poroelasticity(degree: int, boundary: list, **extra) -> dict:
 
 
 PAINTER2018 = {"name": "painter2018", "priming_wave": True}
+#: Finite-strain growth (seed section 4): every condition kind it uses, the seed's 2D law, faster growth.
+GROWTH_CONDITIONS = [
+    {"boundary": "left", "type": "normal_displacement"},
+    {"boundary": "right", "type": "robin", "value": "0.5 * (1 + 0.2 * x[1])"},
+    {"boundary": "top", "type": "robin", "value": "0.3"},
+    {"boundary": "bottom", "type": "traction", "value": ["0.1 * t", "-0.2 * x[0] * t"]},
+    {"boundary": "top", "type": "fluid_pressure", "value": "0.05 * x[0] * t"},
+    {"boundary": "right", "type": "fluid_flux", "value": "0.1 * x[1]"},
+]
+GROWTH = {"delta_2": 0.5, "delta_3": 0.4, "kappa": 0.05, "C_0": 0.1, "alpha_BW": 0.5, "ell_0": 0.2, "xi_f": 0.3}
 CASES = [
     Case("chemotaxis-exponential_fitting", ["chemotaxis"], {"chemotaxis": _chemotaxis("exponential_fitting")},
          {**CHEMISTRY, "omega_3": 1.0}, PAINTER2018),
@@ -124,6 +135,14 @@ CASES = [
     Case("ex01b-coupled-P2-P1-galerkin", ["chemotaxis", "poroelasticity", "active_stress", "mechanochemical"],
          {"chemotaxis": _chemotaxis("galerkin"), "poroelasticity": _poroelasticity(2, EX01B_CONDITIONS)},
          {**CHEMISTRY, **MECHANICS, "tau": 2.0, "xi_f": 0.5, "zeta": 1.0, "omega_3": 1.0}, PAINTER2018,
+         mesh_perturbation=0.15),
+    Case("ex02a-growth-fitted", ["chemotaxis", "poroelastic_growth", "mechanochemical"],
+         {"chemotaxis": _chemotaxis("exponential_fitting"), "poroelastic_growth": {"boundary": GROWTH_CONDITIONS}},
+         {**CHEMISTRY, **GROWTH, "omega_3": 1.0}, PAINTER2018, growth_law={"name": "seed2d"}, cells=4),
+    Case("ex02a-growth-galerkin-conservative", ["chemotaxis", "poroelastic_growth", "mechanochemical"],
+         {"chemotaxis": {**_chemotaxis("galerkin"), "accumulation": "conservative"},
+          "poroelastic_growth": {"boundary": GROWTH_CONDITIONS, "quadrature_degree": 3}},
+         {**CHEMISTRY, **GROWTH, "omega_3": 1.0}, PAINTER2018, growth_law={"name": "seed2d"}, cells=4,
          mesh_perturbation=0.15),
 ]
 

@@ -1,0 +1,181 @@
+r"""Growth laws of the finite-strain growth model (seed section 4): plugins that give F_g.
+
+A growth law gives the growth factors gamma_i(m, t, X), one per direction k_i of
+a local orthonormal frame of the reference configuration, and the growth
+deformation gradient is built from them as printed after seed eq. (4.12):
+
+    F_g = I + sqrt(gamma_1) k_1 (x) k_1 + sqrt(gamma_2) k_2 (x) k_2 [+ gamma_3 k_3 (x) k_3]
+
+(in 2D only gamma_1, gamma_2 on k_1, k_2).  As printed, the in-plane factors enter
+through their square roots and gamma_3 does not (one of the seed's printed
+inconsistencies, kept: a law that wants otherwise overrides :meth:`GrowthLaw.stretches`).
+
+Built-ins (registered through ``primordia_growth_laws``, chosen by ``[growth_law] name``):
+
+* ``seed3d``, seed eq. (4.13): gamma_1 = gamma_2 = delta_1 t, gamma_3 = delta_2 t + delta_3 m/(1 + m^2);
+* ``seed2d``, seed eq. (4.14): gamma_1 = gamma_2 = delta_2 t + delta_3 m/(1 + m^2).
+
+The fluid source of (4.12b) is derived from the law, not typed in per law:
+
+    ell = ell_0 sum_i d gamma_i / dt,   d gamma_i/dt = d gamma_i/d t + sum_f d gamma_i/d f  df/dt
+
+by UFL differentiation through the time and the fields the law reads
+(:func:`fluid_source`).  For ``seed3d`` this is (4.15) with its printed factor
+delta_3 dropped once: ell_0 (2 delta_1 + delta_2 + d_m(gamma_3) d_t m), since
+d_m(gamma_3) = delta_3 (1 - m^2)/(1 + m^2)^2 already carries delta_3.  For
+``seed2d`` it gives ell = 2 ell_0 (delta_2 + delta_3 (1 - m^2)/(1 + m^2)^2 d_t m):
+both in-plane factors grow, so the 2D source is twice the rate of one factor.
+
+Square roots of non-positive factors
+------------------------------------
+sqrt(gamma) has no real value for gamma < 0 (a law driven by a density that
+an oscillating scheme took below zero) and an infinite derivative at 0 (the
+3D law at t = 0).  Every root is taken of the smooth positive part,
+
+    sqrt+(gamma) = sqrt( (gamma + sqrt(gamma^2 + eps^2)) / 2 ),   eps = 1e-12,
+
+which equals sqrt(gamma) to round-off for gamma >> eps, tends to 0 (no growth)
+for gamma <= 0, is never NaN, and has finite derivatives everywhere, so Newton
+tangents (also with respect to m, in a monolithic solve) stay finite.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+import ufl
+
+from primordia.core.config import merge_options
+from primordia.core.errors import ConfigError
+from primordia.core.parameters import Parameter
+
+#: Regularisation of the square roots of growth factors (see the module docstring).
+SQRT_EPSILON = 1e-12
+
+
+def positive_sqrt(gamma, ops=ufl):
+    """sqrt+(gamma) = sqrt((gamma + sqrt(gamma^2 + eps^2)) / 2): sqrt(gamma) for gamma > 0, -> 0 below, never NaN."""
+    return ops.sqrt(0.5 * (gamma + ops.sqrt(gamma * gamma + SQRT_EPSILON**2)))
+
+
+class GrowthLaw(ABC):
+    """Growth factors gamma_i(fields, t, X) on orthonormal directions k_i (seed section 4)."""
+
+    #: Name under which the law is selected in a config (``[growth_law] name``).
+    name: ClassVar[str]
+    #: Parameters the law reads, with defaults and where they come from.
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    #: Fields the law reads (e.g. ``("m",)``), provided by other physics modules.
+    requires: ClassVar[tuple[str, ...]] = ()
+    #: Spatial dimensions the law is written for.
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    #: Options of the ``[growth_law]`` table, with defaults.
+    options: ClassVar[Mapping[str, Any]] = {"directions": None}
+
+    def __init__(self, params: Mapping[str, float], **options):
+        self.params = params
+        self.opts = merge_options(f"growth law {self.name}", self.options, options)
+        if self.opts["directions"] is not None:
+            self.frame(len(self.opts["directions"]))  # validate now, one line
+
+    @abstractmethod
+    def factors(self, fields: Mapping[str, Any], t, X, dimension: int) -> list:
+        """gamma_1, ..., gamma_d (UFL expressions or numbers, dimensionless) at ``fields``, time ``t``, point ``X``."""
+
+    def check_dimension(self, dimension: int) -> None:
+        if dimension not in self.dimensions:
+            raise ConfigError(f"growth law {self.name} is written for {' or '.join(map(str, self.dimensions))}D, "
+                              f"the mesh is {dimension}D")
+
+    def frame(self, dimension: int) -> np.ndarray:
+        """The directions k_1, ..., k_d as rows (default: the coordinate axes), checked orthonormal."""
+        given = self.opts["directions"]
+        if given is None:
+            return np.eye(dimension)
+        try:
+            frame = np.array(given, dtype=float)
+        except (TypeError, ValueError):
+            frame = None
+        if frame is None or frame.shape != (dimension, dimension) or not np.all(np.isfinite(frame)):
+            raise ConfigError(f"growth_law.directions must be {dimension} vectors of {dimension} numbers, "
+                              f"got {given!r}")
+        if not np.allclose(frame @ frame.T, np.eye(dimension), atol=1e-10):
+            raise ConfigError(f"growth_law.directions must be orthonormal, got {given!r}")
+        return frame
+
+    def stretches(self, gammas: Sequence) -> list:
+        """The coefficients of k_i (x) k_i in F_g - I, as printed after (4.12): roots in-plane, gamma_3 as is."""
+        return [positive_sqrt(g) if i < 2 else g for i, g in enumerate(gammas)]
+
+    def growth_tensor(self, fields: Mapping[str, Any], t, X, dimension: int):
+        """F_g = I + sum_i s_i k_i (x) k_i (the unnumbered equation after seed (4.12)), a UFL tensor."""
+        frame = self.frame(dimension)
+        tensor = ufl.Identity(dimension)
+        for stretch, k in zip(self.stretches(self.factors(fields, t, X, dimension)), frame):
+            direction = ufl.as_vector([float(c) for c in k])
+            tensor = tensor + stretch * ufl.outer(direction, direction)
+        return tensor
+
+
+def saturating(m):
+    """m / (1 + m^2): the cell-driven growth of (4.13), (4.14) (the saturation of the active stress (2.5))."""
+    return m / (1.0 + m * m)
+
+
+class Seed3D(GrowthLaw):
+    """Seed eq. (4.13): transversely isotropic growth at a constant rate in-plane, driven by m along k_3."""
+
+    name = "seed3d"
+    dimensions = (3,)
+    requires = ("m",)
+    parameters = (
+        Parameter("delta_1", 1.0 / 52.0, "in-plane growth rate (seed eq. (4.13))", source="seed section 5.5"),
+        Parameter("delta_2", 0.0, "growth rate along k_3 (seed eq. (4.13))", constraint="nonnegative",
+                  source="seed section 5.5"),
+        Parameter("delta_3", 1.0 / 104.0, "cell-driven growth along k_3 (seed eq. (4.13))",
+                  constraint="nonnegative", source="seed section 5.5"),
+    )
+
+    def factors(self, fields, t, X, dimension):
+        p = self.params
+        in_plane = p["delta_1"] * t
+        return [in_plane, in_plane, p["delta_2"] * t + p["delta_3"] * saturating(fields["m"])]
+
+
+class Seed2D(GrowthLaw):
+    """Seed eq. (4.14): isotropic in-plane growth at a constant rate plus a cell-driven part."""
+
+    name = "seed2d"
+    dimensions = (2,)
+    requires = ("m",)
+    parameters = (
+        Parameter("delta_2", 0.15, "growth rate (seed eq. (4.14))", constraint="nonnegative",
+                  source="seed section 5.4"),
+        Parameter("delta_3", 0.045, "cell-driven growth (seed eq. (4.14))", constraint="nonnegative",
+                  source="seed section 5.4"),
+    )
+
+    def factors(self, fields, t, X, dimension):
+        p = self.params
+        gamma = p["delta_2"] * t + p["delta_3"] * saturating(fields["m"])
+        return [gamma, gamma]
+
+
+def fluid_source(law: GrowthLaw, ell_0: float, fields: Mapping[str, Any], rates: Mapping[str, Any], t, X,
+                 dimension: int):
+    """ell = ell_0 sum_i d gamma_i/dt (seed eq. (4.15), general form), differentiated through t and the fields.
+
+    ``rates`` holds d f/dt for every field f the law reads (e.g. (m - m^n)/dt).
+    """
+    time = ufl.variable(t)
+    variables = {name: ufl.variable(value) for name, value in fields.items()}
+    total = 0
+    for gamma in law.factors(variables, time, X, dimension):
+        gamma = ufl.as_ufl(gamma)
+        total = total + ufl.diff(gamma, time)
+        for name, variable in variables.items():
+            total = total + ufl.diff(gamma, variable) * rates[name]
+    return ell_0 * total

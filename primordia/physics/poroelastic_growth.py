@@ -1,0 +1,268 @@
+r"""Finite-strain poroelasticity with growth (seed section 4, eqs. (4.5), (4.11), (4.12a)-(4.12c), (4.16)).
+
+Unknowns on the reference configuration Omega_0 (Taylor-Hood, seed section 5.1):
+the displacement u (P2 vector), the solid pressure psi (P1, the Lagrange
+multiplier of J_e = 1) and the fluid pressure p (P1), solved together by
+Newton's method (PETSc SNES):
+
+    rho u_tt - Div(P_e + P_f) = 0                                             (4.12a)
+    d/dt (C_0 p + alpha_BW (tr C - d)) - (1/J) Div((kappa/eta) J C^-1 Grad p) = ell   (4.12b)
+    J_e = 1                                                                   (4.12c)
+
+with F = I + Grad u, C = F^T F, J = det F, the Lee decomposition F = F_e F_g
+(4.5), J_e = J / J_g, the neo-Hookean effective stress and the fluid stress
+
+    P_e = J (mu B_e - psi I) F^-T,   B_e = F_e F_e^T                          (4.11)
+    P_f = -alpha_BW J p F^-T                                                  (after (4.12c))
+
+F_g and the fluid source ell = ell_0 sum_i d gamma_i/dt come from a growth-law
+plugin (:mod:`primordia.physics.growth_laws`, ``[growth_law] name``): growth
+driven by the cell density m is declared there, where it couples.  Boundary
+conditions per named boundary of Omega_0 (:mod:`primordia.physics.boundary_conditions`):
+the springs of (4.16a) (``robin``), u . N_0 = 0 (``normal_displacement``),
+p = p_D (``fluid_pressure``), no fluid flux (the natural condition).
+
+Discretisation in time (backward Euler) and weak forms
+-------------------------------------------------------
+* momentum: rho (u - u^n - dt v^n)/dt^2 . w + (P_e + P_f) : Grad w (v^n the velocity
+  of the last step, as in the linear model);
+* fluid mass, in conservative form and multiplied by J:
+  J [(C_0 p + alpha_BW (tr C - d)) - (C_0 p^n + alpha_BW (tr C^n - d))]/dt q
+  + (kappa/eta) J C^-1 Grad p . Grad q - J ell q;
+* constraint: -(J - J_g) phi, i.e. J_e = 1 multiplied by J_g > 0, which makes the
+  (u, psi) blocks of the tangent each other's transpose.
+Integrals use a fixed quadrature degree (option ``quadrature_degree``, default 4):
+the integrands are rational in Grad u, and FFCx's own estimate picks hundreds of
+points per cell.
+
+Initial state
+-------------
+Under the seed's 2D law (4.14) F_g(0) != I (gamma(0) = delta_3 m_0 / (1 + m_0^2)),
+so u = 0 is not an equilibrium.  Before the first step the module solves the
+static problem (no inertia, p = 0 as in (2.6)) for (u, psi) with the growth
+ramped in ``initial_load_steps`` stages, F_g(s) = I + s (F_g(0) - I),
+s = 1/N, ..., 1: the run starts from the equilibrium of its initial growth,
+with u_t(0) = 0 and p(0) = 0.
+
+The kinematics this module provides to the transport equations
+(:mod:`primordia.physics.kinematics`): J, J C^-1, tr C - d, no advecting
+velocity (seed (4.17a)-(4.17d)).
+"""
+
+from __future__ import annotations
+
+import ufl
+
+from primordia.core.errors import ConfigError
+from primordia.core.parameters import Parameter
+from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem
+from primordia.physics.boundary_conditions import conditions_from_config
+from primordia.physics.growth_laws import fluid_source
+from primordia.physics.kinematics import Kinematics
+from primordia.physics.poroelastic_linear import inertia, stress_divergence
+from primordia.physics.seed_parameters import POROELASTICITY
+
+GROUP = "poroelastic_growth"
+
+
+# -- kinematics and stresses of seed section 4 -----------------------------------------------
+def deformation_gradient(u):
+    """F = I + Grad u (seed section 4)."""
+    return ufl.Identity(len(u)) + ufl.grad(u)
+
+
+def right_cauchy_green(F):
+    """C = F^T F."""
+    return F.T * F
+
+
+def elastic_stress(F, F_g, psi, mu):
+    """P_e = J (mu B_e - psi I) F^-T, B_e = F_e F_e^T, F_e = F F_g^-1 (seed eqs. (4.5), (4.11))."""
+    F_e = F * ufl.inv(F_g)
+    B_e = F_e * F_e.T
+    return ufl.det(F) * (mu * B_e - psi * ufl.Identity(F.ufl_shape[0])) * ufl.inv(F).T
+
+
+def fluid_stress(F, p, alpha_BW):
+    """P_f = -alpha_BW J p F^-T (seed, after eq. (4.12c))."""
+    return -alpha_BW * ufl.det(F) * p * ufl.inv(F).T
+
+
+# -- the terms of seed eqs. (4.12b), (4.12c), each a UFL integrand ----------------------------
+def fluid_content(C_0, alpha_BW, p, C):
+    """C_0 p + alpha_BW (tr C - d): what (4.12b) differentiates in time."""
+    return C_0 * p + alpha_BW * (ufl.tr(C) - C.ufl_shape[0])
+
+
+def storage(content, content_previous, J, q, dt, dx):
+    """J d/dt (C_0 p + alpha_BW (tr C - d)) (seed eq. (4.12b) times J), backward Euler on the content."""
+    return J * (content - content_previous) / dt * q * dx
+
+
+def darcy_flux(conductivity, eta, J, C, p, q, dx):
+    """-Div((kappa/eta) J C^-1 Grad p) in weak form (seed eq. (4.12b) times J)."""
+    return conductivity / eta * J * ufl.inner(ufl.inv(C) * ufl.grad(p), ufl.grad(q)) * dx
+
+
+def growth_source(ell, J, q, dx):
+    """-J ell (seed eq. (4.12b) times J): the fluid source that accompanies growth."""
+    return -J * ell * q * dx
+
+
+def incompressibility(J, J_g, phi, dx):
+    """J_e = 1 (seed eq. (4.12c)) as -(J - J_g) phi: J_e - 1 times J_g > 0, symmetric with the psi term of P_e."""
+    return -(J - J_g) * phi * dx
+
+
+def _parameters(*names):
+    return tuple(p for p in POROELASTICITY if p.name in names)
+
+
+class PoroelasticGrowth(Physics):
+    """Seed eqs. (4.11), (4.12a)-(4.12c) with a growth-law plugin and boundary conditions (4.16a)-(4.16b)."""
+
+    name = "poroelastic_growth"
+    parameters = _parameters("C_0", "kappa", "alpha_BW", "eta", "rho") + (
+        Parameter("ell_0", 1e-3, "fluid source per unit growth rate (seed eq. (4.15))", constraint="nonnegative",
+                  source="seed section 5.4"),
+    )
+    needs_growth_law = True
+    finite_strain = True
+    options = {"shear_modulus": 4.0, "quadrature_degree": 4, "initial_load_steps": 4, "boundary": []}
+
+    def __init__(self, params, kinetics=None, growth_law=None, **options):
+        super().__init__(params, kinetics=kinetics, growth_law=growth_law, **options)
+        self.requires = tuple(growth_law.requires) if growth_law is not None else ()
+
+    def validate_options(self):
+        mu = self.opts["shear_modulus"]
+        if isinstance(mu, bool) or not isinstance(mu, (int, float)) or not mu > 0:
+            raise ConfigError(f"physics.poroelastic_growth.shear_modulus must be a positive number, got {mu!r}")
+        for key, low in (("quadrature_degree", 1), ("initial_load_steps", 1)):
+            value = self.opts[key]
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ConfigError(f"physics.poroelastic_growth.{key} must be an integer >= {low}, got {value!r}")
+        if self.growth_law is None:
+            raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
+
+    def fields(self):
+        return [FieldSpec("u", degree=2, vector=True, group=GROUP, description="displacement (reference configuration)"),
+                FieldSpec("psi", degree=1, group=GROUP, description="solid pressure (multiplier of J_e = 1)"),
+                FieldSpec("p", degree=1, group=GROUP, description="fluid pressure")]
+
+    # -- setup: kinematics, growth, conditions -----------------------------------------------------
+    def setup(self, disc):
+        self.disc = disc
+        self.growth_law.check_dimension(disc.gdim)
+        self.dx = disc.dx_degree(self.opts["quadrature_degree"])
+        self.conditions = conditions_from_config(self.opts["boundary"], disc.mesh_data, disc.gdim)
+        self.velocity = disc.rate("u")
+        u, u_previous = disc.field("u"), disc.previous("u")
+        self.F, self.F_previous = deformation_gradient(u), deformation_gradient(u_previous)
+        self.C, self.C_previous = right_cauchy_green(self.F), right_cauchy_green(self.F_previous)
+        self.J = ufl.det(self.F)
+        self.ramp = disc.backend.constant(disc.mesh, 1.0)  # growth continuation of the initial solve
+        disc.provide_kinematics(Kinematics(
+            volume_ratio=self.J, volume_ratio_previous=ufl.det(self.F_previous),
+            metric=self.J * ufl.inv(self.C),                         # J C^-1 (4.17a)-(4.17d)
+            volume_change=ufl.tr(self.C) - disc.gdim,                # tr C - d (4.17c)
+            velocity=None, deformation_gradient=self.F,
+            quadrature_degree=self.opts["quadrature_degree"]), self.name)
+
+    def growth_tensor(self, ramp=None):
+        """F_g of the growth law at the current fields and time; I + s (F_g - I) with a ramp s."""
+        disc = self.disc
+        fields = {name: disc.field(name) for name in self.growth_law.requires}
+        F_g = self.growth_law.growth_tensor(fields, disc.t, disc.x, disc.gdim)
+        return F_g if ramp is None else ufl.Identity(disc.gdim) + ramp * (F_g - ufl.Identity(disc.gdim))
+
+    def fluid_source(self):
+        """ell = ell_0 sum_i d gamma_i/dt through t and the fields the law reads (seed eq. (4.15))."""
+        disc = self.disc
+        fields = {name: disc.field(name) for name in self.growth_law.requires}
+        rates = {name: (disc.field(name) - disc.previous(name)) / disc.dt for name in fields}
+        return fluid_source(self.growth_law, self.params["ell_0"], fields, rates, disc.t, disc.x, disc.gdim)
+
+    def initialise(self, disc):
+        """psi = mu: the stress-free value when F_e = I; u, p start at 0 (seed eq. (2.6)), then the initial solve."""
+        disc.interpolate("psi", float(self.opts["shear_modulus"]))
+
+    # -- the balance laws --------------------------------------------------------------------------
+    def _stress_terms(self, F_g):
+        """(P_e + P_f) : Grad w and the constraint, for a given growth tensor."""
+        disc, prm = self.disc, self.params
+        u_test, psi_test = disc.test("u"), disc.test("psi")
+        P = (elastic_stress(self.F, F_g, disc.field("psi"), self.opts["shear_modulus"])     # (4.11)
+             + fluid_stress(self.F, disc.field("p"), prm["alpha_BW"]))                     # P_f
+        return (stress_divergence(P, u_test, self.dx)                                      # (4.12a)
+                + incompressibility(self.J, ufl.det(F_g), psi_test, self.dx))              # (4.12c)
+
+    def _boundary_terms(self):
+        terms = 0
+        for condition in self.conditions:
+            for field_terms in condition.terms(self.disc).values():
+                for term in field_terms:
+                    terms = terms + term
+        return terms
+
+    def _dirichlet(self):
+        return [bc for condition in self.conditions for bc in condition.dirichlet(self.disc)]
+
+    def subproblems(self):
+        disc, prm = self.disc, self.params
+        u, p = disc.field("u"), disc.field("p")
+        u_test, p_test = disc.test("u"), disc.test("p")
+        momentum = inertia(prm["rho"], u, disc.previous("u"), self.velocity, u_test, disc.dt, self.dx)  # (4.12a)
+        content = fluid_content(prm["C_0"], prm["alpha_BW"], p, self.C)
+        content_previous = fluid_content(prm["C_0"], prm["alpha_BW"], disc.previous("p"), self.C_previous)
+        mass = (storage(content, content_previous, self.J, p_test, disc.dt, self.dx)               # (4.12b)
+                + darcy_flux(prm["kappa"], prm["eta"], self.J, self.C, p, p_test, self.dx)
+                + growth_source(self.fluid_source(), self.J, p_test, self.dx))
+        residual = momentum + self._stress_terms(self.growth_tensor()) + mass + self._boundary_terms()
+        for name in ("u", "psi", "p"):
+            for term in disc.contributions(name, disc.test(name)):
+                residual += term
+        unknown = disc.unknown("u")
+        return [Subproblem(name=self.name, unknown=unknown, residual=residual,
+                           jacobian=ufl.derivative(residual, unknown), bcs=self._dirichlet(), linear=False,
+                           petsc_options=_solver_defaults())]
+
+    def initial_subproblems(self):
+        """The static equilibrium of the initial growth (no inertia, p = 0), reached by growth continuation."""
+        disc = self.disc
+        static = (self._stress_terms(self.growth_tensor(self.ramp))
+                  + disc.field("p") * disc.test("p") * self.dx                               # p(0) = 0 (2.6)
+                  + self._boundary_terms())
+        unknown = disc.unknown("u")
+        return [Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
+                           jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
+                           continuation=(self.ramp, self.opts["initial_load_steps"]),
+                           petsc_options=_solver_defaults())]
+
+    def before_step(self, t, dt):
+        for condition in self.conditions:
+            condition.update(self.disc, t)
+
+    def diagnostics(self):
+        """Current area/volume, the range of J and the constraint residual J_e - 1 (seed (4.12c))."""
+        J_g = ufl.det(self.growth_tensor())
+        return [Diagnostic("current_volume", "integral", self.J * self.dx,
+                           "area (2D) or volume (3D) of the current configuration, int J dX"),
+                Diagnostic("J", "extrema", self.J, "volume ratio det F"),
+                Diagnostic("J_e_minus_1", "extrema", self.J / J_g - 1.0,
+                           "residual of the constraint J_e = 1 (seed eq. (4.12c))")]
+
+
+def _solver_defaults() -> dict:
+    """GMRES on each Newton step, preconditioned by a MUMPS LU factorisation that is reused.
+
+    The seed's 2D runs factorise every tangent (MUMPS).  Here the factorisation is
+    kept for up to 10 Newton iterations, across time steps (the tangent changes
+    slowly as the tissue grows): GMRES on the exact tangent converges in a few
+    iterations with it, so Newton keeps its quadratic rate at a fraction of the
+    cost (seed example 2a at 86 x 86 squares: 2.6 instead of 8.6 s per step).
+    The saddle point (the zero psi block) rules out PETSc's unpivoted LU.
+    """
+    return {"ksp_type": "gmres", "ksp_rtol": 1e-8, "ksp_atol": 1e-14, "ksp_max_it": 300,
+            "ksp_gmres_restart": 100, "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
+            "snes_lag_preconditioner": 10, "snes_lag_preconditioner_persists": True}
