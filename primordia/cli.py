@@ -5,6 +5,7 @@
     primordia stability [CONFIG.toml] [--set ...] [--out DIR]
     primordia stability map --x NAME:LO:HI:N --y NAME:LO:HI:N [--coupled|--uncoupled]
     primordia analyse RUN_DIR
+    primordia sweep CONFIG.toml --vary SECTION.KEY=LO:HI:N ... [--seeds N] [--scheduler ADDRESS]
 
 A user's mistake (unknown parameter, wrong sign, missing file, impossible mesh,
 unknown backend or plugin) is printed as one line ``primordia: error: ...`` and
@@ -53,8 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
     if register is not None:
         register(commands)
     from primordia.analysis.patterns.cli import register as register_analyse
+    from primordia.sweep import register as register_sweep
 
     register_analyse(commands)
+    register_sweep(commands)
     return parser
 
 

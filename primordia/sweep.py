@@ -1,0 +1,481 @@
+"""Parameter sweeps: an ensemble of runs on a dask.distributed cluster, gathered into one Dataset.
+
+    primordia sweep CONFIG.toml --vary parameters.alpha=2:8:7 --vary parameters.m0=0.5:1.5:5
+                    [--seeds N] [--set SECTION.KEY=VALUE ...] [--scheduler ADDRESS] [--workers N]
+                    [--timeout SECONDS] [--out DIR] [--no-progress]
+
+Each combination of the varied values (and of the seeds 1..N of the random initial
+perturbation, ``physics.chemotaxis.seed``) is one run, in its own folder
+``OUT/runs/alpha=2_m0=0.5_seed=1/``: the run directory of ``primordia run``, its
+pattern metrics ``metrics.nc`` (:mod:`primordia.analysis.patterns`), ``run.log`` (what
+the run printed) and ``sweep.json`` (status, reason, wall time).  ``OUT/sweep.nc``
+gathers them into one xarray Dataset whose dimensions are the varied keys (and
+``seed``), then time, configuration and species; ``OUT/sweep_map.png`` draws the
+simulated patterning map over two varied parameters with the linear analysis's
+boundary and predicted wavelength over it.
+
+* The runs go to a dask.distributed cluster: a local one with ``--workers`` processes
+  (default: one per core), or the one whose scheduler is at ``--scheduler ADDRESS``.
+  The configuration and ``OUT`` must then be on a file system the workers share.
+* Each run is ``primordia run`` in a subprocess of its worker: a crash (a segfault in
+  PETSc, memory exhaustion) or a hang (``--timeout``) ends that run only, PETSc's option
+  database and MPI are fresh for every run (MPI starts as a singleton: the variables of
+  an enclosing ``mpirun`` are not passed on), and the worker stays healthy for the next run.
+* A run that fails is recorded (``status`` = "failed" and ``reason`` in the Dataset),
+  not fatal.  Running the same command again skips every run already done (completed,
+  with its metrics, from the same configuration and overrides) and retries the others.
+* Mistakes in the command (malformed ``--vary``, unknown key or parameter, missing
+  config) are one-line errors before anything runs; a value a run rejects (e.g. a
+  negative diffusivity) fails that run only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import itertools
+import json
+import os
+import subprocess
+import sys
+import time
+from collections import Counter
+from collections.abc import Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from primordia.core.errors import ConfigError
+
+#: The option that seeds the random initial perturbation (``--seeds``).
+SEED_KEY = "physics.chemotaxis.seed"
+DATASET_FILE = "sweep.nc"
+PICTURE_FILE = "sweep_map.png"
+RECORD_FILE = "sweep.json"
+#: Variables of a run's metrics.nc gathered into the sweep Dataset (over time, configuration, species).
+GATHERED = ("dominant_wavelength", "dominant_wavenumber", "spectral_prominence", "spot_count", "spacing_mean",
+            "spacing_std", "hexatic_order", "spot_fraction", "orientation_order")
+#: Environment variables by which an MPI launcher tells a process it is one rank of a job.
+MPI_LAUNCHER_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "HYDRA_")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One varied configuration key and its values."""
+
+    key: str  #: dotted config key, e.g. "parameters.alpha"
+    values: tuple
+
+    @classmethod
+    def parse(cls, text: str) -> "Axis":
+        """``"section.key=LO:HI:N"``: N values from LO to HI (integers if LO and HI are written as integers)."""
+        key, sep, spec = str(text).partition("=")
+        key = key.strip()
+        parts = spec.split(":")
+        if not sep or len(key.split(".")) < 2 or not all(key.split(".")) or len(parts) != 3:
+            raise ConfigError(f"--vary expects SECTION.KEY=LO:HI:N (e.g. parameters.alpha=2:8:7), got {text!r}")
+        try:
+            low, high, count = float(parts[0]), float(parts[1]), int(parts[2])
+        except ValueError:
+            raise ConfigError(f"--vary {text}: LO and HI must be numbers and N an integer") from None
+        if count < 1 or (count == 1 and low != high) or not (np.isfinite(low) and np.isfinite(high)):
+            raise ConfigError(f"--vary {text}: need N >= 1 finite values (N = 1 only with LO = HI)")
+        values = np.linspace(low, high, count)
+        if _is_integer(parts[0]) and _is_integer(parts[1]) and np.allclose(values, np.round(values)):
+            return cls(key, tuple(int(round(v)) for v in values))
+        return cls(key, tuple(float(v) for v in values))
+
+    @property
+    def name(self) -> str:
+        """The Dataset dimension: the parameter's name for ``parameters.*``, else the whole key."""
+        return self.key.removeprefix("parameters.")
+
+
+def _is_integer(text: str) -> bool:
+    try:
+        int(text.strip())
+    except ValueError:
+        return False
+    return True
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run of the sweep."""
+
+    index: tuple[int, ...]  #: position along each dimension of the Dataset
+    overrides: tuple[str, ...]  #: the --set assignments of this run (fixed ones first)
+    directory: Path
+    fingerprint: str  #: what makes a finished run reusable: config text and overrides
+
+
+@dataclass
+class Sweep:
+    """A configuration, fixed overrides, the varied axes and the seeds; validated on construction."""
+
+    config: Path
+    axes: tuple[Axis, ...]
+    seeds: tuple[int, ...] = ()
+    fixed: tuple[str, ...] = ()
+    out: Path = Path("out/sweep")
+    config_text: str = field(init=False, repr=False)  #: the configuration file as read, for fingerprints
+    base_config: dict = field(init=False, repr=False)  #: resolved configuration with the fixed overrides
+
+    def __post_init__(self):
+        from primordia.model import Model
+
+        self.config, self.out = Path(self.config), Path(self.out)
+        if not self.axes:
+            raise ConfigError("sweep needs at least one --vary SECTION.KEY=LO:HI:N")
+        keys = self.keys
+        if len(set(keys)) != len(keys):
+            raise ConfigError(f"a key is varied twice: {', '.join(k for k in keys if keys.count(k) > 1)}")
+        model = Model.from_file(self.config, list(self.fixed))  # missing config, bad --set: one line
+        resolved = model.resolved_config()
+        for key in keys:
+            if key.startswith("parameters.") and key.count(".") == 1:
+                model.parameters.declaration(key.split(".", 1)[1])  # unknown parameter, with suggestions
+                continue
+            value = _lookup(resolved, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"--vary {key}: not a number of the resolved configuration of {self.config}"
+                                  + (" (--seeds needs physics = [\"chemotaxis\", ...])" if key == SEED_KEY else ""))
+        self.config_text = self.config.read_text()
+        self.base_config = resolved
+
+    @property
+    def keys(self) -> list[str]:
+        """The varied config keys, the seed's last."""
+        return [axis.key for axis in self.axes] + ([SEED_KEY] if self.seeds else [])
+
+    @property
+    def dimensions(self) -> list[tuple[str, tuple]]:
+        """(name, values) of every Dataset dimension of the sweep, seeds last."""
+        dims = [(axis.name, axis.values) for axis in self.axes]
+        return dims + ([("seed", self.seeds)] if self.seeds else [])
+
+    def points(self) -> list[Point]:
+        keys, ranges = self.keys, [values for _, values in self.dimensions]
+        points = []
+        for index in itertools.product(*(range(len(values)) for values in ranges)):
+            values = [ranges[d][i] for d, i in enumerate(index)]
+            assignments = tuple(f"{key}={value!r}" for key, value in zip(keys, values))
+            name = "_".join(f"{dim}={value:g}" for (dim, _), value in zip(self.dimensions, values))
+            overrides = tuple(self.fixed) + assignments
+            digest = hashlib.sha256("\n".join((self.config_text, *overrides)).encode()).hexdigest()[:16]
+            points.append(Point(index, overrides, self.out / "runs" / name, digest))
+        return points
+
+
+def _lookup(table: dict, key: str):
+    for part in key.split("."):
+        if not isinstance(table, dict) or part not in table:
+            return None
+        table = table[part]
+    return table
+
+
+def is_done(point: Point) -> bool:
+    """A run directory with its metrics, completed from the same configuration and overrides."""
+    from primordia.analysis.patterns.run import METRICS_FILE
+
+    record = _read_record(point.directory)
+    return (record.get("status") == "completed" and record.get("fingerprint") == point.fingerprint
+            and (point.directory / METRICS_FILE).is_file())
+
+
+def _read_record(directory: Path) -> dict:
+    try:
+        return json.loads((directory / RECORD_FILE).read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: str,
+            timeout: float | None = None) -> dict:
+    """Run one point (in a dask worker): ``primordia run`` in a subprocess, then its pattern metrics.
+
+    Returns and writes ``sweep.json``: status ("completed" or "failed"), reason, wall time.
+    Never raises for a failed run.
+    """
+    from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
+    from primordia.core import io
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    for stale in (RECORD_FILE, METRICS_FILE):
+        (directory / stale).unlink(missing_ok=True)
+    command = [sys.executable, "-m", "primordia.cli", "run", str(config), "--out", str(directory), "--no-progress"]
+    for assignment in overrides:
+        command += ["--set", assignment]
+    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    start = time.perf_counter()
+    try:
+        finished = subprocess.run(command, capture_output=True, text=True, env=environment, timeout=timeout)
+        log, reason = finished.stdout + finished.stderr, _failure_reason(finished, directory)
+    except subprocess.TimeoutExpired as expired:  # its output so far comes as bytes
+        log = b"".join(part or b"" for part in (expired.stdout, expired.stderr)).decode(errors="replace")
+        reason = f"timed out after {timeout:g} s"
+    io.atomic_write_text(directory / "run.log", log)
+    if not reason:
+        try:
+            analyse_run(directory, pictures=False)
+        except Exception as error:  # noqa: BLE001 - a failed analysis is recorded like a failed run
+            reason = f"pattern metrics: {type(error).__name__}: {error}"
+    record = {"status": "failed" if reason else "completed", "reason": reason, "fingerprint": fingerprint,
+              "wall_time_s": time.perf_counter() - start, "overrides": list(overrides)}
+    io.write_json(directory / RECORD_FILE, record)
+    return record
+
+
+def _failure_reason(finished: subprocess.CompletedProcess, directory: Path) -> str:
+    """Why ``primordia run`` failed, in one line ("" if it completed)."""
+    if finished.returncode == 0:
+        return ""
+    lines = [line.strip() for line in finished.stderr.splitlines() if line.strip()]
+    for line in lines:
+        if line.startswith("primordia: error: "):
+            return line.removeprefix("primordia: error: ")
+    try:
+        status = json.loads((directory / "summary.json").read_text()).get("status", "")
+    except (OSError, ValueError):
+        status = ""
+    if status.startswith("stopped"):
+        return status
+    if finished.returncode < 0:
+        return f"killed by signal {-finished.returncode}"
+    return lines[-1] if lines else f"exit status {finished.returncode}"
+
+
+@contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None):
+    """A dask.distributed Client: of the cluster at ``scheduler``, or of a local cluster of ``workers`` processes."""
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except OSError as error:
+            raise ConfigError(f"cannot reach the dask scheduler at {scheduler}: {error}") from None
+        with client:
+            yield client
+        return
+    with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        yield client
+
+
+def run_sweep(sweep: Sweep, scheduler: str | None = None, workers: int | None = None,
+              timeout: float | None = None, progress: bool = False):
+    """Run every point not done yet, gather all into ``OUT/sweep.nc`` (:func:`gather`); return the Dataset.
+
+    The Dataset's attributes say how many runs were skipped (done before), run, and failed.
+    Paths given to the workers are absolute: a remote worker has a working directory of its own.
+    """
+    from dask.distributed import as_completed
+
+    points = sweep.points()
+    done = [is_done(p) for p in points]
+    todo = [p for p, finished in zip(points, done) if not finished]
+    records = {p.directory: _read_record(p.directory) for p, finished in zip(points, done) if finished}
+    start = time.perf_counter()
+    if todo:
+        bar = _progress_bar(len(points), len(points) - len(todo), progress)
+        with dask_client(scheduler, workers) as client:
+            futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
+                                     str(p.directory.resolve()), p.fingerprint, timeout, pure=False): p
+                       for p in todo}
+            for future in as_completed(futures):
+                point = futures[future]
+                try:
+                    records[point.directory] = future.result()
+                except Exception as error:  # noqa: BLE001 - e.g. the worker died: record it, go on
+                    records[point.directory] = {"status": "failed", "reason": f"{type(error).__name__}: {error}"}
+                bar.update(1)
+        bar.close()
+    ds = gather(sweep, points, records)
+    ds.attrs.update({"runs": len(points), "runs_skipped": len(points) - len(todo), "runs_executed": len(todo),
+                     "runs_failed": int(np.sum(ds["status"].values != "completed")),
+                     "wall_time_s": time.perf_counter() - start})
+    from primordia.analysis.patterning import save_dataset
+
+    save_dataset(ds, sweep.out / DATASET_FILE)
+    return ds
+
+
+def _progress_bar(total: int, done: int, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=done, unit="run", desc="sweep", disable=not enabled, file=sys.stderr,
+                dynamic_ncols=True)
+
+
+def gather(sweep: Sweep, points: Sequence[Point], records: dict):
+    """One Dataset over the sweep's dimensions (then time, configuration, species) from the run folders."""
+    import xarray as xr
+
+    from primordia.analysis.patterns.metrics import PATTERN_KINDS
+    from primordia.analysis.patterns.run import METRICS_FILE, predicted_mode
+    from primordia.core.config import apply_overrides, load_config
+
+    dims = sweep.dimensions
+    names, shape = [name for name, _ in dims], tuple(len(values) for _, values in dims)
+    status = np.full(shape, "failed", dtype=object)
+    reason = np.full(shape, "not run", dtype=object)
+    wall = np.full(shape, np.nan)
+    predicted = {name: np.full(shape, np.nan) for name in ("k_max", "wavelength", "rate")}
+    metrics = {}
+    base = load_config(sweep.config)
+    for point in points:
+        record = records.get(point.directory, {})
+        status[point.index] = record.get("status", "failed")
+        reason[point.index] = record.get("reason", "") or ""
+        wall[point.index] = record.get("wall_time_s", np.nan)
+        mode = predicted_mode(apply_overrides(base, list(point.overrides)))
+        for name in predicted:
+            predicted[name][point.index] = getattr(mode, name)
+        if status[point.index] == "completed":
+            with xr.open_dataset(point.directory / METRICS_FILE, engine="scipy") as run:
+                metrics[point.index] = run.load()
+    ds = xr.Dataset(
+        {"status": (names, status.astype(str), {"long_name": "completed or failed"}),
+         "reason": (names, reason.astype(str), {"long_name": "why the run failed (empty if it completed)"}),
+         "wall_time_s": (names, wall, {"long_name": "wall time of the run and its metrics"}),
+         "run_dir": (names, np.array([str(p.directory) for p in points], dtype=str).reshape(shape)),
+         "predicted_wavenumber": (names, predicted["k_max"], {"long_name": "linear analysis: fastest stationary k"}),
+         "predicted_wavelength": (names, predicted["wavelength"], {"long_name": "linear analysis: 2 pi / k_max"}),
+         "predicted_growth_rate": (names, predicted["rate"], {"long_name": "linear analysis: Re phi at k_max"})},
+        coords={name: (name, list(values)) for name, values in dims},
+        attrs={"title": f"primordia sweep of {sweep.config.name} over {', '.join(names)}",
+               "config": str(sweep.config), "fixed_overrides": " ".join(sweep.fixed),
+               "varied": " ".join(f"{a.key}" for a in sweep.axes) + (f" {SEED_KEY}" if sweep.seeds else "")},
+    )
+    if metrics:
+        first = next(iter(metrics.values()))
+        inner = {"time": first["time"].values, "configuration": first["configuration"].values,
+                 "species": first["species"].values}
+        full = names + list(inner)
+        for variable in GATHERED + ("pattern",):
+            fill = -1 if variable == "pattern" else np.nan
+            array = np.full(shape + tuple(len(v) for v in inner.values()), fill,
+                            dtype=np.int8 if variable == "pattern" else float)
+            for index, run in metrics.items():
+                array[index] = run[variable].reindex(inner, fill_value=fill).transpose(*inner).values
+            ds[variable] = (full, array, dict(first[variable].attrs))
+        ds["pattern"].attrs.update({"flag_values": np.arange(-1, len(PATTERN_KINDS), dtype=np.int8),
+                                    "flag_meanings": "no_result " + " ".join(PATTERN_KINDS)})
+        ds = ds.assign_coords({name: (name, values, dict(first[name].attrs)) for name, values in inner.items()})
+    return ds
+
+
+def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | None:
+    """The simulated patterning map over the two varied keys with the linear analysis over it (None if not 2)."""
+    from primordia.analysis.patterns.figures import sweep_figure
+    from primordia.analysis.patterns.metrics import PATTERN_KINDS
+
+    if len(sweep.axes) != 2 or "time" not in ds.dims:
+        return None
+    x, y = (axis.name for axis in sweep.axes)
+    species = species or ("m" if "m" in ds["species"].values else str(ds["species"].values[0]))
+    final = ds.isel(time=-1).sel(configuration="reference", species=species)
+    kinds = final["pattern"]
+    reduced = final[["spacing_mean", "spot_count", "dominant_wavelength"]]
+    reduced["dominant_wavelength"] = reduced["dominant_wavelength"].where(kinds > 0)  # no pattern: no wavelength
+    failed = final["status"] != "completed"
+    if "seed" in ds.dims:
+        reduced = reduced.mean("seed", skipna=True)
+        failed = failed.all("seed")
+        names = np.apply_along_axis(_most_common_kind, kinds.get_axis_num("seed"), kinds.values)
+    else:
+        names = np.vectorize(lambda code: PATTERN_KINDS[code] if code >= 0 else "failed", otypes=[object])(
+            kinds.values)
+    dims = [d for d in kinds.dims if d != "seed"]
+    reduced["pattern_name"] = (dims, names)
+    reduced["failed"] = failed.transpose(*dims)
+    reduced.attrs["title"] = (f"{ds.attrs['title']}: {species} at t = {float(final['time']):g} "
+                              f"(reference configuration{', mean over seeds' if 'seed' in ds.dims else ''})")
+    return sweep_figure(reduced.transpose(x, y), _linear_map(sweep, x, y), path, x, y)
+
+
+def _most_common_kind(codes: np.ndarray) -> str:
+    from primordia.analysis.patterns.metrics import PATTERN_KINDS
+
+    found = [PATTERN_KINDS[c] for c in codes if c >= 0]
+    return Counter(found).most_common(1)[0][0] if found else "failed"
+
+
+def _linear_map(sweep: Sweep, x: str, y: str, n: int = 41):
+    """The linear patterning space over the sweep's two parameters (slightly wider), or None."""
+    from primordia.analysis.patterning import ParameterRange, patterning_space
+    from primordia.analysis.patterns.run import linear_model
+
+    if not all(axis.key.startswith("parameters.") for axis in sweep.axes):
+        return None
+    try:
+        params, coupled = linear_model(sweep.base_config)
+    except ConfigError:
+        return None
+    ranges = []
+    for axis in sweep.axes:  # half a sweep cell beyond the outer points, where the sign constraint allows
+        low, high = min(axis.values), max(axis.values)
+        margin = 0.5 * (high - low) / max(len(axis.values) - 1, 1) if high > low else 0.1 * max(abs(low), 1.0)
+        try:
+            params.replace(**{axis.name: low - margin})
+            low -= margin
+        except ConfigError:
+            pass
+        ranges.append(ParameterRange(axis.name, low, high + margin, n))
+    try:
+        return patterning_space(ranges[0], ranges[1], params=params, coupled=coupled)
+    except ConfigError:  # e.g. a swept value outside the parameter's sign constraint
+        return None
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    """Add the ``sweep`` subcommand to an argparse ``subparsers`` object; sets ``func``."""
+    parser = subparsers.add_parser(
+        "sweep", help="run a parameter sweep on a dask cluster and map the patterns it forms",
+        description=__doc__.split("\n\n")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("config", help="TOML configuration file")
+    parser.add_argument("--vary", action="append", default=[], metavar="SECTION.KEY=LO:HI:N",
+                        help="vary a config value over N values from LO to HI (repeatable), e.g. parameters.m0=0.5:1.5:5")
+    parser.add_argument("--seeds", type=int, default=0, metavar="N",
+                        help=f"run each point with seeds 1..N of the random initial perturbation ({SEED_KEY})")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="override a config value for every run (repeatable), e.g. --set mesh.cells=[43,43]")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask scheduler, e.g. tcp://host:8786")
+    parser.add_argument("--workers", type=int, metavar="N", help="worker processes of the local cluster "
+                                                                 "(default: one per core)")
+    parser.add_argument("--timeout", type=float, metavar="SECONDS", help="stop (and record as failed) a run after this")
+    parser.add_argument("--out", help="output directory (default: out/sweep_<config name>)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=command_sweep)
+    return parser
+
+
+def command_sweep(args) -> int:
+    """Entry point of ``primordia sweep``; returns the exit code."""
+    if args.seeds < 0:
+        raise ConfigError(f"--seeds must be >= 0, got {args.seeds}")
+    if args.workers is not None and (args.workers < 1 or args.scheduler):
+        raise ConfigError("--workers must be >= 1, and applies to the local cluster only (not with --scheduler)")
+    if args.timeout is not None and not args.timeout > 0:
+        raise ConfigError(f"--timeout must be > 0 seconds, got {args.timeout:g}")
+    config = Path(args.config)
+    sweep = Sweep(config, tuple(Axis.parse(text) for text in args.vary), tuple(range(1, args.seeds + 1)),
+                  tuple(args.overrides), Path(args.out) if args.out else Path("out") / f"sweep_{config.stem}")
+    print(f"primordia sweep: {len(sweep.points())} runs of {config} over "
+          + " x ".join(f"{name} ({len(values)})" for name, values in sweep.dimensions) + f" -> {sweep.out}")
+    ds = run_sweep(sweep, args.scheduler, args.workers, args.timeout, progress=not args.no_progress)
+    print(f"  {ds.attrs['runs_skipped']} done before (skipped), {ds.attrs['runs_executed']} run, "
+          f"{ds.attrs['runs_failed']} failed, in {ds.attrs['wall_time_s']:.1f} s")
+    for text, count in Counter(ds["reason"].values[ds["status"].values != "completed"]).most_common():
+        print(f"  failed ({count}): {text}")
+    picture = sweep_picture(ds, sweep, sweep.out / PICTURE_FILE)
+    print(f"  wrote {sweep.out / DATASET_FILE}" + (f" and {picture}" if picture else
+                                                    " (no map: it needs exactly two --vary keys)"))
+    return 0

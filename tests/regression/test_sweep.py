@@ -1,0 +1,114 @@
+"""Parameter sweeps on a local dask cluster (primordia.sweep, ``primordia sweep``).
+
+A 2 x 2 sweep of coarse runs (16 x 16 squares, 10 steps) over alpha and D_m, where
+D_m = -0.03 is a value every run rejects: those runs are recorded as failed with the
+reason, the others complete with their metrics, all gathered into one Dataset.  Running
+the same command again skips the completed runs and retries the failed ones.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+from conftest import SMALL_CONFIG
+
+from primordia.core.errors import ConfigError
+from primordia.sweep import SEED_KEY, Axis, Sweep, execute, run_sweep
+
+COARSE = (SMALL_CONFIG.replace("cells = [8, 8]", "cells = [16, 16]").replace("t_final = 1.0", "t_final = 2.0")
+          .replace("pictures = false", "pictures = false\ntimes = [1.0, 2.0]"))
+VARY = ("parameters.alpha=2:6:2", "parameters.D_m=-0.03:0.03:2")
+
+
+def test_sweep_records_failures_gathers_metrics_and_skips_what_is_done(tmp_path, small_config, primordia_cli):
+    config = small_config(COARSE)
+    out = tmp_path / "sweep"
+    sweep = Sweep(config, tuple(Axis.parse(text) for text in VARY), out=out)
+    ds = run_sweep(sweep, workers=2)
+
+    assert ds.sizes["alpha"] == 2 and ds.sizes["D_m"] == 2
+    assert list(ds["alpha"].values) == [2, 6] and list(ds["D_m"].values) == [-0.03, 0.03]
+    assert list(ds["time"].values) == [1.0, 2.0] and set(ds["species"].values) == {"m", "e", "f", "b"}
+    assert ds["spot_count"].dims == ("alpha", "D_m", "time", "configuration", "species")
+    good, bad = ds.sel(D_m=0.03), ds.sel(D_m=-0.03)
+    assert list(good["status"].values) == ["completed", "completed"]
+    assert list(bad["status"].values) == ["failed", "failed"]
+    assert all("D_m must be > 0" in reason for reason in bad["reason"].values)
+    assert np.isfinite(good["spectral_prominence"].values).all()
+    assert np.isnan(bad["spectral_prominence"].values).all()
+    assert (bad["pattern"].values == -1).all() and (good["pattern"].values >= 0).all()
+    # the linear prediction of each point's own parameters: alpha changes k_max
+    predicted = good["predicted_wavenumber"].values
+    assert np.isfinite(predicted).all() and predicted[0] != predicted[1]
+    assert ds.attrs["runs_executed"] == 4 and ds.attrs["runs_failed"] == 2
+    with xr.open_dataset(out / "sweep.nc") as saved:
+        assert list(saved["status"].sel(D_m=0.03).values) == ["completed", "completed"]
+    completed = [out / "runs" / f"alpha={a}_D_m=0.03" for a in (2, 6)]
+    for run in completed:
+        assert (run / "metrics.nc").is_file() and (run / "fields.xdmf").is_file()
+    assert "D_m must be > 0" in (out / "runs" / "alpha=2_D_m=-0.03" / "run.log").read_text()
+
+    before = [(run / "summary.json").stat().st_mtime_ns for run in completed]
+    result = primordia_cli("sweep", config, *[a for text in VARY for a in ("--vary", text)],
+                           "--workers", "2", "--out", out, "--no-progress")
+    assert result.returncode == 0, result.stderr
+    assert "2 done before (skipped), 2 run, 2 failed" in result.stdout
+    assert "failed (2): parameter D_m must be > 0" in result.stdout
+    assert [(run / "summary.json").stat().st_mtime_ns for run in completed] == before
+    assert (out / "sweep_map.png").stat().st_size > 10_000
+    with xr.open_dataset(out / "sweep.nc") as saved:
+        assert saved.attrs["runs_skipped"] == 2
+        assert np.isfinite(saved["spectral_prominence"].sel(D_m=0.03).values).all()
+
+
+def test_seeds_add_a_dimension_and_the_fingerprint_follows_the_overrides(small_config, tmp_path):
+    config = small_config()
+    sweep = Sweep(config, (Axis.parse("parameters.alpha=2:4:3"),), seeds=(1, 2), out=tmp_path)
+    points = sweep.points()
+    assert [name for name, _ in sweep.dimensions] == ["alpha", "seed"]
+    assert len(points) == 6 and points[1].index == (0, 1)
+    assert points[1].overrides == ("parameters.alpha=2", f"{SEED_KEY}=2")
+    assert points[1].directory == tmp_path / "runs" / "alpha=2_seed=2"
+    changed = Sweep(config, sweep.axes, seeds=(1, 2), fixed=("time.t_final=0.4",), out=tmp_path).points()
+    assert changed[1].directory == points[1].directory and changed[1].fingerprint != points[1].fingerprint
+
+
+def test_a_run_past_its_timeout_is_recorded_as_failed(small_config, tmp_path):
+    record = execute(str(small_config()), [], str(tmp_path / "run"), "fingerprint", timeout=0.2)
+    assert record["status"] == "failed" and record["reason"] == "timed out after 0.2 s"
+    assert (tmp_path / "run" / "sweep.json").is_file()
+
+
+@pytest.mark.parametrize("text", ["parameters.alpha", "alpha=1:2:3", "parameters.alpha=1:2", "parameters.alpha=a:2:3",
+                                  "parameters.alpha=1:2:1"])
+def test_malformed_vary(text):
+    with pytest.raises(ConfigError):
+        Axis.parse(text)
+
+
+def test_integer_and_float_axes():
+    assert Axis.parse("physics.chemotaxis.seed=1:3:3").values == (1, 2, 3)
+    assert Axis.parse("parameters.m0=0.5:1.5:3").values == (0.5, 1.0, 1.5)
+    assert Axis.parse("parameters.m0=0.5:1.5:3").name == "m0"
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--vary", "parameters.alpha=2:8"], "--vary expects SECTION.KEY=LO:HI:N"),
+    (["--vary", "parameters.alpah=2:8:3"], "unknown parameter 'alpah' (did you mean alpha"),
+    (["--vary", "physics.chemotaxis.nope=1:2:2"], "--vary physics.chemotaxis.nope: not a number"),
+    (["--vary", "parameters.alpha=2:8:3", "--vary", "parameters.alpha=1:2:2"], "a key is varied twice"),
+    (["--vary", "parameters.alpha=2:8:3", "--workers", "0"], "--workers must be >= 1"),
+    ([], "sweep needs at least one --vary"),
+])
+def test_sweep_bad_input_is_one_line(small_config, primordia_cli, tmp_path, arguments, message):
+    result = primordia_cli("sweep", small_config(), *arguments, "--out", tmp_path / "out")
+    assert result.returncode == 2
+    assert result.stderr.startswith("primordia: error: ") and message in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_sweep_of_a_missing_config(primordia_cli, tmp_path):
+    result = primordia_cli("sweep", tmp_path / "missing.toml", "--vary", "parameters.alpha=2:8:3")
+    assert result.returncode == 2 and result.stderr.startswith("primordia: error: config file not found")
