@@ -42,7 +42,7 @@ so u = 0 is not an equilibrium.  Before the first step the module solves the
 static problem (no inertia, p = 0 as in (2.6)) for (u, psi) with the growth
 ramped in ``initial_load_steps`` stages, F_g(s) = I + s (F_g(0) - I),
 s = 1/N, ..., 1: the run starts from the equilibrium of its initial growth,
-with u_t(0) = 0 and p(0) = 0.
+with u_t(0) = 0 and p(0) = 0 (option ``initial_equilibrium = false`` skips it).
 
 The kinematics this module provides to the transport equations
 (:mod:`primordia.physics.kinematics`): J, J C^-1, tr C - d, no advecting
@@ -128,7 +128,8 @@ class PoroelasticGrowth(Physics):
     )
     needs_growth_law = True
     finite_strain = True
-    options = {"shear_modulus": 4.0, "quadrature_degree": 4, "initial_load_steps": 4, "boundary": []}
+    options = {"shear_modulus": 4.0, "quadrature_degree": 4, "initial_equilibrium": True, "initial_load_steps": 4,
+               "boundary": []}
 
     def __init__(self, params, kinetics=None, growth_law=None, **options):
         super().__init__(params, kinetics=kinetics, growth_law=growth_law, **options)
@@ -142,6 +143,9 @@ class PoroelasticGrowth(Physics):
             value = self.opts[key]
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ConfigError(f"physics.poroelastic_growth.{key} must be an integer >= {low}, got {value!r}")
+        if not isinstance(self.opts["initial_equilibrium"], bool):
+            raise ConfigError(f"physics.poroelastic_growth.initial_equilibrium must be true or false, "
+                              f"got {self.opts['initial_equilibrium']!r}")
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
@@ -228,7 +232,13 @@ class PoroelasticGrowth(Physics):
                            petsc_options=_solver_defaults())]
 
     def initial_subproblems(self):
-        """The static equilibrium of the initial growth (no inertia, p = 0), reached by growth continuation."""
+        """The static equilibrium of the initial growth (no inertia, p = 0), reached by growth continuation.
+
+        None with ``initial_equilibrium = false``: the fields then start as initialised
+        (u = 0, psi = mu, p = 0, or as another module set them, e.g. a manufactured solution).
+        """
+        if not self.opts["initial_equilibrium"]:
+            return []
         disc = self.disc
         static = (self._stress_terms(self.growth_tensor(self.ramp))
                   + disc.field("p") * disc.test("p") * self.dx                               # p(0) = 0 (2.6)
