@@ -6,6 +6,8 @@ can override these choices.
 
 from __future__ import annotations
 
+import sys
+
 from primordia.core.errors import PluginError
 from primordia.core.plugins import hookimpl
 
@@ -27,4 +29,25 @@ def primordia_select_splitting_scheme(name, options, schemes, physics):
     if name not in schemes:
         known = ", ".join(sorted(schemes)) or "none"
         raise PluginError(f"unknown splitting scheme '{name}' (registered: {known})")
-    return schemes[name](physics, **options)
+    return schemes[name](physics, **_options_for(name, options, schemes))
+
+
+def _options_for(name: str, options: dict, schemes: dict) -> dict:
+    """The [coupling] options of scheme ``name``.
+
+    An option that belongs to another registered scheme (e.g. ``tolerance`` of
+    ``fixed_point`` in a config whose scheme was switched with ``--set``) is left
+    out with a warning naming it; one that no scheme knows reaches the scheme,
+    which refuses it in one line.
+    """
+    own = set(getattr(schemes[name], "options", {}))
+    others = {key: other for other, cls in schemes.items() if other != name
+              for key in getattr(cls, "options", {}) if key not in own}
+    kept = {}
+    for key, value in options.items():
+        if key in others:
+            print(f"primordia: warning: coupling.{key} is an option of scheme '{others[key]}' and is ignored "
+                  f"by '{name}'", file=sys.stderr)
+        else:
+            kept[key] = value
+    return kept

@@ -9,6 +9,7 @@ the forms, through ``primordia_select_backend``.
 
 from __future__ import annotations
 
+import dataclasses
 import time as clock
 from contextlib import contextmanager
 from pathlib import Path
@@ -81,10 +82,29 @@ class Simulation:
     def _initialise_fields(self):
         for physics in self.model.physics_objects:
             physics.initialise(self.disc)
+        self.disc.store_previous()
         for physics in self.model.physics_objects:
             for subproblem in physics.initial_subproblems():
-                self._solve_initial(subproblem)
+                self._solve_initial(self._holding_the_others(subproblem, physics))
         self.disc.store_previous()
+
+    def _holding_the_others(self, subproblem, physics):
+        """``subproblem`` with the fields it does not solve for held at their initial values.
+
+        A module's initial solve states equations for its own fields only; when the
+        scheme groups them with other fields (one monolithic function), those others
+        get (c - c_0) v = 0 so the solve neither moves them nor meets zero rows.
+        """
+        owned = {spec.name for spec in physics.fields()}
+        group = self.disc.group_of_function(subproblem.unknown)
+        others = [name for name in self.disc.group_fields(group) if name not in owned]
+        if not others:
+            return subproblem
+        disc = self.disc
+        residual = subproblem.residual + sum(
+            ufl.inner(disc.field(name) - disc.previous(name), disc.test(name)) * disc.dx for name in others)
+        return dataclasses.replace(subproblem, residual=residual,
+                                   jacobian=ufl.derivative(residual, subproblem.unknown))
 
     def _solve_initial(self, subproblem) -> None:
         """One solve completing the initial state, in continuation stages when the subproblem asks for them."""

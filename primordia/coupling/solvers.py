@@ -72,14 +72,30 @@ def accumulate(totals: dict[str, SolveStats], name: str, stats: SolveStats) -> N
     totals[name] += stats
 
 
+#: Options PETSc had before primordia wrote any (PETSC_OPTIONS, petsc4py.init arguments): the user's, never touched.
+_GIVEN_OUTSIDE = frozenset(PETSc.Options().getAll())
+#: Options primordia wrote to the (process-wide) database, by prefix, so the next solver of a prefix starts clean.
+_WRITTEN: dict[str, set[str]] = {}
+
+
 def set_default_options(prefix: str, defaults: dict, overrides: dict | None = None) -> None:
-    """Write defaults (unless already set, e.g. on the command line) and overrides."""
+    """Write this solver's options under ``prefix``: defaults, then overrides; options given outside win.
+
+    PETSc's options database is process-wide: what an earlier solver of the same prefix
+    wrote (another model run in the same Python process) is removed first, so one run's
+    ``[solver]`` table never leaks into the next.  The options stay in the database for
+    the life of the solver (PETSc reads some, e.g. MUMPS's, only when it factorises).
+    """
     options = PETSc.Options()
-    for key, value in defaults.items():
-        if not options.hasName(prefix + key):
-            options[prefix + key] = _option_text(value)
-    for key, value in (overrides or {}).items():
-        options[prefix + key] = _option_text(value)
+    for name in _WRITTEN.pop(prefix, ()):
+        options.delValue(name)
+    written = _WRITTEN.setdefault(prefix, set())
+    for key, value in {**defaults, **(overrides or {})}.items():
+        name = prefix + key
+        if name in _GIVEN_OUTSIDE:
+            continue
+        options[name] = _option_text(value)
+        written.add(name)
 
 
 def _parallel_safe(defaults: dict, comm) -> dict:
@@ -213,6 +229,7 @@ class LinearSolver(_Solver):
         warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=3)
         operators = self.ksp.getOperators()
         PETSc.Options()[self.sub.prefix + "pc_factor_mat_solver_type"] = "mumps"
+        _WRITTEN.setdefault(self.sub.prefix, set()).add(self.sub.prefix + "pc_factor_mat_solver_type")
         self.ksp.reset()
         self.ksp.setFromOptions()
         self.ksp.setOperators(*operators)
@@ -297,5 +314,6 @@ class NewtonSolver(_Solver):
         detail = SNES_REASONS.get(reason, str(reason))
         if reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE:
             detail += f" (KSP: {KSP_REASONS.get(self.ksp.getConvergedReason(), self.ksp.getConvergedReason())})"
+        hint = f" ({self.sub.failure_hint})" if self.sub.failure_hint else ""
         return (f"{self.sub.name}: Newton did not converge: {detail} after {self.snes.getIterationNumber()} "
-                f"iterations{progress}; options under -{self.sub.prefix}")
+                f"iterations{progress}{hint}; options under -{self.sub.prefix}")

@@ -55,6 +55,8 @@ class Subproblem:
     solve to be done in ``steps`` stages with the UFL ``constant`` set to
     1/steps, 2/steps, ..., 1 (load continuation: each stage starts from the last).
     ``petsc_options`` are defaults for the options prefix ``prefix``.
+    ``failure_hint`` is appended to the error when the solve fails (what the
+    physics knows about why it may be impossible).
     """
 
     name: str
@@ -68,6 +70,7 @@ class Subproblem:
     preconditioner: ufl.Form | None = None
     continuation: tuple[Any, int] | None = None
     petsc_options: dict[str, Any] = field(default_factory=dict)
+    failure_hint: str | None = None
 
     @property
     def prefix(self) -> str:

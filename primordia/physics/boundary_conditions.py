@@ -60,6 +60,8 @@ class Condition:
     #: The registry name of the kind (its ``kind``).
     name: ClassVar[str]
     vector_value: ClassVar[bool] = False
+    #: Whether the condition prescribes the normal displacement (the boundary cannot move outwards freely).
+    holds_normal_displacement: ClassVar[bool] = False
     default_value = None
 
     def __init_subclass__(cls, **kwargs):
@@ -117,7 +119,7 @@ class _Dirichlet(Condition):
 
 
 class Clamped(_Dirichlet):
-    kind, field, vector_value = "clamped", "u", True
+    kind, field, vector_value, holds_normal_displacement = "clamped", "u", True, True
 
     @staticmethod
     def default_value(gdim):
@@ -125,13 +127,13 @@ class Clamped(_Dirichlet):
 
 
 class Displacement(_Dirichlet):
-    kind, field, vector_value = "displacement", "u", True
+    kind, field, vector_value, holds_normal_displacement = "displacement", "u", True, True
 
 
 class NormalDisplacement(_Dirichlet):
     """u . n prescribed on a boundary whose normal is a coordinate axis."""
 
-    kind, field, default_value = "normal_displacement", "u", "0"
+    kind, field, default_value, holds_normal_displacement = "normal_displacement", "u", "0", True
 
     def dirichlet(self, disc):
         axis = _normal_axis(disc.mesh_data, self.boundary)
@@ -218,6 +220,17 @@ def conditions_from_config(tables, mesh_data, gdim: int) -> list[Condition]:
                               f"(it has: {', '.join(mesh_data.boundaries) or 'none'})")
         conditions.append(kinds[kind](boundary, table.get("value"), table.get("constants"), gdim))
     return conditions
+
+
+def encloses(conditions: list[Condition], mesh_data) -> bool:
+    """Whether conditions holding the normal displacement cover every exterior facet of the mesh."""
+    from primordia.core.meshes import exterior_facets
+
+    held = {c.boundary for c in conditions if c.holds_normal_displacement}
+    if not held:
+        return False
+    facets = {tuple(sorted(f)) for name in held for f in mesh_data.boundaries[name]}
+    return len(facets) >= len(exterior_facets(mesh_data.cells))
 
 
 def _normal_axis(mesh_data, boundary: str) -> int:

@@ -56,7 +56,7 @@ import ufl
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import Parameter
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem
-from primordia.physics.boundary_conditions import conditions_from_config
+from primordia.physics.boundary_conditions import conditions_from_config, encloses
 from primordia.physics.growth_laws import fluid_source
 from primordia.physics.kinematics import Kinematics
 from primordia.physics.poroelastic_linear import inertia, stress_divergence
@@ -229,7 +229,15 @@ class PoroelasticGrowth(Physics):
         unknown = disc.unknown("u")
         return [Subproblem(name=self.name, unknown=unknown, residual=residual,
                            jacobian=ufl.derivative(residual, unknown), bcs=self._dirichlet(), linear=False,
-                           petsc_options=_solver_defaults())]
+                           petsc_options=_solver_defaults(), failure_hint=self._failure_hint())]
+
+    def _failure_hint(self) -> str | None:
+        """Why a solve may have no solution: a tissue held on all sides cannot change its volume."""
+        if encloses(self.conditions, self.disc.mesh_data):
+            return ("every boundary holds the normal displacement, so the volume of Omega_0 cannot change, "
+                    "while J_e = 1 (seed (4.12c)) asks J = J_g: the growth cannot be accommodated; "
+                    "free a boundary or hold it with robin springs")
+        return None
 
     def initial_subproblems(self):
         """The static equilibrium of the initial growth (no inertia, p = 0), reached by growth continuation.
@@ -247,7 +255,7 @@ class PoroelasticGrowth(Physics):
         return [Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
                            jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
                            continuation=(self.ramp, self.opts["initial_load_steps"]),
-                           petsc_options=_solver_defaults())]
+                           petsc_options=_solver_defaults(), failure_hint=self._failure_hint())]
 
     def before_step(self, t, dt):
         for condition in self.conditions:
