@@ -408,8 +408,12 @@ def _most_common_kind(codes: np.ndarray) -> str:
     return Counter(found).most_common(1)[0][0] if found else "failed"
 
 
-def _linear_map(sweep: Sweep, x: str, y: str, n: int = 41):
-    """The linear patterning space over the sweep's two parameters (slightly wider), or None."""
+def _linear_map(sweep: Sweep, x: str, y: str, n: int = 41, nk: int = 256):
+    """The linear patterning space over the sweep's two parameters (slightly wider), or None.
+
+    ``nk`` wavenumbers (fine, ~5 s on 41 x 41): the predicted wavelength is the best of them,
+    so its contours step where k_max jumps from one to the next.
+    """
     from primordia.analysis.patterning import ParameterRange, patterning_space
     from primordia.analysis.patterns.run import linear_model
 
@@ -430,7 +434,7 @@ def _linear_map(sweep: Sweep, x: str, y: str, n: int = 41):
             pass
         ranges.append(ParameterRange(axis.name, low, high + margin, n))
     try:
-        return patterning_space(ranges[0], ranges[1], params=params, coupled=coupled)
+        return patterning_space(ranges[0], ranges[1], params=params, coupled=coupled, nk=nk)
     except ConfigError:  # e.g. a swept value outside the parameter's sign constraint
         return None
 

@@ -173,6 +173,8 @@ def test_predicted_mode_of_example_1a():
     assert mode.rate > 0
     assert "uncoupled" in mode.note
     assert "uncoupled" not in predicted_mode("examples/ex01b.toml").note
+    stable = predicted_mode({"model": {"physics": ["chemotaxis"]}, "parameters": {"m0": 0.25, "alpha": 1.0}})
+    assert np.isnan(stable.k_max) and np.isnan(stable.wavelength) and stable.rate <= 0 and "stable" in stable.note
 
 
 def test_analyse_command(tmp_path, primordia_cli):

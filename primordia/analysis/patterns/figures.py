@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
 
 from primordia.core.io import atomic_path
 
@@ -132,8 +133,10 @@ def _draw_linear(ax, linear: xr.Dataset, x: str, y: str, wavelength: bool) -> li
     if wavelength:
         k = linear["turing_wavenumber"].transpose(y, x).values
         predicted = np.where(k > 0, 2.0 * np.pi / k, np.nan)
-        if np.isfinite(predicted).sum() > 3:
-            lines = ax.contour(lx, ly, predicted, levels=6, colors="tab:orange", linewidths=1.0, linestyles="--")
+        finite = predicted[np.isfinite(predicted)]
+        if finite.size > 3:  # levels over the bulk: near the boundary the wavelength grows without bound
+            levels = MaxNLocator(6).tick_values(finite.min(), np.percentile(finite, 80))
+            lines = ax.contour(lx, ly, predicted, levels=levels, colors="tab:orange", linewidths=1.0, linestyles="--")
             ax.clabel(lines, fontsize=7, fmt="%.2g")
             handles.append(Line2D([], [], color="tab:orange", linestyle="--", label="linear: 2 pi / k_max"))
     return handles

@@ -50,7 +50,11 @@ SCALAR_METRICS = (
 
 
 class PredictedMode(NamedTuple):
-    """The linear analysis's fastest-growing stationary (Turing) mode; NaN where it does not apply."""
+    """The linear analysis's fastest-growing stationary (Turing) mode.
+
+    ``k_max`` and ``wavelength`` are NaN when no mode grows (``rate`` <= 0 is
+    then the largest rate) or when the analysis does not describe the model (all NaN).
+    """
 
     k_max: float
     wavelength: float
@@ -92,8 +96,10 @@ def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
     except ConfigError as error:
         return PredictedMode(np.nan, np.nan, np.nan, f"no linear analysis for this model: {error}")
     mode = fastest_growing_mode(params, coupled=coupled, kind="stationary")
-    return PredictedMode(mode.k_max, mode.wavelength, mode.growth_rate,
-                         "coupled" if coupled else "uncoupled (xi_f = 0)")
+    note = "coupled" if coupled else "uncoupled (xi_f = 0)"
+    if not mode.unstable:  # no wavelength is selected; the largest (negative) rate still says how stable
+        return PredictedMode(np.nan, np.nan, mode.growth_rate, f"{note}, stable: no Turing mode grows")
+    return PredictedMode(mode.k_max, mode.wavelength, mode.growth_rate, note)
 
 
 @dataclass(frozen=True)
