@@ -78,8 +78,10 @@ class GrowthLaw(ABC):
     def __init__(self, params: Mapping[str, float], **options):
         self.params = params
         self.opts = merge_options(f"growth law {self.name}", self.options, options)
-        if self.opts["directions"] is not None:
-            self.frame(len(self.opts["directions"]))  # validate now, one line
+        given = self.opts["directions"]
+        if given is not None:  # validate now, one line; the mesh's dimension is checked by frame()
+            size = len(given) if isinstance(given, (list, tuple)) else 0
+            self.frame(size if size in (2, 3) else 3)
 
     @abstractmethod
     def factors(self, fields: Mapping[str, Any], t, X, dimension: int) -> list:
@@ -100,8 +102,8 @@ class GrowthLaw(ABC):
         except (TypeError, ValueError):
             frame = None
         if frame is None or frame.shape != (dimension, dimension) or not np.all(np.isfinite(frame)):
-            raise ConfigError(f"growth_law.directions must be {dimension} vectors of {dimension} numbers, "
-                              f"got {given!r}")
+            raise ConfigError(f"growth_law.directions must be {dimension} vectors of {dimension} numbers "
+                              f"(one per direction k_i, in {dimension}D), got {given!r}")
         if not np.allclose(frame @ frame.T, np.eye(dimension), atol=1e-10):
             raise ConfigError(f"growth_law.directions must be orthonormal, got {given!r}")
         return frame

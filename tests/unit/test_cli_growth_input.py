@@ -1,0 +1,31 @@
+"""Mistakes in a growth configuration (seed section 4), through the real ``primordia`` command: one line, exit 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from test_cli_bad_input import assert_one_line_error
+
+EX02A = Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml"
+COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "output.times=[0.4]",
+          "--set", "output.pictures=false", "--no-progress"]
+
+
+@pytest.mark.parametrize("overrides, fragments", [
+    (["--set", "growth_law.name=seed4d"], ["unknown growth law 'seed4d'", "seed2d", "seed3d"]),
+    (["--set", "growth_law.name=seed3d"], ["seed3d is written for 3D, the mesh is 2D"]),
+    (["--set", 'model.physics=["chemotaxis", "poroelastic_growth", "mechanochemical", "active_stress"]'],
+     ["active_stress", "cannot join poroelastic_growth"]),
+    (["--set", "parameters.delta_2=-0.1"], ["parameter delta_2 must be >= 0"]),
+    (["--set", "physics.poroelastic_growth.shear_modulus=0"], ["shear_modulus must be a positive number"]),
+    (["--set", "physics.poroelastic_growth.boundary=[{boundary='left', type='springs'}]"],
+     ["unknown boundary condition type 'springs'", "robin"]),
+    (["--set", "physics.chemotaxis.accumulation=lagrangian"], ["accumulation must be one of material, conservative"]),
+    (["--set", "growth_law.directions=[[1.0, 1.0], [0.0, 1.0]]"], ["growth_law.directions must be orthonormal"]),
+], ids=["unknown-law", "law-of-the-wrong-dimension", "active-stress-with-growth", "negative-growth-rate",
+        "zero-shear-modulus", "unknown-condition-kind", "unknown-accumulation", "skewed-directions"])
+def test_a_bad_growth_config_is_one_line(primordia_cli, tmp_path, overrides, fragments):
+    result = primordia_cli("run", EX02A, *COARSE, *overrides, "--out", tmp_path / "out")
+    assert_one_line_error(result, *fragments)
