@@ -24,6 +24,7 @@ order, the same order dolfinx keeps, so quadrature points coincide with FFCx's.
 
 from __future__ import annotations
 
+import functools
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,6 +38,7 @@ from petsc4py import PETSc
 from primordia.backends.ufl_numpy import (
     REFERENCE_VERTICES,
     REFERENCE_VOLUMES,
+    ArgumentBlock,
     IntegralPlan,
     UnsupportedUFL,
     cell_quantities,
@@ -429,7 +431,7 @@ class _Chunk:
         self.gdim = mesh.gdim
         self.inverse_jacobian = mesh.inverse_jacobian[cells]                   # (E, tdim, gdim)
         self.num_entities = len(self.inverse_jacobian)
-        self._scalar_cache: dict[tuple, np.ndarray] = {}
+        self._factor_cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self._field_cache: dict[tuple, np.ndarray] = {}
         self._geometry_cache: dict[str, np.ndarray | None] = {}
 
@@ -455,44 +457,37 @@ class _Chunk:
         return np.take_along_axis(self.mesh.mesh_data.cells[self.cells], local, axis=1)
 
     # -- basis functions ----------------------------------------------------------------
-    def _scalar(self, element: skfem.Element, derivatives: int) -> np.ndarray:
-        """(n_local, *(gdim,) * derivatives, E or 1, Q or 1) physical values of a scalar element."""
-        key = (type(element), derivatives)
-        if key in self._scalar_cache:
-            return self._scalar_cache[key]
-        table = self.rule.table(element, derivatives)
-        if derivatives and derivatives >= element.maxdeg:  # affine cells: constant over the points
-            table = table[..., :1]
-        K = self.mesh.inverse_jacobian_by_cell[:, :, self.cells]                # (tdim, gdim, E)
-        if self.rule.facet:
-            table = np.moveaxis(table[self.local_facets], 0, -2)               # (n, ..., E, Q)
-            if derivatives == 0:
-                values = table
-            elif derivatives == 1:
-                values = np.einsum("ikeq,kde->ideq", table, K)
-            else:
-                values = np.einsum("ikleq,kae,lbe->iabeq", table, K, K, optimize=True)
-        elif derivatives == 0:
-            values = table[..., None, :]
-        elif derivatives == 1:
-            values = np.moveaxis(np.tensordot(table, K, axes=([1], [0])), 1, -1)   # (n, gdim, E, Q)
-        else:
-            values = np.einsum("iklq,kae,lbe->iabeq", table, K, K, optimize=True)
-        self._scalar_cache[key] = values
-        return values
-
-    def argument(self, space: SkfemFunctionSpace, derivatives: int) -> np.ndarray:
+    def argument_blocks(self, space: SkfemFunctionSpace) -> list[ArgumentBlock]:
         self._check_space(space)
-        if len(space.blocks) == 1 and space.value_shape == ():
-            return self._scalar(space.blocks[0].element, derivatives)
-        parts = [self._scalar(block.element, derivatives) for block in space.blocks]
-        entities = max(p.shape[-2] for p in parts)
-        points = max(p.shape[-1] for p in parts)
-        derivative_shape = (self.gdim,) * derivatives
-        dense = np.zeros((space.cell_dofs.shape[1], space.value_size) + derivative_shape + (entities, points))
-        for block, part in zip(space.blocks, parts):
-            dense[block.local, block.component] = part
-        return dense.reshape(dense.shape[:1] + space.value_shape + dense.shape[2:])
+        return [ArgumentBlock(block.component, block.local, functools.partial(self._factors, block.element))
+                for block in space.blocks]
+
+    def _factors(self, element: skfem.Element, derivatives: int) -> tuple[np.ndarray, np.ndarray]:
+        """Reference table (n_local, tdim ** k, E or 1, Q or 1) and reference-to-physical map of a scalar element."""
+        key = (type(element), derivatives)
+        if key not in self._factor_cache:
+            table = self.rule.table(element, derivatives)
+            if derivatives and derivatives >= element.maxdeg:  # affine cells: constant over the points
+                table = table[..., :1]
+            if self.rule.facet:
+                table = np.moveaxis(table[self.local_facets], 0, -2)            # (n, ..., E, Q)
+            else:
+                table = table[..., None, :]
+            table = table.reshape(table.shape[:1] + (-1,) + table.shape[-2:])
+            self._factor_cache[key] = table, self._derivative_map(derivatives)
+        return self._factor_cache[key]
+
+    def _derivative_map(self, derivatives: int) -> np.ndarray:
+        """(tdim ** k, *(gdim,) * k, E, 1): k-th physical derivatives from reference ones (affine cells)."""
+        if derivatives == 0:
+            return np.ones((1, 1, 1))
+        K = self.mesh.inverse_jacobian_by_cell[:, :, self.cells]                # (tdim, gdim, E)
+        if derivatives == 1:
+            return K[..., None]
+        if derivatives == 2:
+            tdim = K.shape[0]
+            return np.einsum("kae,lbe->klabe", K, K).reshape((tdim * tdim,) + K.shape[1:2] * 2 + K.shape[2:])[..., None]
+        raise unsupported(f"derivatives of order {derivatives}")
 
     def coefficient(self, function, derivatives: int) -> np.ndarray:
         if not isinstance(function, SkfemFunction):
@@ -501,14 +496,25 @@ class _Chunk:
         self._check_space(space)
         key = (id(function), derivatives)
         if key not in self._field_cache:
-            parts = []
-            for block in space.blocks:
-                dofs = function.array[block.cell_dofs[self.cells]]                # (E, n)
-                parts.append(np.einsum("ei,i...eq->...eq", dofs, self._scalar(block.element, derivatives)))
-            parts = np.broadcast_arrays(*parts)
+            parts = np.broadcast_arrays(*(self._interpolate(function.array, block, derivatives)
+                                          for block in space.blocks))
             values = np.stack(parts).reshape(space.value_shape + parts[0].shape)
-            self._field_cache[key] = values
+            self._field_cache[key] = np.swapaxes(values, -1, -2)
         return self._field_cache[key]
+
+    def _interpolate(self, values: np.ndarray, block: _Block, derivatives: int) -> np.ndarray:
+        """(*(gdim,) * k, Q or 1, E): k-th derivatives of the block's component of a field with DOF ``values``.
+
+        Point-major, like the evaluator's arrays (the context's arrays are views of it, swapped).
+        """
+        table, mapping = self._factors(block.element, derivatives)
+        dofs = values[block.cell_dofs[self.cells]]                                 # (E, n)
+        if table.shape[2] == 1:  # the same reference table on every cell: one matrix product
+            reference = (table[:, :, 0].reshape(len(table), -1).T @ dofs.T).reshape(len(mapping), -1, len(dofs))
+        else:
+            reference = np.einsum("ei,ireq->rqe", dofs, table)                     # (R, Q, E)
+        mapping = np.swapaxes(mapping, -1, -2)
+        return sum(mapping[r] * reference[r] for r in range(len(mapping)))
 
     def constant(self, constant) -> np.ndarray:
         if not isinstance(constant, SkfemConstant):
@@ -529,12 +535,13 @@ class _Chunk:
         return self._geometry_cache[quantity]
 
     def spatial_coordinate(self) -> np.ndarray:
-        points = self.rule.points
-        jacobian = self.mesh.jacobian[self.cells]
-        origin = self.mesh.origin[self.cells].T[:, :, None]
+        """(gdim, E, Q), a view of point-major data."""
+        jacobian = self.mesh.jacobian[self.cells]                                   # (E, gdim, tdim)
         if self.rule.facet:
-            return origin + np.einsum("eak,keq->aeq", jacobian, np.moveaxis(points[self.local_facets], 0, 1))
-        return origin + np.einsum("eak,kq->aeq", jacobian, points)
+            mapped = np.einsum("eak,ekq->aqe", jacobian, self.rule.points[self.local_facets])
+        else:
+            mapped = np.ascontiguousarray(np.tensordot(jacobian, self.rule.points, axes=([2], [0])).transpose(1, 2, 0))
+        return np.swapaxes(self.mesh.origin[self.cells].T[:, None, :] + mapped, 1, 2)
 
     def facet_normal(self) -> np.ndarray | None:
         if not self.rule.facet:
@@ -585,6 +592,43 @@ class _Dirichlet:
 
 
 # ---------------------------------------------------------------------------------------
+# Sparsity pattern
+# ---------------------------------------------------------------------------------------
+
+
+class _Pattern:
+    """CSR pattern of all cell couplings between a test and a trial space, and each
+    element-matrix entry's position in its values (``positions``: (cells, n_test, n_trial))."""
+
+    def __init__(self, test: SkfemFunctionSpace, trial: SkfemFunctionSpace):
+        self.test, self.trial = test, trial
+        keys = test.cell_dofs[:, :, None] * trial.num_dofs + trial.cell_dofs[:, None, :]
+        unique, positions = np.unique(keys.ravel(), return_inverse=True)
+        self.row, self.col = np.divmod(unique, trial.num_dofs)
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(self.row, minlength=test.num_dofs))]
+                                     ).astype(PETSc.IntType)
+        self.indices = self.col.astype(PETSc.IntType)
+        self.positions = positions.reshape(keys.shape).astype(np.int32 if len(unique) < 2 ** 31 else np.int64)
+        self._runs: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def add(self, data: np.ndarray, cells: np.ndarray | slice, tensors: np.ndarray) -> None:
+        """``data[positions[cells]] += tensors``, entries at the same position summed.
+
+        A run of cells (a slice) goes through the distinct positions it touches,
+        found once and kept: its cost is that of the run, not a pass over ``data``.
+        """
+        if not isinstance(cells, slice):
+            data += np.bincount(self.positions[cells].ravel(), weights=tensors.ravel(), minlength=len(data))
+            return
+        run = self._runs.get((cells.start, cells.stop))
+        if run is None:
+            unique, inverse = np.unique(self.positions[cells], return_inverse=True)
+            run = self._runs[(cells.start, cells.stop)] = (unique, inverse.ravel().astype(self.positions.dtype))
+        unique, inverse = run
+        data[unique] += np.bincount(inverse, weights=tensors.ravel(), minlength=len(unique))
+
+
+# ---------------------------------------------------------------------------------------
 # The backend
 # ---------------------------------------------------------------------------------------
 
@@ -608,7 +652,7 @@ class SkfemBackend(Backend):
         super().__init__(comm)
         self._plans: OrderedDict[int, tuple[ufl.Form, list[IntegralPlan]]] = OrderedDict()
         self._rules: dict[tuple, _Rule] = {}
-        self._patterns: dict[tuple[int, int], tuple] = {}
+        self._patterns: dict[tuple[int, int], _Pattern] = {}
 
     # -- mesh, spaces, fields -----------------------------------------------------------
     def create_mesh(self, data: MeshData) -> SkfemMesh:
@@ -691,28 +735,21 @@ class SkfemBackend(Backend):
                 tensors = integrate_integrand(plan.integrand, context, context.weights)
                 yield entities, np.broadcast_to(tensors, (context.num_entities, sizes[0], sizes[1]))
 
-    def _pattern(self, test: SkfemFunctionSpace, trial: SkfemFunctionSpace):
-        """CSR pattern of all cell couplings, and each (cell, i, j) entry's position in it."""
+    def _pattern(self, test: SkfemFunctionSpace, trial: SkfemFunctionSpace) -> _Pattern:
         key = (id(test), id(trial))
         hit = self._patterns.get(key)
-        if hit is None or hit[0] is not test or hit[1] is not trial:
-            rows, cols = test.cell_dofs, trial.cell_dofs
-            keys = rows[:, :, None] * trial.num_dofs + cols[:, None, :]
-            unique, positions = np.unique(keys.ravel(), return_inverse=True)
-            row, col = np.divmod(unique, trial.num_dofs)
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=test.num_dofs))])
-            positions = positions.reshape(keys.shape).astype(np.int32 if len(unique) < 2 ** 31 else np.int64)
-            hit = (test, trial, indptr.astype(PETSc.IntType), col.astype(PETSc.IntType), positions, row, col)
-            self._patterns[key] = hit
-        return hit[2:]
+        if hit is None or hit.test is not test or hit.trial is not trial:
+            hit = self._patterns[key] = _Pattern(test, trial)
+        return hit
 
     # -- assembly -----------------------------------------------------------------------
     def assemble_matrix(self, form, bcs: Sequence[BoundaryCondition] = (), A=None, diagonal: float = 1.0):
         test, trial = self._form_spaces(form)
-        indptr, indices, positions, row, col = self._pattern(test, trial)
+        pattern = self._pattern(test, trial)
+        indptr, indices, row, col = pattern.indptr, pattern.indices, pattern.row, pattern.col
         data = np.zeros(len(indices))
         for cells, tensors in self._element_tensors(form):
-            data += np.bincount(positions[cells].ravel(), weights=tensors.ravel(), minlength=len(data))
+            pattern.add(data, cells, tensors)
         row_fixed = self._constrained(bcs, test)
         col_fixed = self._constrained(bcs, trial)
         if row_fixed is not None or col_fixed is not None:

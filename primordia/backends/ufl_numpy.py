@@ -8,21 +8,35 @@ of integrals and estimation of their polynomial degree), but without function
 pullbacks or geometry lowering: integrands stay in physical space and are
 evaluated by a recursive interpreter over UFL node types
 (:func:`evaluate_integrand`; :func:`integrate_integrand` also sums over the
-quadrature points, term by term and factor by factor).
+quadrature points into element tensors).
 
 Array layout
 ------------
 Every node evaluates to one numpy array with the axes ::
 
-    (test, trial, *shape, *free_indices, entity, point)
+    (test, trial, *shape, *free_indices, point, entity)
 
-``test`` and ``trial`` run over the local basis functions of the form's
-arguments (size 1 when the node does not depend on that argument), ``shape`` is
-the node's ``ufl_shape``, the free-index axes follow the node's
-``ufl_free_indices`` order, ``entity`` runs over the cells (or facets) of a chunk
-and ``point`` over the quadrature points.  The argument, entity and point axes
-may have size 1 and broadcast; shape and free-index axes always have full size.
-One evaluation of an integrand thus yields all element tensors of a chunk.
+``shape`` is the node's ``ufl_shape``, the free-index axes follow the node's
+``ufl_free_indices`` order, ``point`` runs over the quadrature points and
+``entity`` over the cells (or facets) of a chunk: last, so that the many arrays
+that do not vary over the points (gradients on affine cells) broadcast along an
+outer axis.  Axes of size 1 broadcast; shape and free-index axes have full size.
+
+Arguments, block by block
+-------------------------
+An integrand is linear in each argument.  It is evaluated for one (test block,
+trial block) pair at a time, a block being one scalar component of an argument's
+space (:class:`ArgumentBlock`: one per component of a vector field, one per
+field of a mixed space), and the ``test`` and ``trial`` axes run over the
+block's *directions*, its value and its reference derivatives ``d/dX_r`` (those
+the integrand uses), not over its basis functions.  The integrand's value on a
+pair is thus the coefficient of (test direction a) x (trial direction b), and
+the pair's element tensors are ``sum_{a,b,q} value[a,b,q,e] w[e,q] T[i,a,q] S[j,b,q]``
+with the reference tables T, S of the two blocks: on cells, one matrix product
+with a matrix the same for every cell, as in FFCx's argument factorisation.  A
+node that vanishes on a pair (a component of a mixed argument other than the
+block's) evaluates to ``None`` and prunes what depends on it, so a mixed space
+costs what its coupled blocks cost, and never a dense, mostly zero, array.
 
 Quadrature
 ----------
@@ -40,8 +54,12 @@ What the evaluator needs from a backend is stated in :class:`QuadratureContext`.
 
 from __future__ import annotations
 
+import functools
 import math
+import operator
 import string
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -179,17 +197,45 @@ def _collapsed_tetrahedron_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class ArgumentBlock:
+    """One scalar component of an argument's space: the unit arguments are evaluated in.
+
+    On a chunk, the block's basis functions or their ``k``-th derivatives are
+    ``sum_r table[i, r, e, q] * map[r, *d, e, q]``, the two factors ``factors(k)``
+    returns: ``table`` (n_block, R, E, Q) holds reference values or derivatives
+    in ``R = tdim ** k`` directions, ``map`` (R, *(gdim,) * k, E, Q) turns them
+    into physical ones (the 1 x 1 identity for ``k = 0``).  Their E or Q axes may
+    have size 1: on cells the table is the same on every entity and the map at
+    every point.  ``component`` ``None`` makes one block of all components; its
+    map then has the value shape after R.
+    """
+
+    component: int | None   # index in the space's flattened value shape
+    local: np.ndarray       # positions of the block's DOFs among the space's local DOFs
+    factors: Callable[[int], tuple[np.ndarray, np.ndarray]]
+
+
 class QuadratureContext(Protocol):
     """What :func:`evaluate_integrand` asks of a backend, on one chunk of entities.
 
     ``E`` is the number of entities (cells or facets) of the chunk and ``Q`` the
     number of quadrature points; either may be 1 in a returned array (broadcast).
+    The evaluator works point-major (module docstring): arrays that are views of
+    (..., Q, E) data, swapped, spare it a strided layout.
+    Arguments come block by block from ``argument_blocks``; a context without it
+    may provide ``argument`` instead (the protocol before blocks), whose dense
+    arrays then make one block of all components.
     """
 
     gdim: int
 
+    def argument_blocks(self, space) -> Sequence[ArgumentBlock]:
+        """The scalar components of ``space``; their ``local`` DOFs partition the space's."""
+
     def argument(self, space, derivatives: int) -> np.ndarray:
-        """Basis functions of ``space``: (n_local, *value_shape, *(gdim,) * derivatives, E, Q)."""
+        """Basis functions of ``space``: (n_local, *value_shape, *(gdim,) * derivatives, E, Q).
+        Only asked for when ``argument_blocks`` is absent."""
 
     def coefficient(self, function, derivatives: int) -> np.ndarray:
         """Values or derivatives of a field: (*value_shape, *(gdim,) * derivatives, E, Q)."""
@@ -203,114 +249,272 @@ class QuadratureContext(Protocol):
 
 
 def evaluate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContext) -> np.ndarray:
-    """Values of a scalar integrand: an array (test, trial, entity, point), broadcastable."""
+    """Values of a scalar integrand: an array (test, trial, entity, point), broadcastable.
+
+    The test and trial axes run over the local basis functions of the arguments.
+    """
     with np.errstate(all="ignore"):  # both branches of a conditional are evaluated
-        return _Evaluator(context).value(integrand)
+        evaluator = _Evaluator(context, integrand)
+        if not evaluator.arguments:
+            return _swap_points(evaluator.value(integrand))
+        parts = [(test, trial, np.einsum("abqe,iaeq,jbeq->ijeq", value, test_table, trial_table))
+                 for test, trial, value, test_table, trial_table in evaluator.block_values()]
+        points = np.broadcast_shapes((1, 1), *(part.shape[2:] for *_, part in parts))
+        values = np.zeros(evaluator.num_local + points)
+        for test, trial, part in parts:
+            values[test.local[:, None], trial.local] = part
+        return values
 
 
 def integrate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContext,
                         weights: np.ndarray) -> np.ndarray:
-    """Element tensors ``sum_q integrand * weights``: an array (entity, test, trial), broadcastable.
+    """Element tensors ``sum_q integrand * weights``: an array (entity, test, trial).
 
     ``weights`` (entity, point) are the quadrature weights times the Jacobian
-    determinant.  Sums are integrated term by term and products factor by
-    factor, so that e.g. ``exp(-m) * u * div(v)`` never builds the full
-    (test, trial, entity, point) product before summing over the points.
+    determinant.  Each (test block, trial block) pair is integrated on its own
+    (:func:`_block_tensor`) and written at its blocks' local positions.
     """
     with np.errstate(all="ignore"):
-        return _Evaluator(context).integrate(integrand, weights)
+        evaluator = _Evaluator(context, integrand)
+        tensors = np.zeros((len(weights),) + evaluator.num_local)
+        for test, trial, value, test_table, trial_table in evaluator.block_values():
+            tensors[:, test.local[:, None], trial.local] = _block_tensor(value, weights, test_table, trial_table)
+        return tensors
 
+
+def _block_tensor(value: np.ndarray, weights: np.ndarray, test_table: np.ndarray,
+                  trial_table: np.ndarray) -> np.ndarray:
+    """``sum_{a,b,q} value[a,b,q,e] weights[e,q] test_table[i,a,e,q] trial_table[j,b,e,q]``: (E, n_i, n_j).
+
+    When neither table depends on the entity (cells), this is one matrix product
+    of a constant (i j, a b q) matrix, the products of the reference tables, with
+    the weighted values (a b q, E): the work per cell of a compiled kernel.
+    """
+    (n_test, test_directions), (n_trial, trial_directions) = test_table.shape[:2], trial_table.shape[:2]
+    entities, points = weights.shape
+    weighted = np.broadcast_to(value * weights.T, (test_directions, trial_directions, points, entities))
+    if test_table.shape[2] == 1 and trial_table.shape[2] == 1:
+        test_table = np.broadcast_to(test_table[:, :, 0], (n_test, test_directions, points))
+        trial_table = np.broadcast_to(trial_table[:, :, 0], (n_trial, trial_directions, points))
+        reference = np.einsum("iaq,jbq->ijabq", test_table, trial_table).reshape(n_test * n_trial, -1)
+        return (reference @ weighted.reshape(-1, entities)).reshape(n_test, n_trial, entities).transpose(2, 0, 1)
+    return np.einsum("abqe,iaeq,jbeq->eij", weighted, test_table, trial_table, optimize=True)
+
+
+def _swap_points(array: np.ndarray) -> np.ndarray:
+    """(..., entity, point), the context's axes, as (..., point, entity), the evaluator's; and back."""
+    return np.swapaxes(array, -1, -2)
+
+
+def _modified_argument(o) -> tuple[uc.Argument | None, int]:
+    """The argument of ``o`` = grad(...(grad(argument))) and the number of grads; (None, 0) otherwise."""
+    derivatives = 0
+    while isinstance(o, uc.Grad):
+        o, derivatives = o.ufl_operands[0], derivatives + 1
+    return (o, derivatives) if isinstance(o, uc.Argument) else (None, 0)
+
+
+def _dense_argument_block(context: QuadratureContext, argument: uc.Argument) -> ArgumentBlock:
+    """The one block of a context that only has the dense ``argument`` (the protocol before
+    blocks): its directions are the basis functions themselves, its tables the identity."""
+    space = argument.ufl_function_space()
+    size = context.argument(space, 0).shape[0]
+    identity = np.eye(size).reshape(size, size, 1, 1)
+    return ArgumentBlock(None, np.arange(size), lambda derivatives: (identity, context.argument(space, derivatives)))
+
+
+#: The block of an absent argument (a linear form has no trial function): one DOF, value 1.
+_ABSENT = ArgumentBlock(0, np.zeros(1, dtype=np.int64), lambda derivatives: (np.ones((1, 1, 1, 1)), np.ones((1, 1, 1))))
+_MISSING = object()
 
 _ARGS, _POINTS = "AB", "YZ"
-
-#: Below this many (test x trial x summed index x point) products per entity, one
-#: broadcast einsum beats a matrix product per entity.
-_CONTRACTION_MIN_SIZE = 2048
 _INDEX_LETTERS = string.ascii_lowercase + "CDEFGHIJKLMNOPQRSTUVWX"
 
 
-class _Evaluator:
-    """Recursive evaluation of one integrand on one chunk, memoised per node."""
+class _Analysis:
+    """What evaluating an integrand needs to know beforehand, from one pass over its nodes.
 
-    def __init__(self, context: QuadratureContext):
+    ``masks``: which arguments each node depends on (bit 0 test, bit 1 trial), by node id;
+    ``memoised``: the nodes worth keeping once evaluated, those used more than once or by
+    a parent that depends on more arguments (evaluated again for each block pair), by id;
+    ``arguments`` by number, and the derivative ``orders`` each appears with, by
+    (number, flat component) where a mixed argument is split, else by (number, None).
+    """
+
+    def __init__(self, root):
+        self.root = root  # keeps the node ids unique
+        self.masks: dict[int, int] = {}
+        self.arguments: dict[int, uc.Argument] = {}
+        self.orders: dict[tuple[int, int | None], set[int]] = {}
+        uses: dict[int, int] = {}
+        self.memoised: set[int] = set()
+        stack = [root]
+        while stack:
+            node = stack[-1]
+            if id(node) in self.masks:
+                stack.pop()
+                continue
+            pending = [op for op in node.ufl_operands if id(op) not in self.masks]
+            if pending:
+                stack.extend(pending)
+                continue
+            stack.pop()
+            self.masks[id(node)] = mask = self._mask(node)
+            for op in node.ufl_operands:
+                uses[id(op)] = uses.get(id(op), 0) + 1
+                if uses[id(op)] > 1 or self.masks[id(op)] != mask:
+                    self.memoised.add(id(op))
+                if not isinstance(node, uc.Grad):
+                    self._note_derivatives(op, node.ufl_operands[1] if isinstance(node, uc.Indexed) else None)
+        self._note_derivatives(root, None)
+
+    def _mask(self, node) -> int:
+        if isinstance(node, uc.Argument):
+            if node.number() > 1:
+                raise unsupported(f"Argument number {node.number()}")
+            self.arguments[node.number()] = node
+            return 1 << node.number()
+        return functools.reduce(operator.or_, (self.masks[id(op)] for op in node.ufl_operands), 0)
+
+    def _note_derivatives(self, o, multiindex) -> None:
+        argument, derivatives = _modified_argument(o)
+        if argument is not None:
+            component = None if multiindex is None else _fixed_component(argument, multiindex)
+            self.orders.setdefault((argument.number(), component), set()).add(derivatives)
+
+
+def _fixed_component(argument: uc.Argument, multiindex) -> int | None:
+    """The flat value component ``argument[multiindex]`` (or of its derivatives) picks, if fixed."""
+    shape = argument.ufl_shape
+    fixed = multiindex.indices()[: len(shape)]
+    if not shape or not all(isinstance(index, uc.FixedIndex) for index in fixed):
+        return None
+    return int(np.ravel_multi_index(tuple(int(index) for index in fixed), shape))
+
+
+#: Analyses of the integrands evaluated last (a backend evaluates the same few, chunk after chunk).
+_ANALYSES: OrderedDict[int, _Analysis] = OrderedDict()
+_CACHED_ANALYSES = 256
+
+
+def _analysis(integrand) -> _Analysis:
+    hit = _ANALYSES.get(id(integrand))
+    if hit is None or hit.root is not integrand:
+        hit = _ANALYSES[id(integrand)] = _Analysis(integrand)
+        if len(_ANALYSES) > _CACHED_ANALYSES:
+            _ANALYSES.popitem(last=False)
+    _ANALYSES.move_to_end(id(integrand))
+    return hit
+
+
+class _Evaluator:
+    """Recursive evaluation of one integrand on one chunk, block pair by block pair.
+
+    A memoised node's value is shared by every block pair when the node depends
+    on no argument, and by every pair with the same test (trial) block when it
+    depends on the test (trial) function only.
+    """
+
+    def __init__(self, context: QuadratureContext, integrand: ufl.core.expr.Expr):
         self.context = context
-        self._memo: dict[int, tuple[object, np.ndarray]] = {}
+        self.integrand = integrand
+        analysis = _analysis(integrand)
+        self.arguments, self._all_orders = analysis.arguments, analysis.orders
+        self._masks, self._memoised = analysis.masks, analysis.memoised
+        self.blocks = [self._argument_blocks(number) for number in (0, 1)]
+        self.num_local = tuple(1 + max(int(block.local.max()) for block in blocks) for blocks in self.blocks)
+        self._pair = (0, 0)
+        self._memo: dict[object, np.ndarray | None] = {}
+        self._factors_memo: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._tables: dict[tuple[int, int], np.ndarray] = {}
+        self._offsets: dict[tuple[int, int], dict[int | None, int]] = {}
+
+    # -- arguments, block by block --------------------------------------------------------
+    def _argument_blocks(self, number: int) -> list[ArgumentBlock]:
+        argument = self.arguments.get(number)
+        if argument is None:
+            return [_ABSENT]
+        if hasattr(self.context, "argument_blocks"):
+            return list(self.context.argument_blocks(argument.ufl_function_space()))
+        return [_dense_argument_block(self.context, argument)]
+
+    def _factors(self, number: int, index: int, derivatives: int) -> tuple[np.ndarray, np.ndarray]:
+        key = (number, index, derivatives)
+        if key not in self._factors_memo:
+            self._factors_memo[key] = self.blocks[number][index].factors(derivatives)
+        return self._factors_memo[key]
+
+    def _orders(self, number: int, index: int) -> list[int]:
+        """The derivative orders a block appears with: its component's, and those of every component."""
+        component = self.blocks[number][index].component
+        return sorted(set().union(*(orders for (n, c), orders in self._all_orders.items()
+                                    if n == number and (c is None or component is None or c == component))))
+
+    def _direction_offsets(self, number: int, index: int) -> dict[int | None, int]:
+        """Where each derivative order's directions start on a block's axis; ``None``: the total."""
+        key = (number, index)
+        if key not in self._offsets:
+            offsets, start = {}, 0
+            for derivatives in self._orders(number, index):
+                offsets[derivatives] = start
+                start += len(self._factors(number, index, derivatives)[1])
+            offsets[None] = start
+            self._offsets[key] = offsets
+        return self._offsets[key]
+
+    def table(self, number: int, index: int) -> np.ndarray:
+        """Reference tables of a block in all the directions of its argument's axis: (n_block, directions, E, Q)."""
+        key = (number, index)
+        if key not in self._tables:
+            if number not in self.arguments:
+                self._tables[key] = np.ones((1, 1, 1, 1))
+            else:
+                parts = [self._factors(number, index, derivatives)[0] for derivatives in self._orders(number, index)]
+                points = np.broadcast_shapes(*(part.shape[2:] for part in parts))
+                self._tables[key] = np.concatenate([np.broadcast_to(p, p.shape[:2] + points) for p in parts], axis=1)
+        return self._tables[key]
+
+    def block_values(self):
+        """Yield (test block, trial block, integrand value, test table, trial table) for every block
+        pair on which the integrand does not vanish; the value is (test directions, trial directions, Q, E)."""
+        for test_index, test in enumerate(self.blocks[0]):
+            for trial_index, trial in enumerate(self.blocks[1]):
+                self._pair = (test_index, trial_index)
+                value = self._value(self.integrand)
+                if value is not None:
+                    yield test, trial, value, self.table(0, test_index), self.table(1, trial_index)
+
+    # -- memoised evaluation -----------------------------------------------------------------
+    def _key(self, o):
+        """Memo key of ``o``: the node, and the current block of each argument it depends on."""
+        mask = self._masks.get(id(o), 0)
+        return id(o) if not mask else (id(o), self._pair[0] if mask & 1 else -1, self._pair[1] if mask & 2 else -1)
+
+    def _value(self, o) -> np.ndarray | None:
+        """The value of ``o`` on the current block pair; ``None`` where it vanishes on it."""
+        key = self._key(o)
+        hit = self._memo.get(key, _MISSING)
+        if hit is _MISSING:
+            hit = _handler(type(o))(self, o)
+            if id(o) in self._memoised:
+                self._memo[key] = hit
+        return hit
 
     def value(self, o) -> np.ndarray:
-        hit = self._memo.get(id(o))
-        if hit is not None:
-            return hit[1]
-        result = _handler(type(o))(self, o)
-        self._memo[id(o)] = (o, result)  # keep o alive: ids stay unique
+        """The value of ``o``, vanishing parts as zeros (for operators that are not linear)."""
+        result = self._value(o)
+        if result is None:
+            return np.zeros((1, 1) + o.ufl_shape + tuple(o.ufl_index_dimensions) + (1, 1))
         return result
 
-    def integrate(self, o, weights: np.ndarray) -> np.ndarray:
-        if isinstance(o, uc.Sum):
-            return sum(self.integrate(term, weights) for term in o.ufl_operands)
-        factors = []
-        _collect_factors(o, factors)
-        contractions = [f for f in factors if isinstance(f, uc.IndexSum) and id(f) not in self._memo]
-        q_varying, q_constant = [], []
-        for factor in factors:
-            if len(contractions) == 1 and factor is contractions[0]:
-                continue
-            value = self.value(factor)
-            if value.shape[0] == 1 and value.shape[1] == 1:
-                weights = weights * value[0, 0]       # no argument: fold into the weights
-            elif value.shape[-1] == 1:
-                q_constant.append(value[..., 0])      # constant over the points: apply after the sum
-            else:
-                q_varying.append(value)
-        if len(contractions) == 1:
-            if not q_varying and not q_constant:
-                result = self._contract(contractions[0], weights)
-                if result is not None:
-                    return result
-            value = self.value(contractions[0])
-            (q_constant if value.shape[-1] == 1 else q_varying).append(value[..., 0] if value.shape[-1] == 1
-                                                                       else value)
-        uniform = [v for v in q_varying if v.shape[2] == 1]  # same on every entity: multiply first, it is small
-        if len(uniform) > 1:
-            q_varying = [v for v in q_varying if v.shape[2] != 1] + [_product(uniform)]
-        if q_varying:
-            terms = ",".join("abeq" for _ in q_varying)
-            result = np.einsum(f"{terms},eq->eab", *q_varying, weights)
-        else:
-            result = weights.sum(axis=-1)[:, None, None]
-        for value in q_constant:
-            result = result * np.moveaxis(value, -1, 0)
-        return result
-
-    def _contract(self, o, weights: np.ndarray) -> np.ndarray | None:
-        """``sum_{indices, points} a * b * weights`` for ``o`` = IndexSum(s) of Product(a, b).
-
-        With ``a`` depending on the test function only and ``b`` on the trial
-        function only (or on none), this is one matrix product per entity, over
-        the summed indices and the points at once: no (test, trial, ..., point)
-        temporary.  Returns ``None`` when the pattern does not apply or is too
-        small to gain.
-        """
-        node = o
-        while isinstance(node, uc.IndexSum):
-            node = node.ufl_operands[0]
-        if o.ufl_free_indices or not isinstance(node, uc.Product):
-            return None
-        a, b = node.ufl_operands
-        first, second = self._scalar_operands(node)
-        if first.shape[1] > 1 or second.shape[0] > 1:
-            first, second = second, first
-        if first.shape[1] > 1 or second.shape[0] > 1:
-            return None                                  # an operand depends on both arguments
-        free = np.broadcast_shapes(first.shape[2:-2], second.shape[2:-2])
-        n_test, n_trial = first.shape[0], second.shape[1]
-        entities, points = weights.shape
-        if n_test * n_trial * int(np.prod(free)) * points < _CONTRACTION_MIN_SIZE:
-            return None
-        test_part = np.broadcast_to(first[:, 0], (n_test,) + free + (entities, points))
-        trial_part = np.broadcast_to(second[0], (n_trial,) + free + (entities, points)) * weights
-        test_part = np.moveaxis(test_part, -2, 0).reshape(entities, n_test, -1)
-        trial_part = np.moveaxis(trial_part, -2, 0).reshape(entities, n_trial, -1)
-        return np.matmul(test_part, trial_part.transpose(0, 2, 1))
+    def _other_component(self, expression, multiindex) -> bool:
+        """Whether ``expression[multiindex]`` is a component of an argument other than its current block's."""
+        argument, _ = _modified_argument(expression)
+        if argument is None:
+            return False
+        component = _fixed_component(argument, multiindex)
+        block = self.blocks[argument.number()][self._pair[argument.number()]]
+        return None not in (component, block.component) and component != block.component
 
     # -- helpers -----------------------------------------------------------------------
     @staticmethod
@@ -325,16 +529,36 @@ class _Evaluator:
         """Operand values aligned to ``o``'s free indices (operators of scalars)."""
         return [self._align(self.value(op), op.ufl_free_indices, o.ufl_free_indices) for op in o.ufl_operands]
 
+    def _factor_values(self, operands) -> list[np.ndarray] | None:
+        """Values of a product's factors, ``None`` when one vanishes; factors depending on
+        arguments come first, so that a vanishing one spares evaluating the others."""
+        values = {}
+        for op in sorted(operands, key=lambda op: -self._masks[id(op)]):
+            value = values[id(op)] = self._value(op)
+            if value is None:
+                return None
+        return [values[id(op)] for op in operands]
+
     # -- terminals ----------------------------------------------------------------------
     def argument(self, o, derivatives=0):
+        """The current block of an argument in its directions: zero but in the block's component,
+        where it is the map from the reference derivatives of this order (identity for values)."""
         number = o.number()
-        if number > 1:
-            raise unsupported(f"Argument number {number}")
-        basis = self.context.argument(o.ufl_function_space(), derivatives)
-        return basis[:, None] if number == 0 else basis[None, :]
+        block = self.blocks[number][self._pair[number]]
+        mapping = _swap_points(self._factors(number, self._pair[number], derivatives)[1])
+        offsets = self._direction_offsets(number, self._pair[number])
+        rows = slice(offsets[derivatives], offsets[derivatives] + len(mapping))
+        if block.component is None:
+            array = np.zeros((offsets[None],) + mapping.shape[1:])
+            array[rows] = mapping
+        else:
+            array = np.zeros((offsets[None], int(np.prod(o.ufl_shape))) + mapping.shape[1:])
+            array[rows, block.component] = mapping
+            array = array.reshape(array.shape[:1] + o.ufl_shape + mapping.shape[1:])
+        return array[:, None] if number == 0 else array[None, :]
 
     def coefficient(self, o, derivatives=0):
-        return self.context.coefficient(o, derivatives)[None, None]
+        return _swap_points(self.context.coefficient(o, derivatives))[None, None]
 
     def grad(self, o):
         derivatives, terminal = 0, o
@@ -354,7 +578,7 @@ class _Evaluator:
         value = self.context.geometry(type(o).__name__)
         if value is None:
             raise unsupported(type(o).__name__)
-        return value[None, None]
+        return _swap_points(value)[None, None]
 
     def scalar_value(self, o):
         if isinstance(o, uc.ComplexValue):
@@ -378,7 +602,11 @@ class _Evaluator:
     # -- tensor algebra in index notation ----------------------------------------------------
     def indexed(self, o):
         expression, multiindex = o.ufl_operands
-        array = self.value(expression)
+        if self._masks[id(expression)] and self._other_component(expression, multiindex):
+            return None
+        array = self._value(expression)
+        if array is None:
+            return None
         slicer = [slice(None)] * array.ndim
         kept = []
         for position, index in enumerate(multiindex):
@@ -393,7 +621,9 @@ class _Evaluator:
 
     def component_tensor(self, o):
         expression, multiindex = o.ufl_operands
-        array = self.value(expression)
+        array = self._value(expression)
+        if array is None:
+            return None
         free, shape, out = _subscripts(expression.ufl_free_indices, [i.count() for i in multiindex],
                                        o.ufl_free_indices)
         return np.einsum(f"{_ARGS}{free}{_POINTS}->{_ARGS}{shape}{out}{_POINTS}", array)
@@ -402,30 +632,42 @@ class _Evaluator:
         summand, multiindex = o.ufl_operands
         summed = multiindex[0].count()
         rank = len(summand.ufl_shape)
-        if isinstance(summand, uc.Product) and id(summand) not in self._memo:
+        if isinstance(summand, uc.Product) and self._key(summand) not in self._memo:
             # a[i] * b[i] summed over i: one contraction, no (..., i, ...) temporary
             a, b = summand.ufl_operands
+            values = self._factor_values((a, b))
+            if values is None:
+                return None
             first, second, out = _subscripts(a.ufl_free_indices, b.ufl_free_indices, o.ufl_free_indices)
             return np.einsum(f"{_ARGS}{first}{_POINTS},{_ARGS}{second}{_POINTS}->{_ARGS}{out}{_POINTS}",
-                             self.value(a), self.value(b))
-        array = self.value(summand)
+                             *_same_entities(values))
+        array = self._value(summand)
+        if array is None:
+            return None
         axis = 2 + rank + summand.ufl_free_indices.index(summed)
         return array.sum(axis=axis)
 
     def list_tensor(self, o):
-        parts = np.broadcast_arrays(*(self.value(op) for op in o.ufl_operands))
-        return np.stack(parts, axis=2)
+        parts = [self._value(op) for op in o.ufl_operands]
+        if all(part is None for part in parts):
+            return None
+        return np.stack(np.broadcast_arrays(*(0.0 if part is None else part for part in parts)), axis=2)
 
     # -- arithmetic ---------------------------------------------------------------------
     def sum(self, o):
-        a, b = (self.value(op) for op in o.ufl_operands)
-        return a + b
+        a, b = (self._value(op) for op in o.ufl_operands)
+        return b if a is None else a if b is None else a + b
 
     def product(self, o):
-        a, b = self._scalar_operands(o)
+        values = self._factor_values(o.ufl_operands)
+        if values is None:
+            return None
+        a, b = (self._align(value, op.ufl_free_indices, o.ufl_free_indices) for value, op in zip(values, o.ufl_operands))
         return a * b
 
     def division(self, o):
+        if self._value(o.ufl_operands[0]) is None:
+            return None
         a, b = self._scalar_operands(o)
         return a / b
 
@@ -462,13 +704,14 @@ class _Evaluator:
         return np.maximum(a, b)
 
     def real_part(self, o):  # Conj and Real are the identity for real scalars
-        return self.value(o.ufl_operands[0])
+        return self._value(o.ufl_operands[0])
 
     def imag_part(self, o):
-        return np.zeros_like(self.value(o.ufl_operands[0]))
+        value = self._value(o.ufl_operands[0])
+        return None if value is None else np.zeros_like(value)
 
     def variable(self, o):
-        return self.value(o.ufl_operands[0])
+        return self._value(o.ufl_operands[0])
 
     # -- conditionals -------------------------------------------------------------------
     def condition(self, o):
@@ -483,7 +726,18 @@ class _Evaluator:
         mask = self.value(condition)
         extra = len(o.ufl_shape) + len(o.ufl_free_indices)
         mask = mask.reshape(mask.shape[:2] + (1,) * extra + mask.shape[2:])
-        return np.where(mask, self.value(true_value), self.value(false_value))
+        true_value, false_value = self._value(true_value), self._value(false_value)
+        if true_value is None and false_value is None:
+            return None
+        return np.where(mask, 0.0 if true_value is None else true_value, 0.0 if false_value is None else false_value)
+
+
+def _same_entities(values: list[np.ndarray]) -> list[np.ndarray]:
+    """The arrays with their entity axis expanded to a common size: einsum is several times
+    slower when an operand broadcasts along its innermost axis (a constant, say)."""
+    entities = max(value.shape[-1] for value in values)
+    return [value if value.shape[-1] == entities
+            else np.ascontiguousarray(np.broadcast_to(value, value.shape[:-1] + (entities,))) for value in values]
 
 
 def _subscripts(*groups) -> list[str]:
@@ -496,22 +750,6 @@ def _subscripts(*groups) -> list[str]:
                     raise unsupported("operation on more than 48 free indices at once")
                 letters[count] = _INDEX_LETTERS[len(letters)]
     return ["".join(letters[count] for count in group) for group in groups]
-
-
-def _product(values):
-    result = values[0]
-    for value in values[1:]:
-        result = result * value
-    return result
-
-
-def _collect_factors(o, factors: list) -> None:
-    """The factors of a chain of scalar products without free indices."""
-    if isinstance(o, uc.Product) and not o.ufl_free_indices:
-        for operand in o.ufl_operands:
-            _collect_factors(operand, factors)
-    else:
-        factors.append(o)
 
 
 def _permutations(d):
