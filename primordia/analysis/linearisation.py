@@ -1,6 +1,10 @@
-"""The linearised poro-mechano-chemical system (seed eq. (3.1), Definition 3.1).
+"""The linearised poro-mechano-chemical system of the seed, by hand (seed eq. (3.1), Definition 3.1).
 
-The homogeneous steady state (seed eq. (2.5), priming wave saturated,
+This is the seed's model typed in: the independent cross-check of the analysis
+derived from a composed model (:mod:`primordia.analysis.composed`), and what the
+closed forms, conditions and patterning spaces of seed section 3 are built on.
+
+The homogeneous steady state (seed eq. (2.6), priming wave saturated,
 ``w = omega_1``) is perturbed by plane waves ``exp(i k.x + phi t)``; with
 Proposition 3.1 (grad -> i k, Laplacian -> -k^2, d/dt -> phi) seed eq. (3.1)
 becomes the linear system ``M(phi, k) w = 0`` for ``w = (u_1..u_d, p, m, e, f, b)``.
@@ -41,12 +45,12 @@ SCALAR_UNKNOWNS = ("p", "m", "e", "f", "b")
 
 @dataclass(frozen=True)
 class LinearisedCoefficients:
-    """Coefficients of seed eq. (3.1) at the steady state (2.5); all dimensionless.
+    """Coefficients of seed eq. (3.1) at the steady state (2.6); all dimensionless.
 
     Values are floats or arrays of one common broadcast shape.
     """
 
-    # steady state (seed eq. (2.5) with w = omega_1)
+    # steady state (seed eq. (2.6) with w = omega_1)
     m0: np.ndarray  #: cell density at rest
     e0: np.ndarray  #: epithelium activation at rest
     f0: np.ndarray  #: FGF at rest, kappa_F e0 / delta_F
@@ -97,7 +101,7 @@ class LinearisedCoefficients:
 
 
 def hill_derivative(m, threshold, exponent):
-    """d/dm of seed eq. (2.3)'s h(m) = m^P/(K^P + m^P): P K^P m^(P-1)/(K^P + m^P)^2."""
+    """d/dm of seed eq. (2.4)'s h(m) = m^P/(K^P + m^P): P K^P m^(P-1)/(K^P + m^P)^2."""
     return exponent * threshold**exponent * m ** (exponent - 1.0) / (threshold**exponent + m**exponent) ** 2
 
 
@@ -110,11 +114,11 @@ def linearise(params: Mapping) -> LinearisedCoefficients:
     With neither activation nor inactivation (``k_on = k_off = 0``) every
     ``e`` is at rest; ``e0 = 0`` is taken, and ``A_m = A_e = 0`` regardless.
     """
-    p = params
+    m0 = np.asarray(params["m0"], dtype=float)
+    p = {**params, "m0": m0}  # an array: k_on = k_off = 0 gives e0 = nan (then 0), not ZeroDivisionError
     kinetics = Painter2018(p, priming_wave=False)
-    m0 = np.asarray(p["m0"], dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
-        rest = kinetics.initial_state(m0, 0.0, NUMPY)
+        rest = kinetics.initial_state(0.0, NUMPY)
     e0 = np.where(np.isfinite(rest["e"]), rest["e"], 0.0)
     b0 = np.asarray(rest["b"], dtype=float)
     k_on = kinetics.activation(m0, 0.0, NUMPY)
@@ -149,7 +153,7 @@ def linearise(params: Mapping) -> LinearisedCoefficients:
         mu=mu, lam=lam, rho=p["rho"], C_0=p["C_0"],
         hydraulic_mobility=p["kappa"] / p["eta"],
         alpha_BW=p["alpha_BW"],
-        # seed eq. (2.4) linearised: d/dm [tau m / (1 + zeta m^2)]
+        # seed eq. (2.5) linearised: d/dm [tau m / (1 + zeta m^2)]
         active_stress_slope=(lam + 2.0 * mu / 3.0) * p["tau"] * (1.0 - zeta_m2) / (1.0 + zeta_m2) ** 2,
         xi_f=p["xi_f"],
     )
@@ -197,7 +201,7 @@ def matrix_pencil(params_or_coefficients, k_vector) -> tuple[np.ndarray, np.ndar
             # momentum: -div(lambda div u I + 2 mu eps(u)) -> mu K u_i + (mu + lambda) k_i k_j u_j
             put(M0, i, j, (c.mu + c.lam) * kv[..., i] * kv[..., j] + (c.mu * K if i == j else 0.0))
             put(M1, P, j, 1j * c.alpha_BW * kv[..., j])  # d/dt alpha_BW div u
-            put(M0, F, j, 1j * c.xi_f * kv[..., j])  # seed eq. (2.2c): FGF sink xi_f div u
+            put(M0, F, j, 1j * c.xi_f * kv[..., j])  # seed eq. (2.3c): FGF sink xi_f div u
         put(M2, i, i, c.rho)  # rho d_tt u
         put(M0, i, P, 1j * kv[..., i])  # grad p
         put(M0, i, M, -1j * c.active_stress_slope * kv[..., i])  # -div(sigma_act^lin)
@@ -225,21 +229,24 @@ def dispersion_matrix(params_or_coefficients, phi, k_vector) -> np.ndarray:
 
 
 def real_pencil(params_or_coefficients, k_vector):
-    """The pencil of :func:`matrix_pencil` made real by ``u -> -i u`` (same determinant).
+    """The pencil of :func:`matrix_pencil` made real by ``u -> -i u`` (same determinant), see :func:`made_real`."""
+    return made_real(matrix_pencil(params_or_coefficients, k_vector), np.shape(k_vector)[-1])
+
+
+def made_real(pencil, d: int):
+    """A pencil (M0, M1, M2) whose first ``d`` unknowns are the displacement, made real by ``u -> -i u``.
 
     Scaling the displacement unknowns by -i and their rows by i is a
     similarity with determinant 1 that removes every imaginary unit (all of
     them sit on a displacement row or column), so the eigenvalues come in
     exact conjugate pairs and real LAPACK routines apply.
     """
-    M0, M1, M2 = matrix_pencil(params_or_coefficients, k_vector)
-    d = np.shape(k_vector)[-1]
-    n = M0.shape[-1]
+    n = pencil[0].shape[-1]
     row = np.ones(n, dtype=complex)
     col = np.ones(n, dtype=complex)
     row[:d], col[:d] = 1j, -1j
     out = []
-    for matrix in (M0, M1, M2):
+    for matrix in pencil:
         scaled = row[:, None] * matrix * col[None, :]
         assert np.all(scaled.imag == 0.0), "the pencil should be real after u -> -i u"
         out.append(np.ascontiguousarray(scaled.real))

@@ -1,17 +1,22 @@
-r"""Chemotaxis of mesenchymal cells with epithelium, FGF and BMP (seed eqs. (2.2a)-(2.2d)).
+r"""Transport of the species of a kinetics: diffusion, chemotaxis, reaction (seed eqs. (2.3a)-(2.3d)).
 
-The four species and their transport are declared data (:data:`SPECIES`);
-their reactions come from a kinetics plugin (built-in: ``painter2018``).  In the
-dimensionless form of seed section 3 (D_b = delta_B = kappa_F = kappa_B =
-gamma = 1 by default) the balance laws are
+The species, their diffusivities and which one climbs which gradient are
+declared by the kinetics plugin (:class:`~primordia.physics.kinetics.base.Species`);
+this module states their balance laws once, for whatever species it is given.
+For the built-in ``painter2018`` (the seed's m, e, f, b) in the dimensionless
+form of seed section 3 (D_b = delta_B = kappa_F = kappa_B = gamma = 1 by
+default) they are
 
-    dm/dt = div( D_m grad m - alpha m exp(-gamma m) grad f )          (2.2a)
-    de/dt = R_e(m, e, b, x, t)                                        (2.2b)
-    df/dt = div( D_f grad f ) + R_f(e, f)                             (2.2c)
-    db/dt = div( D_b grad b ) + R_b(m, b)                             (2.2d)
+    dm/dt = div( D_m grad m - chi(m) m grad f ),  chi(m) = alpha exp(-gamma m)   (2.3a)
+    de/dt = R_e(m, e, b, x, t)                                                (2.3b)
+    df/dt = div( D_f grad f ) + R_f(e, f)                                     (2.3c)
+    db/dt = div( D_b grad b ) + R_b(m, b)                                     (2.3d)
 
-with zero-flux boundaries (2.6a) and initial data (2.5) plus a seeded random
-perturbation of m (``perturbation`` x m0 x U(-1, 1) at each vertex).  Couplings
+and in general, for each species c with diffusivity D (none: immobile) and
+attractant a (none: no chemotaxis), dc/dt = div(D grad c - chi(c) c grad a) + R_c,
+with zero-flux boundaries (2.7a) and the kinetics' initial state (seed (2.6) for
+painter2018) plus a seeded perturbation of the species declared ``perturbed``
+(``perturbation`` x c_0 x U(-1, 1) at each vertex, or a cosine mode).  Couplings
 to a moving solid (advection by u_t, the FGF sink xi_f div u) are not stated
 here: the module that declares the coupling adds them (``disc.contribute``).
 
@@ -20,18 +25,19 @@ Time discretisation (implicit-explicit, one linear solve per species)
 Each reaction is split by the kinetics as R_s = P_s - L_s c_s with P_s, L_s >= 0;
 production is explicit, loss implicit.  With M_L the lumped P1 mass matrix
 (vertex quadrature) and S the P1 stiffness matrix, one step t_n -> t_{n+1}
-solves, in this order (Gauss-Seidel: each solve sees the species already
-updated):
+solves the species in the kinetics' order (Gauss-Seidel: each solve sees the
+species already updated); for painter2018:
 
     (M_L/dt + A_chi(m^n, f^n)) m^{n+1}               = M_L m^n / dt
     M_L (e^{n+1} - e^n)/dt = M_L [P_e - L_e e^{n+1}]   at (m^{n+1}, b^n, t_{n+1})
     (M_L/dt + D_f S + delta_F M_L) f^{n+1}           = M_L (f^n/dt + kappa_F e^{n+1})
     (M_L/dt + D_b S + delta_B M_L) b^{n+1}           = M_L (b^n/dt + kappa_B h_3(m^{n+1}) m^{n+1})
 
-A_chi is the cell transport operator.  With ``flux_scheme = "exponential_fitting"``
-(default) it is the edge-averaged exponentially fitted (Scharfetter-Gummel,
-"EAFE", Xu & Zikatanov 1999) discretisation of the flux D_m grad m - chi m grad f,
-chi = alpha exp(-gamma m^n): for every edge ij with stiffness weight
+A_chi is the transport operator of a species that climbs a gradient (the cells).
+With ``flux_scheme = "exponential_fitting"`` (default) it is the edge-averaged
+exponentially fitted (Scharfetter-Gummel, "EAFE", Xu & Zikatanov 1999)
+discretisation of the flux D_m grad m - chi m grad f, chi = chi(m^n) from the
+kinetics (alpha exp(-gamma m^n) for painter2018): for every edge ij with stiffness weight
 w_ij = -S_ij and Peclet number Pe_ij = chi_ij (f_j - f_i)/D_m, with
 chi_ij = chi((m_i + m_j)/2) the sensitivity at the edge midpoint (the mean of
 the vertex values of chi over-sharpens steep stripes and keeps them from breaking
@@ -52,44 +58,23 @@ step on the UFL residual; the f and b matrices are constant and factorised once.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import ufl
 
 from primordia.core import ops as ops_
 from primordia.core.errors import ConfigError
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
-from primordia.physics.seed_parameters import CHEMOTAXIS
-
-
-@dataclass(frozen=True)
-class Species:
-    """A transported species: its diffusivity parameter and chemo-attractant, if any."""
-
-    name: str
-    description: str
-    diffusivity: str | None = None  # parameter name; None = immobile
-    attractant: str | None = None  # species whose gradient the flux climbs
-
-
-#: The four species of seed eqs. (2.2a)-(2.2d), in solve order.
-SPECIES = (
-    Species("m", "mesenchymal cell density", diffusivity="D_m", attractant="f"),
-    Species("e", "epithelium activation state (dimensionless, in [0, 1])"),
-    Species("f", "FGF concentration", diffusivity="D_f"),
-    Species("b", "BMP concentration", diffusivity="D_b"),
-)
+from primordia.physics.kinetics.base import Species
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
 ACCUMULATIONS = ("material", "conservative")
 PERTURBATION_SHAPES = ("random", "cosine")
 
 
-# -- the terms of seed eqs. (2.2a)-(2.2d) / (4.17a)-(4.17d), each a UFL integrand ---------------
+# -- the terms of seed eqs. (2.3a)-(2.3d) / (4.17a)-(4.17d), each a UFL integrand ---------------
 # J (volume ratio) and K (metric J C^-1) come from the kinematics the mechanics provides
 # (primordia.physics.kinematics): J = 1 and K = None (identity) without finite strain, so the
-# small-strain forms are exactly the terms of (2.2a)-(2.2d).
+# small-strain forms are exactly the terms of (2.3a)-(2.3d).
 def accumulation(c, c_previous, test, dt, dx_lumped, volume_ratio=1, volume_ratio_previous=None):
     """d c / d t by backward Euler, lumped, on the reference configuration.
 
@@ -103,17 +88,17 @@ def accumulation(c, c_previous, test, dt, dx_lumped, volume_ratio=1, volume_rati
 
 
 def diffusive_flux(diffusivity, c, test, dx, metric=None):
-    """-div(D grad c) in weak form: D grad c . grad v (seed (2.2a)); D J C^-1 Grad c . Grad v (4.17a)."""
+    """-div(D grad c) in weak form: D grad c . grad v (seed (2.3a)); D J C^-1 Grad c . Grad v (4.17a)."""
     return diffusivity * ufl.inner(_pulled_back(metric, ufl.grad(c)), ufl.grad(test)) * dx
 
 
 def chemotactic_flux(sensitivity, c, attractant, test, dx, metric=None):
-    """+div(chi c grad f) in weak form (seed (2.2a)): -chi c grad f . grad v; with J C^-1 in (4.17a)."""
+    """+div(chi c grad f) in weak form (seed (2.3a)): -chi c grad f . grad v; with J C^-1 in (4.17a)."""
     return -sensitivity * c * ufl.inner(_pulled_back(metric, ufl.grad(attractant)), ufl.grad(test)) * dx
 
 
 def reaction(production, loss_rate, c, test, dx_lumped, volume_ratio=1):
-    """-R = -(P - L c), lumped (seed (2.2b)-(2.2d)); times J on the reference configuration (4.17b-d)."""
+    """-R = -(P - L c), lumped (seed (2.3b)-(2.3d)); times J on the reference configuration (4.17b-d)."""
     return -_times(volume_ratio, production - loss_rate * c) * test * dx_lumped
 
 
@@ -128,10 +113,12 @@ def _times(factor, expression):
 
 
 class Chemotaxis(Physics):
-    """The 4-species m, e, f, b model of seed eqs. (2.2a)-(2.2d), (2.5), (2.6a)."""
+    """Diffusion, chemotaxis and reaction of the kinetics' species (seed eqs. (2.3a)-(2.3d), (2.6), (2.7a)).
+
+    It reads no parameter of its own: diffusivities and sensitivities are the kinetics'.
+    """
 
     name = "chemotaxis"
-    parameters = CHEMOTAXIS
     needs_kinetics = True
     options = {"flux_scheme": "exponential_fitting", "perturbation": 0.01, "seed": 1,
                "perturbation_shape": "random", "wavenumber": [0.0, 0.0], "accumulation": "material"}
@@ -156,36 +143,42 @@ class Chemotaxis(Physics):
                 or not all(isinstance(k, (int, float)) and not isinstance(k, bool) for k in wavenumber)):
             raise ConfigError(f"physics.chemotaxis.wavenumber must be a list of numbers (k_x, k_y[, k_z]), "
                               f"got {wavenumber!r}")
-        missing = set(s.name for s in SPECIES) - set(self.kinetics.species)
-        if missing:
-            raise ConfigError(f"kinetics {self.kinetics.name} does not react species {sorted(missing)}")
+
+    @property
+    def species(self) -> tuple[Species, ...]:
+        """The transported species, in solve order: the kinetics' declaration."""
+        return self.kinetics.species
 
     def fields(self):
-        return [FieldSpec(s.name, degree=1, description=s.description) for s in SPECIES]
+        return [FieldSpec(s.name, degree=1, description=s.description) for s in self.species]
 
-    def sensitivity(self, m, ops):
-        """chi(m) = alpha exp(-gamma m): the chemotactic flux is chi(m) m grad f (seed eq. (2.2a))."""
-        return self.params["alpha"] * ops.exp(-self.params["gamma"] * m)
+    def sensitivity(self, species: Species, density, ops):
+        """chi(c): the chemotactic flux of ``species`` is chi(c) c grad a (seed eq. (2.3a)), from the kinetics."""
+        return self.kinetics.sensitivity(species.name, density, ops)
 
     def setup(self, disc):
         self.disc = disc
         if self.opts["flux_scheme"] == "exponential_fitting":
-            for species in SPECIES:
+            for species in self.species:
                 if species.attractant and not (disc.is_alone(species.name) and disc.is_alone(species.attractant)):
                     raise ConfigError("flux_scheme = \"exponential_fitting\" needs the species as separate fields; "
                                       "with a monolithic scheme use physics.chemotaxis.flux_scheme = \"galerkin\"")
 
     def initialise(self, disc):
-        """Seed eq. (2.5) plus the perturbation of m (seeded noise, or a cosine mode)."""
-        m0 = self.params["m0"]
-        disc.set_vertex_values("m", m0 * (1.0 + self.opts["perturbation"] * self._perturbation(disc.mesh_data.points)))
+        """The kinetics' initial state (seed eq. (2.6)), the perturbed species perturbed at the vertices."""
         t0 = disc.time
-        for name in ("e", "f", "b"):
-            disc.interpolate(name, lambda x, name=name: np.broadcast_to(
-                self.kinetics.initial_state(m0, t0, ops_.NUMPY.at(x))[name], x.shape[1:]).copy())
+        for species in self.species:
+            if species.perturbed:
+                points = disc.mesh_data.points
+                state = self.kinetics.initial_state(t0, ops_.NUMPY.at(tuple(points.T)))[species.name]
+                disc.set_vertex_values(species.name, np.broadcast_to(state, len(points))
+                                       * (1.0 + self.opts["perturbation"] * self._perturbation(points)))
+            else:
+                disc.interpolate(species.name, lambda x, name=species.name: np.broadcast_to(
+                    self.kinetics.initial_state(t0, ops_.NUMPY.at(x))[name], x.shape[1:]).copy())
 
     def _perturbation(self, points: np.ndarray) -> np.ndarray:
-        """Relative perturbation of m at the vertices: U(-1, 1) noise, or prod_i cos(k_i x_i)."""
+        """Relative perturbation of the perturbed species at the vertices: U(-1, 1) noise, or prod_i cos(k_i x_i)."""
         if self.opts["perturbation_shape"] == "random":
             return np.random.default_rng(self.opts["seed"]).uniform(-1.0, 1.0, len(points))
         shape = np.ones(len(points))
@@ -194,14 +187,14 @@ class Chemotaxis(Physics):
         return shape
 
     def _reactions(self):
-        state = {s.name: self.disc.field(s.name) for s in SPECIES}
+        state = {s.name: self.disc.field(s.name) for s in self.species}
         return self.kinetics.split_rates(state, self.disc.t, ops_.UFL.at(self.disc.x))
 
     def species_residual(self, species: Species, reactions) -> ufl.Form:
         """The residual of one species: the terms of its balance law (+ contributed couplings).
 
         Read on the kinematics of the run (J, J C^-1: seed (4.17a)-(4.17d) multiplied by J), which
-        are the identity without finite strain (seed (2.2a)-(2.2d)).
+        are the identity without finite strain (seed (2.3a)-(2.3d)).
         """
         disc, motion = self.disc, self.disc.kinematics
         dx = disc.dx_degree(motion.quadrature_degree) if motion.moves else disc.dx
@@ -215,7 +208,7 @@ class Chemotaxis(Physics):
         if species.diffusivity is not None and not self._fitted(species):
             residual += diffusive_flux(self.params[species.diffusivity], c, test, dx, motion.metric)
         if species.attractant is not None and not self._fitted(species):
-            chi = self.sensitivity(disc.previous(species.name), ops_.UFL)
+            chi = self.sensitivity(species, disc.previous(species.name), ops_.UFL)
             residual += chemotactic_flux(chi, c, disc.previous(species.attractant), test, dx, motion.metric)
         for term in disc.contributions(species.name, test):
             residual += term
@@ -224,7 +217,7 @@ class Chemotaxis(Physics):
     def diagnostics(self):
         """On a moving reference configuration: the cells it holds, int J m dX (lumped, as the accumulation)."""
         motion = self.disc.kinematics
-        if not motion.finite_strain:
+        if not motion.finite_strain or "m" not in self.kinetics.species_names:
             return []
         return [Diagnostic("cell_amount", "integral", motion.volume_ratio * self.disc.field("m") * self.disc.dx_lumped,
                            "cells in the current configuration, int J m dX over the reference one")]
@@ -237,7 +230,7 @@ class Chemotaxis(Physics):
 
         reactions = self._reactions()
         problems = []
-        for species in SPECIES:
+        for species in self.species:
             unknown = self.disc.unknown(species.name)
             residual = self.species_residual(species, reactions)
             jacobian = ufl.derivative(residual, unknown)
@@ -247,7 +240,7 @@ class Chemotaxis(Physics):
                 operator = ExponentiallyFittedFlux(
                     self.disc, species.name, species.attractant,
                     diffusivity=self.params[species.diffusivity],
-                    sensitivity=lambda m: self.sensitivity(m, ops_.NUMPY),
+                    sensitivity=lambda c, species=species: self.sensitivity(species, c, ops_.NUMPY),
                     metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
             problems.append(Subproblem(

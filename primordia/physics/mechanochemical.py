@@ -6,9 +6,9 @@ the motion of the tissue from the kinematics the mechanics module provides
 model (example 1b) and the finite-strain growth model (examples 2a, 2b, 4), and
 adds to the chemotaxis balance laws:
 
-* advection of the mobile species by the solid velocity (seed (2.3a), (2.3c), (2.3d)),
-  when the kinematics has an advecting velocity (small strain):
-      + du/dt . grad c^n    for c in m, f, b
+* advection of the species the kinetics declares ``advected`` by the solid velocity
+  (seed (2.3a), (2.3c), (2.3d)), when the kinematics has an advecting velocity (small strain):
+      + du/dt . grad c^n    for c in m, f, b (painter2018)
   explicit, like the rest of the IMEX transport coupling: du/dt is the solid
   velocity of the last completed step and c^n the start-of-step concentration, so
   the species matrices stay constant (factorised once) and the solves linear.  It is
@@ -16,7 +16,8 @@ adds to the chemotaxis balance laws:
   magnitude (series.nc records the fields, so a violation shows as growth).  On
   the reference configuration (finite strain) there is none: advection is in the
   material derivative of (4.17a)-(4.17d);
-* the FGF sink of volume change:
+* the sink of volume change, in the balance of each species declared ``volume_sink``
+  (FGF for painter2018):
       + xi_f div u              small strain, seed (2.3c)
       + xi_f J (tr C - d)       finite strain, seed (4.17c) multiplied by J
   with u the current displacement (xi_f > 0: dilation consumes FGF).
@@ -24,7 +25,7 @@ adds to the chemotaxis balance laws:
 Active stress (the reverse coupling, m driving the solid) is the separate module
 :mod:`primordia.physics.active_stress`; growth driven by m is the growth law's
 (:mod:`primordia.physics.growth_laws`).  Requires: ``u`` (a mechanics module) and
-``m``, ``f``, ``b`` (chemotaxis).
+the species it couples (declared by the kinetics, transported by chemotaxis).
 
 With the advection term the cell transport matrix is no longer an M-matrix in
 general: non-negativity of m is guaranteed without solid motion only (the seed's
@@ -38,8 +39,6 @@ import ufl
 from primordia.core.errors import ConfigError
 from primordia.physics.base import Physics
 from primordia.physics.seed_parameters import MECHANOCHEMICAL
-
-ADVECTED = ("m", "f", "b")
 
 
 def solid_advection(velocity, c_previous, test, dx):
@@ -55,11 +54,29 @@ def fgf_sink(xi_f, volume_change, volume_ratio, test, dx):
 
 
 class MechanoChemical(Physics):
-    """Solid advection of m, f, b and the FGF sink xi_f div u."""
+    """Solid advection of the advected species (m, f, b) and the volume sink xi_f div u (of f)."""
 
     name = "mechanochemical"
     parameters = MECHANOCHEMICAL
-    requires = ("u", "m", "f", "b")
+
+    @property
+    def advected(self) -> tuple[str, ...]:
+        """Species carried by the solid velocity, as the kinetics declares them (m, f, b: seed (2.3a-d))."""
+        return tuple(s.name for s in self.kinetics.species if s.advected)
+
+    @property
+    def sinks(self) -> tuple[str, ...]:
+        """Species consumed by volume change, as the kinetics declares them (f: seed (2.3c))."""
+        return tuple(s.name for s in self.kinetics.species if s.volume_sink)
+
+    @property
+    def requires(self) -> tuple[str, ...]:
+        return ("u",) + tuple(dict.fromkeys(self.advected + self.sinks))
+
+    def check_composition(self, modules):
+        if self.kinetics is None:
+            raise ConfigError("mechanochemical couples the species of a kinetics to the solid: "
+                              "add chemotaxis to model.physics")
 
     def fields(self):
         return []
@@ -67,9 +84,10 @@ class MechanoChemical(Physics):
     def setup(self, disc):
         # terms are built when the balance laws are (after every module's setup): the kinematics
         # of the mechanics module are known by then
-        for species in ADVECTED:
+        for species in self.advected:
             disc.contribute(species, lambda test, species=species: self._advection(disc, species, test))
-        disc.contribute("f", lambda test: self._sink(disc, test))
+        for species in self.sinks:
+            disc.contribute(species, lambda test: self._sink(disc, test))
 
     @staticmethod
     def _advection(disc, species: str, test):

@@ -1,7 +1,9 @@
 """Parameter declarations of every seed module, gathered for the whole model.
 
-Each module declares its own parameters (next to the equations that read them);
-this file only lists which declarations make up the seed's full
+Each module declares its own parameters (next to the equations that read them:
+the species' rest density, diffusivities and sensitivity with the ``painter2018``
+kinetics that declares the species); this file holds the declarations of the
+mechanical modules and lists which declarations make up the seed's full
 poro-mechano-chemical model, so that the linear stability analysis and the
 simulations read the very same names, defaults and checks (seed Table 3.1).
 """
@@ -9,16 +11,6 @@ simulations read the very same names, defaults and checks (seed Table 3.1).
 from __future__ import annotations
 
 from primordia.core.parameters import Parameter, ParameterSet
-
-CHEMOTAXIS = (
-    Parameter("m0", 2.0, "rest density of mesenchymal cells (seed eq. (2.5))"),
-    Parameter("D_m", 0.01, "cell diffusivity"),
-    Parameter("D_f", 0.1, "FGF diffusivity"),
-    Parameter("D_b", 1.0, "BMP diffusivity (1 in the seed's scaling)", source="seed section 2 scaling"),
-    Parameter("alpha", 4.0, "chemotactic sensitivity to FGF", constraint="nonnegative"),
-    Parameter("gamma", 1.0, "saturation of the chemotactic flux alpha m exp(-gamma m)",
-              constraint="nonnegative", source="seed section 2 scaling"),
-)
 
 POROELASTICITY = (
     Parameter("E", 3.0e4, "Young modulus of the skeleton"),
@@ -37,7 +29,7 @@ ACTIVE_STRESS = (
 )
 
 MECHANOCHEMICAL = (
-    Parameter("xi_f", 0.15, "FGF sink per unit volume change (seed eq. (2.2c))", constraint="any"),
+    Parameter("xi_f", 0.15, "FGF sink per unit volume change (seed eq. (2.3c))", constraint="any"),
 )
 
 
@@ -52,5 +44,5 @@ def seed_parameters(**overrides: float) -> ParameterSet:
     from primordia.physics.kinetics.painter2018 import PARAMETERS as PAINTER2018
 
     return ParameterSet(
-        CHEMOTAXIS + PAINTER2018 + POROELASTICITY + ACTIVE_STRESS + MECHANOCHEMICAL, overrides
+        PAINTER2018 + POROELASTICITY + ACTIVE_STRESS + MECHANOCHEMICAL, overrides
     )

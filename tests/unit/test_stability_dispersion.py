@@ -127,7 +127,7 @@ def test_linearised_kinetics_match_finite_differences_of_the_simulation_kinetics
     params = seed_parameters(kappa_F=1.3, kappa_B=0.7, delta_B=1.4, omega_1=0.8)
     c = linearise(params)
     kinetics = Painter2018(params, priming_wave=False)
-    state = {"m": 2.0, **kinetics.initial_state(2.0, 0.0, NUMPY)}
+    state = kinetics.initial_state(0.0, NUMPY)
     rates = kinetics.rates(state, 0.0, NUMPY)
     assert all(abs(value) < 1e-12 for value in rates.values())  # it is a steady state
     h = 1e-6

@@ -1,16 +1,29 @@
-"""The contract of a reaction-kinetics plugin.
+"""The contract of a reaction-kinetics plugin: its species, how they move, how they react.
 
-A kinetics object gives, for every species of the chemotaxis model, its
-reaction rate split as ``R_s = production_s - loss_s * c_s`` with
-``production_s >= 0`` and ``loss_s >= 0`` wherever the concentrations are
-non-negative.  The split is what the IMEX scheme needs: production is taken
-explicitly and loss implicitly (a Patankar-type linearisation), so a
-non-negative state stays non-negative for any time step.
+A kinetics declares its **species** (:class:`Species`): names, which parameter is
+each one's diffusivity, which species climbs the gradient of which (with the
+sensitivity :meth:`Kinetics.sensitivity`), which the moving solid carries or
+consumes, and which starts perturbed.  The transport physics
+(:mod:`primordia.physics.chemotaxis`) and the mechano-chemical couplings read
+these declarations, so a plugin can bring a fifth species or a different system
+altogether; the seed's m, e, f, b are the declaration of ``painter2018``.
+
+For every species the kinetics gives its reaction rate split as
+``R_s = production_s - loss_s * c_s`` with ``production_s >= 0`` and
+``loss_s >= 0`` wherever the concentrations are non-negative.  The split is what
+the IMEX scheme needs: production is taken explicitly and loss implicitly (a
+Patankar-type linearisation), so a non-negative state stays non-negative for any
+time step.  A species that does not react returns the plain numbers ``(0, 0)``:
+it is conserved (the linear stability analysis then holds it at its initial value).
 
 Kinetics are written once against an ``ops`` namespace providing ``exp``,
-``tanh`` and ``x`` (spatial coordinates as a tuple): the same code then builds
-UFL expressions for the weak forms (``ops = primordia.core.ops.UFL``) or numpy
-values for initial data and the stability analysis (``ops = primordia.core.ops.NUMPY``).
+``tanh``, ``sqrt``, ``ln`` and ``x`` (spatial coordinates as a tuple): the same
+code then builds UFL expressions for the weak forms (``ops = primordia.core.ops.UFL``),
+numpy values for initial data (``ops = primordia.core.ops.NUMPY``), and first
+derivatives for the linear stability analysis (dual numbers,
+:mod:`primordia.analysis.autodiff`), so the analysis linearises the very code
+the simulation runs.  Use only arithmetic and ``ops`` functions in
+:meth:`~Kinetics.split_rates` and :meth:`~Kinetics.sensitivity`.
 
 Kinetics register through the ``primordia_kinetics`` hook, built-in and
 third-party alike; see ``primordia/core/hookspecs.py``.
@@ -20,20 +33,51 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from primordia.core.config import merge_options
+from primordia.core.errors import PluginError
 from primordia.core.parameters import Parameter
 
 
+@dataclass(frozen=True)
+class Species:
+    """A species of a kinetics, and how the transport physics moves it.
+
+    ``diffusivity``  name of the parameter holding its diffusion coefficient
+                     (dimensionless); None: immobile (reacts in place, no transport).
+    ``attractant``   the species whose gradient it climbs: the flux is
+                     ``D grad c - chi(c) c grad a``, chi from :meth:`Kinetics.sensitivity`
+                     (seed eq. (2.3a)); it must be mobile.
+    ``advected``     carried by the solid velocity, ``+ u_t . grad c`` (seed (2.3a), (2.3c), (2.3d)).
+    ``volume_sink``  consumed by volume change, ``+ xi_f div u`` (seed (2.3c)), when the
+                     mechano-chemical couplings are in the model.
+    ``perturbed``    its initial state carries the run's perturbation
+                     (``physics.chemotaxis.perturbation``: seeded noise or a cosine mode).
+    """
+
+    name: str
+    description: str
+    diffusivity: str | None = None
+    attractant: str | None = None
+    advected: bool = False
+    volume_sink: bool = False
+    perturbed: bool = False
+
+    @property
+    def mobile(self) -> bool:
+        return self.diffusivity is not None
+
+
 class Kinetics(ABC):
-    """Reaction terms of the species ``m, e, f, b`` (or a plugin's own list)."""
+    """The species of a model and their reactions."""
 
     #: Name under which the kinetics is selected in a config (``[kinetics] name``).
     name: ClassVar[str]
-    #: Species the kinetics reacts; must match the transport model's species.
-    species: ClassVar[tuple[str, ...]] = ("m", "e", "f", "b")
-    #: Parameters the kinetics reads, with seed defaults.
+    #: The species, in solve order (the transport physics solves them one after another).
+    species: ClassVar[tuple[Species, ...]] = ()
+    #: Parameters the kinetics reads (reactions, diffusivities, sensitivities, initial data), with defaults.
     parameters: ClassVar[tuple[Parameter, ...]] = ()
     #: Non-numeric options accepted in the ``[kinetics]`` table, with defaults.
     options: ClassVar[Mapping[str, Any]] = {}
@@ -41,6 +85,17 @@ class Kinetics(ABC):
     def __init__(self, params: Mapping[str, float], **options):
         self.params = params
         self.opts = merge_options(f"kinetics {self.name}", self.options, options)
+        check_species(self)
+
+    @property
+    def species_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.species)
+
+    def species_named(self, name: str) -> Species:
+        for species in self.species:
+            if species.name == name:
+                return species
+        raise KeyError(name)
 
     @abstractmethod
     def split_rates(self, c: Mapping[str, Any], t, ops) -> dict[str, tuple[Any, Any]]:
@@ -51,9 +106,48 @@ class Kinetics(ABC):
         """
 
     def rates(self, c: Mapping[str, Any], t, ops) -> dict[str, Any]:
-        """The full reaction rates ``R_s`` (used by the Galerkin residual and analysis)."""
+        """The full reaction rates ``R_s`` (used by the Galerkin residual and the analysis)."""
         return {s: prod - loss * c[s] for s, (prod, loss) in self.split_rates(c, t, ops).items()}
 
     @abstractmethod
-    def initial_state(self, m0: float, t0, ops) -> dict[str, Any]:
-        """The species other than ``m`` at rest with ``m = m0`` (seed eq. (2.5))."""
+    def initial_state(self, t0, ops) -> dict[str, Any]:
+        """Every species at ``t0`` before the run's perturbation (at rest: seed eq. (2.6) for painter2018)."""
+
+    def sensitivity(self, species: str, density, ops):
+        """chi(c) of a species that climbs an attractant's gradient, at its own density ``c``.
+
+        The chemotactic flux is ``chi(c) c grad a``.  Only species declared with an
+        ``attractant`` are asked.
+        """
+        raise PluginError(f"kinetics {self.name}: species {species} climbs a gradient but the kinetics "
+                          f"defines no sensitivity(species, density, ops)")
+
+    def homogeneous(self) -> "Kinetics":
+        """The kinetics the linear stability analysis linearises: spatially homogeneous and autonomous.
+
+        The default is the kinetics itself (reactions that read neither ``ops.x`` nor
+        ``t``); a kinetics with a space- or time-dependent forcing returns the state it
+        settles to (``painter2018``: the priming wave saturated, seed section 3).
+        """
+        return self
+
+
+def check_species(kinetics: Kinetics) -> None:
+    """The declaration is consistent: unique names, known attractants and diffusivity parameters."""
+    where = f"kinetics {kinetics.name}"
+    names = [s.name for s in kinetics.species]
+    if not names:
+        raise PluginError(f"{where} declares no species")
+    if len(set(names)) != len(names):
+        raise PluginError(f"{where} declares a species twice: {', '.join(names)}")
+    declared = {p.name for p in kinetics.parameters}
+    for species in kinetics.species:
+        if species.diffusivity is not None and species.diffusivity not in declared:
+            raise PluginError(f"{where}: the diffusivity {species.diffusivity} of species {species.name} "
+                              f"is not among its parameters")
+        if species.attractant is not None:
+            if species.attractant not in names or species.attractant == species.name:
+                raise PluginError(f"{where}: species {species.name} climbs '{species.attractant}', "
+                                  f"which is not another of its species ({', '.join(names)})")
+            if not species.mobile:
+                raise PluginError(f"{where}: species {species.name} climbs a gradient but has no diffusivity")
