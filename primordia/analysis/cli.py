@@ -1,13 +1,17 @@
 """The ``primordia stability`` command (linear stability analysis, seed section 3).
 
-    primordia stability [CONFIG.toml] [--set parameters.NAME=VALUE ...] [--coupled|--uncoupled] [--d 2|3] [--out DIR]
-        verdicts of seed sections 3.2-3.6, the fastest-growing mode (k_max, wavelength 2 pi / k_max),
-        and the dispersion curves as DIR/dispersion.nc + DIR/dispersion.png
+    primordia stability [CONFIG.toml] [--set section.key=value ...] [--uncoupled] [--chemistry-only] [--d 2|3]
+                        [--out DIR]
+        the analysis of the model CONFIG composes (the one `primordia run CONFIG` runs), derived from its
+        own equations: homogeneous steady state, fastest-growing mode (k_max, wavelength 2 pi / k_max),
+        the dispersion curves as DIR/dispersion.nc + DIR/dispersion.png; for the seed's kinetics also
+        the cross-check with the seed's hand-derived matrix and the verdicts of seed sections 3.2-3.6.
+        A file without [model] (or none) is a parameter set of the seed's full model.
 
     primordia stability map [CONFIG.toml] --x NAME:LO:HI:N --y NAME:LO:HI:N [--coupled|--uncoupled]
                             [--critical NAME] [--theta corrected|seed] [--nk N] [--set ...] [--out DIR]
-        the patterning space over two parameters, from the conditions and from the growth rates,
-        as DIR/patterning_X_Y.nc + .png (seed Figures 3.1-3.3)
+        the patterning space over two parameters of the seed's model, from the conditions and from the
+        growth rates, as DIR/patterning_X_Y.nc + .png (seed Figures 3.1-3.3)
 
 ``register(subparsers)`` adds the command to the main ``primordia`` parser.
 """
@@ -34,15 +38,20 @@ def register(subparsers) -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("inputs", nargs="*", metavar="[map] [CONFIG.toml]",
-                        help="'map' for a patterning space; a TOML file whose [parameters] table is read")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="parameters.NAME=VALUE",
-                        help="override a parameter (repeatable)")
+                        help="'map' for a patterning space; a run configuration, or a file of [parameters]")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                        help="override a config value, e.g. parameters.D_m=0.03 (repeatable)")
     coupling = parser.add_mutually_exclusive_group()
-    coupling.add_argument("--coupled", dest="coupled", action="store_true", default=True,
-                          help="full poro-mechano-chemical system (default)")
+    coupling.add_argument("--coupled", dest="coupled", action="store_true", default=None,
+                          help="the full poro-mechano-chemical loop (default: as the model is composed; "
+                               "the seed's full model without a run configuration)")
     coupling.add_argument("--uncoupled", dest="coupled", action="store_false",
                           help="drop the mechano-chemical loop (xi_f = 0, seed section 3.4)")
-    parser.add_argument("--d", type=int, choices=(2, 3), default=2, help="space dimension (default 2)")
+    parser.add_argument("--chemistry-only", action="store_true",
+                        help="analyse the kinetics and the transport of its species alone, without the mechanics "
+                             "(the only analysis of a finite-strain growth model)")
+    parser.add_argument("--d", type=int, choices=(2, 3), default=None,
+                        help="space dimension (default: the mesh's, else 2)")
     parser.add_argument("--out", help=f"output directory (default {DEFAULT_OUT}/...)")
     parser.add_argument("--x", metavar="NAME:LO:HI:N", help="map: first parameter axis")
     parser.add_argument("--y", metavar="NAME:LO:HI:N", help="map: second parameter axis")
@@ -57,8 +66,6 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Entry point of ``primordia stability``; returns the exit code."""
-    from primordia.analysis.inputs import read_parameters
-
     inputs = list(args.inputs)
     mapping = bool(inputs) and inputs[0] == "map"
     if mapping:
@@ -66,13 +73,26 @@ def run(args) -> int:
     if len(inputs) > 1:
         raise ConfigError(f"stability takes at most one CONFIG.toml, got {' '.join(inputs)}")
     config = inputs[0] if inputs else None
-    params = read_parameters(config, args.overrides)
     stem = Path(config).stem if config else None
     if mapping:
-        return _run_map(args, params, stem)
+        return _run_map(args, config, stem)
     if args.x or args.y or args.critical:
         raise ConfigError("--x, --y and --critical apply to 'primordia stability map'")
-    return _run_dispersion(args, params, stem)
+    return _run_dispersion(args, config, stem)
+
+
+def _compose(args, config):
+    """(the model's linearisation, its parameters, the space dimension) from the command line."""
+    from primordia.analysis.composed import linearise_model, linearise_seed
+    from primordia.analysis.inputs import read_model, read_parameters
+
+    model = read_model(config, args.overrides) if config is not None else None
+    uncoupled = args.coupled is False
+    if model is None:
+        params = read_parameters(config, args.overrides)
+        return linearise_seed(params, args.chemistry_only, uncoupled), params, args.d or 2
+    linear = linearise_model(model, args.chemistry_only, uncoupled)
+    return linear, model.parameters, args.d or model.mesh_data.points.shape[1]
 
 
 def _output_directory(args, *parts) -> Path:
@@ -81,35 +101,55 @@ def _output_directory(args, *parts) -> Path:
     return DEFAULT_OUT.joinpath(*[p for p in parts if p])
 
 
-def _describe(params) -> str:
+def _describe(params, defaults: str = "Table 3.1") -> str:
     changed = [f"{name}={params[name]:g}" for name in params
                if params[name] != params.declaration(name).default]
-    return "Table 3.1" + (f" with {', '.join(changed)}" if changed else "")
+    return defaults + (f" with {', '.join(changed)}" if changed else "")
 
 
-def _run_dispersion(args, params, stem) -> int:
-    from primordia.analysis.conditions import verdicts
-    from primordia.analysis.dispersion import fastest_growing_mode
+def _run_dispersion(args, config, stem) -> int:
+    from primordia.analysis.composed import seed_cross_check
     from primordia.analysis.figures import dispersion_figure
-    from primordia.analysis.patterning import dispersion_relation, save_dataset
+    from primordia.analysis.patterning import model_dispersion_relation, save_dataset
 
     start = time.perf_counter()
-    base = params if args.coupled else params.replace(xi_f=0.0)
-    print(f"primordia stability: d = {args.d}, {'coupled' if args.coupled else 'uncoupled (xi_f = 0)'}, "
-          f"parameters: {_describe(params)}")
-    for verdict in verdicts(params):
-        print(f"  {verdict}")
-    fastest = fastest_growing_mode(base, coupled=args.coupled)
-    turing = fastest_growing_mode(base, coupled=args.coupled, kind="stationary")
-    print(f"  fastest-growing mode: {_mode_text(fastest)}")
-    print(f"  fastest stationary (Turing) mode: {_mode_text(turing)}")
-    ds = dispersion_relation(base, d=args.d, coupled=args.coupled)
+    linear, params, d = _compose(args, config)
+    print(f"primordia stability: {linear.name or 'model'}: {linear.describe()}; d = {d}")
+    defaults = "Table 3.1" if linear.kinetics == "painter2018" else f"the defaults of {linear.kinetics}"
+    print(f"  parameters: {_describe(params, defaults)}")
+    for note in linear.notes:
+        print(f"  {note}")
+    rest = linear.steady_state
+    held = f" ({', '.join(rest.conserved)} conserved, held at the initial value)" if rest.conserved else ""
+    print(f"  homogeneous steady state: {rest}{held}")
+    print(f"  fastest-growing mode: {_mode_text(linear.fastest_mode())}")
+    print(f"  fastest stationary (Turing) mode: {_mode_text(linear.fastest_mode('stationary'))}")
+    difference = seed_cross_check(linear, d=d)
+    if difference is not None:
+        print(f"  cross-check: the seed's hand-derived M(phi, k) (Definition 3.1, corrected) equals the derived one "
+              f"to {difference:.1e} (relative)")
+        for verdict in _seed_verdicts(linear, params):
+            print(f"  {verdict}")
+    ds = model_dispersion_relation(linear, d=d)
     out = _output_directory(args, stem)
     netcdf = save_dataset(ds, out / "dispersion.nc")
     figure = out / "dispersion.png"
     dispersion_figure(ds, figure)
     print(f"  wrote {netcdf} and {figure} ({time.perf_counter() - start:.1f} s)")
     return 0
+
+
+def _seed_verdicts(linear, params) -> list:
+    """The verdicts of seed sections 3.2-3.6 where the seed's model is the one analysed (hand-derived)."""
+    from primordia.analysis.composed import SEED_PHYSICS, seed_values
+    from primordia.analysis.conditions import uncoupled_verdict, verdicts
+
+    values = seed_values(params)
+    if linear.mechanics is None:
+        return [uncoupled_verdict(values)]
+    if set(linear.physics) == set(SEED_PHYSICS):
+        return verdicts(values if linear.coupled else values.replace(xi_f=0.0))
+    return []
 
 
 def _mode_text(mode) -> str:
@@ -122,7 +162,7 @@ def _mode_text(mode) -> str:
             f"[{mode.band[0]:.3g}, {mode.band[1]:.3g}]{edge})")
 
 
-def _run_map(args, params, stem) -> int:
+def _run_map(args, config, stem) -> int:
     from primordia.analysis.figures import patterning_figure
     from primordia.analysis.patterning import (
         ParameterRange,
@@ -135,17 +175,19 @@ def _run_map(args, params, stem) -> int:
         raise ConfigError("stability map needs --x NAME:LO:HI:N and --y NAME:LO:HI:N")
     if args.nk < 2:
         raise ConfigError(f"--nk must be >= 2, got {args.nk}")
+    params, coupled = _seed_map_parameters(args, config)
     x, y = ParameterRange.parse(args.x), ParameterRange.parse(args.y)
     if args.critical is not None:
         params.declaration(args.critical)
     start = time.perf_counter()
-    kind = "coupled" if args.coupled else "uncoupled"
-    ds = patterning_space(x, y, params=params, coupled=args.coupled, nk=args.nk,
+    kind = "coupled" if coupled else "uncoupled"
+    ds = patterning_space(x, y, params=params, coupled=coupled, nk=args.nk,
                           critical_parameter=args.critical, theta_variant=args.theta)
-    print(f"primordia stability map: {x.name} x {y.name} ({x.n} x {y.n}), {kind}, parameters: {_describe(params)}")
+    print(f"primordia stability map: {x.name} x {y.name} ({x.n} x {y.n}), {kind}, seed's model, "
+          f"parameters: {_describe(params)}")
     k = ds["k"].values
     print(f"  {k.size} wavenumbers in [{k.min():.3g}, {k.max():.3g}]")
-    symbol = "d_0" if args.coupled else "a_0"
+    symbol = "d_0" if coupled else "a_0"
     agreement = boundary_agreement(ds)
     print(f"  Turing-unstable: {_percent(ds['unstable_numerical'])} of the grid from the eigenvalues, "
           f"{_percent(ds['unstable_conditions'])} from {symbol} < 0 (exact criterion), "
@@ -169,6 +211,21 @@ def _run_map(args, params, stem) -> int:
     patterning_figure(ds, figure)
     print(f"  wrote {netcdf} and {figure} ({time.perf_counter() - start:.1f} s)")
     return 0
+
+
+def _seed_map_parameters(args, config):
+    """(seed parameters, coupled?) of a map: the seed's model, coupled as the config's model is (or --coupled)."""
+    from primordia.analysis.composed import linearise_model, seed_values
+    from primordia.analysis.inputs import read_model, read_parameters
+
+    model = read_model(config, args.overrides) if config is not None else None
+    if model is None:
+        return read_parameters(config, args.overrides), args.coupled is not False
+    linear = linearise_model(model, args.chemistry_only, args.coupled is False)
+    if linear.kinetics != "painter2018":
+        raise ConfigError(f"stability map draws patterning spaces of the seed's model (kinetics painter2018); "
+                          f"{config} uses kinetics {linear.kinetics}: primordia stability {config} analyses it")
+    return seed_values(model.parameters), linear.coupled if args.coupled is None else args.coupled
 
 
 def _percent(flag) -> str:

@@ -108,8 +108,24 @@ def _standard_eigenvalues(A, B):
     return np.linalg.eigvals(np.linalg.solve(B, A))
 
 
+def pencil_roots(M0, M1, rho, d: int, method: str, size: int):
+    """Every root phi of det(M0 + phi M1 + phi^2 rho E_u E_u^T) = 0, E_u the first ``d`` unknowns (real pencil).
+
+    ``method`` "standard" (B invertible) or "qz"; QZ results are NaN-padded to ``size``.
+    """
+    A, B = first_order_pencil(M0, M1, rho, d)
+    if method == "standard":
+        return _standard_eigenvalues(A, B)
+    return _qz_eigenvalues(A, B, size)
+
+
 def _choose_method(c: LinearisedCoefficients, method: str) -> str:
     invertible = bool(np.all(np.asarray(c.rho) > 0) and np.all(np.asarray(c.C_0) > 0))
+    return choose_method(invertible, method)
+
+
+def choose_method(invertible: bool, method: str) -> str:
+    """"auto" -> "standard" when the first-order pencil's B is invertible (rho C_0 > 0), else "qz"."""
     if method == "auto":
         return "standard" if invertible else "qz"
     if method == "standard" and not invertible:
@@ -119,7 +135,7 @@ def _choose_method(c: LinearisedCoefficients, method: str) -> str:
     return method
 
 
-def _sort_by_growth(rates):
+def sort_by_growth(rates):
     """Descending real part, then descending imaginary part; NaN last.
 
     Real parts are compared to 12 significant digits (relative to the
@@ -149,7 +165,7 @@ def _homogeneous_rates(c: LinearisedCoefficients, size: int):
     M0, _, _ = matrix_pencil(c, np.zeros((1,)))
     chemistry = np.linalg.eigvals(-M0[..., 2:, 2:])  # d = 1: rows u, p come first
     zeros = np.zeros(chemistry.shape[:-1] + (size - 4,), dtype=complex)
-    return _sort_by_growth(np.concatenate([chemistry.astype(complex), zeros], axis=-1))
+    return sort_by_growth(np.concatenate([chemistry.astype(complex), zeros], axis=-1))
 
 
 def longitudinal_rates(params_or_coefficients, k, coupled: bool = True, method: str = "auto",
@@ -170,12 +186,7 @@ def longitudinal_rates(params_or_coefficients, k, coupled: bool = True, method: 
     cc = c if paired else _expand(c, k.ndim)
     shape = np.broadcast_shapes(cc.shape, k.shape)
     M0, M1, _ = real_pencil(cc, wave_vectors(k, 1))
-    A, B = first_order_pencil(M0, M1, cc.rho, 1)
-    if _choose_method(c, method) == "standard":
-        rates = _standard_eigenvalues(A, B)
-    else:
-        rates = _qz_eigenvalues(A, B, LONGITUDINAL_DEGREE)
-    rates = _sort_by_growth(rates)
+    rates = sort_by_growth(pencil_roots(M0, M1, cc.rho, 1, _choose_method(c, method), LONGITUDINAL_DEGREE))
     at_rest = np.broadcast_to(k == 0, shape)
     if np.any(at_rest):
         rates = np.where(at_rest[..., None], _homogeneous_rates(cc, LONGITUDINAL_DEGREE), rates)
@@ -237,15 +248,9 @@ def growth_rates(params, k, d: int = 2, coupled: bool = True, method: str = "qz"
     if np.any(k < 0):
         raise ValueError("wavenumbers must be >= 0")
     M0, M1, _ = real_pencil(c, wave_vectors(k, d, direction))
-    A, B = first_order_pencil(M0, M1, c.rho, d)
     n_transverse = 2 * (d - 1) if float(c.rho) > 0 else 0
-    size = LONGITUDINAL_DEGREE + n_transverse
-    if _choose_method(c, method) == "standard":
-        roots = _standard_eigenvalues(A, B)
-    else:
-        roots = _qz_eigenvalues(A, B, size)
-    rates, transverse = _split_transverse(roots, c, k, d, n_transverse)
-    rates = _sort_by_growth(rates)
+    roots = pencil_roots(M0, M1, c.rho, d, _choose_method(c, method), LONGITUDINAL_DEGREE + n_transverse)
+    rates, transverse = split_transverse(roots, _shear_speed(c), k, d, n_transverse, LONGITUDINAL_DEGREE)
     at_rest = k == 0
     if np.any(at_rest):
         rates[at_rest] = _homogeneous_rates(c, LONGITUDINAL_DEGREE)
@@ -253,12 +258,19 @@ def growth_rates(params, k, d: int = 2, coupled: bool = True, method: str = "qz"
     return GrowthRates(k=k, rates=rates, transverse=transverse, d=d)
 
 
-def _split_transverse(roots, c, k, d, n_transverse):
-    """Remove the roots of B^(d-1) (each of +-i k sqrt(mu/rho), d-1 times) by nearest match."""
+def _shear_speed(c: LinearisedCoefficients) -> float:
+    return float(np.sqrt(c.mu / c.rho)) if float(c.rho) > 0 else np.inf
+
+
+def split_transverse(roots, speed, k, d, n_transverse, keep):
+    """Remove the roots of B^(d-1) (each of +-i k speed, d-1 times) by nearest match.
+
+    Returns (the other roots sorted by growth, the first ``keep`` of them; the
+    transverse roots), ``speed`` = sqrt(mu / rho), the shear-wave speed.
+    """
     remaining = roots.copy()
     found = np.full(k.shape + (n_transverse,), np.nan, dtype=complex)
     if n_transverse:
-        speed = np.sqrt(c.mu / c.rho)
         targets = [sign * 1j * k * speed for sign in (1, -1) for _ in range(d - 1)]
         for column, target in enumerate(targets):
             distance = np.abs(remaining - target[:, None])
@@ -267,7 +279,7 @@ def _split_transverse(roots, c, k, d, n_transverse):
             rows = np.arange(k.size)
             found[rows, column] = remaining[rows, nearest]
             remaining[rows, nearest] = np.nan
-    kept = _sort_by_growth(remaining)[..., :LONGITUDINAL_DEGREE]  # NaN (removed) sort last
+    kept = sort_by_growth(remaining)[..., :keep]  # NaN (removed) sort last
     return kept, found
 
 
@@ -355,9 +367,17 @@ def fastest_growing_mode(params, k=None, coupled: bool = True, kind: str = "any"
     """
     c = _as_coefficients(params)
     k = default_wavenumbers(c, coupled=coupled) if k is None else np.sort(np.asarray(k, dtype=float))
+    return fastest_mode_of(lambda kk: longitudinal_rates(c, kk, coupled, method="qz"), k, kind)
+
+
+def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
+    """The fastest mode of a dispersion relation ``rates_at(k) -> roots (k.shape + (n,))`` over a sorted k grid.
+
+    The grid's best k is refined by a bounded Brent search between its neighbours.
+    """
 
     def growth_at(kk):
-        return max_growth_of_kind(longitudinal_rates(c, np.atleast_1d(kk), coupled, method="qz"), kind)
+        return max_growth_of_kind(rates_at(np.atleast_1d(kk)), kind)
 
     growth = growth_at(k)
     best = int(np.argmax(growth))
@@ -369,7 +389,7 @@ def fastest_growing_mode(params, k=None, coupled: bool = True, kind: str = "any"
             options={"xatol": 1e-8 * k[best]})
         if -found.fun >= growth[best]:
             k_max = float(found.x)
-    roots = longitudinal_rates(c, np.array([k_max]), coupled, method="qz")[0]
+    roots = rates_at(np.array([k_max]))[0]
     of_kind = growth_of_kind(roots, kind)
     leading = roots[np.argmax(of_kind)]
     rate = float(np.max(of_kind))

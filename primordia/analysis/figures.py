@@ -147,7 +147,8 @@ def patterning_figure(ds: xr.Dataset, path=None):
 
 
 def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
-    """Re phi(k) and Im phi(k) of the leading roots, and a_0, d_0 (as a_0/k^2, d_0/((kappa/eta)(2mu+lambda)k^6))."""
+    """Re phi(k) and Im phi(k) of the leading roots, and the constant term: det M(0, k) (derived analysis), or
+    a_0, d_0 (seed's, as a_0/k^2, d_0/((kappa/eta)(2mu+lambda)k^6))."""
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
     k = ds["k"].values
     real, imag = ds["growth_rate_real"].values, ds["growth_rate_imag"].values
@@ -162,19 +163,25 @@ def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
         if ds.attrs.get(f"{prefix}_unstable"):
             axes[0].axvline(ds.attrs[f"{prefix}_k_max"], color="gray", linestyle=style,
                             label=f"{prefix} k_max = {ds.attrs[f'{prefix}_k_max']:.3g}")
-    axes[0].set_title("Re phi (leading roots of P_1 + P_2 P_3; symlog, linear below 1e-6)", fontsize=10)
+    seed = "a0" in ds  # the hand-derived seed analysis: P_1 + P_2 P_3, a_0 and d_0
+    axes[0].set_title(f"Re phi (leading roots{' of P_1 + P_2 P_3' if seed else ''}; symlog, linear below 1e-6)",
+                      fontsize=10)
     axes[1].set_title("Im phi", fontsize=10)
-    modulus = ds.attrs["parameter_kappa"] / ds.attrs["parameter_eta"]
     K = k**2
     with np.errstate(divide="ignore", invalid="ignore"):
-        axes[2].plot(k, ds["a0"].values / K, label="a_0 / k^2 (uncoupled)")
-        from primordia.physics.seed_parameters import lame
+        if seed:
+            modulus = ds.attrs["parameter_kappa"] / ds.attrs["parameter_eta"]
+            axes[2].plot(k, ds["a0"].values / K, label="a_0 / k^2 (uncoupled)")
+            from primordia.physics.seed_parameters import lame
 
-        mu, lam = lame({"E": ds.attrs["parameter_E"], "nu": ds.attrs["parameter_nu"]})
-        axes[2].plot(k, ds["d0"].values / (modulus * (2 * mu + lam) * K**3),
-                     label="d_0 / ((kappa/eta)(2mu+lambda) k^6) (coupled)")
-    small_k = [abs(line.get_ydata()[0]) for line in axes[2].get_lines()]
-    axes[2].set_yscale("symlog", linthresh=max(min(small_k), 1e-12))  # the sign at small k matters
+            mu, lam = lame({"E": ds.attrs["parameter_E"], "nu": ds.attrs["parameter_nu"]})
+            axes[2].plot(k, ds["d0"].values / (modulus * (2 * mu + lam) * K**3),
+                         label="d_0 / ((kappa/eta)(2mu+lambda) k^6) (coupled)")
+        else:
+            axes[2].plot(k, ds["constant_term"].values, label="det M(0, k) / prod |M_ii(0, k)|")
+    if seed:
+        small_k = [abs(line.get_ydata()[0]) for line in axes[2].get_lines()]
+        axes[2].set_yscale("symlog", linthresh=max(min(small_k), 1e-12))  # the sign at small k matters
     axes[2].axhline(0.0, color="black", linewidth=0.7)
     axes[2].set_title("constant terms (negative: a real positive root)", fontsize=10)
     for ax in axes:

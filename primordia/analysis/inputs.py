@@ -1,16 +1,19 @@
-"""Parameters for the stability analysis from a TOML file and ``--set`` overrides.
+"""What the stability analysis reads from a TOML file and ``--set`` overrides.
 
-A configuration's ``[parameters]`` table holds overrides by seed name (Table
-3.1 names, as in simulations); every other table is ignored, so a simulation
-config can be analysed as it is.  ``--set parameters.NAME=VALUE`` overrides on
-top.  Every mistake is a one-line :class:`~primordia.core.errors.ConfigError`.
+A run configuration (one with a ``[model]`` table) is composed into the
+:class:`~primordia.model.Model` that ``primordia run`` would run
+(:func:`read_model`), overrides applied the same way.  A file without ``[model]``
+is a parameter set of the seed's model: its ``[parameters]`` table holds
+overrides by seed name (Table 3.1 names), ``--set parameters.NAME=VALUE``
+overrides on top (:func:`read_parameters`).  Every mistake is a one-line
+:class:`~primordia.core.errors.ConfigError`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
-from primordia.core.config import load_config, parse_assignment
+from primordia.core.config import apply_overrides, load_config, parse_assignment
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import ParameterSet
 from primordia.physics.seed_parameters import seed_parameters
@@ -45,3 +48,17 @@ def read_parameters(config=None, assignments: Iterable[str] = ()) -> ParameterSe
         name, value = parse_parameter_assignment(text)
         overrides[name] = value
     return seed_parameters(**overrides)
+
+
+def read_model(config, assignments: Iterable[str] = ()):
+    """The :class:`~primordia.model.Model` a run configuration composes (as ``primordia run`` does), or None.
+
+    None for a file without a ``[model]`` table (a parameter set of the seed's model).
+    ``assignments`` are ``section.key=value`` overrides, as for ``primordia run --set``.
+    """
+    table = load_config(config)
+    if "model" not in table:
+        return None
+    from primordia.model import Model
+
+    return Model.from_config(apply_overrides(table, list(assignments or ())))

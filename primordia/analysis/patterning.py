@@ -37,7 +37,7 @@ from primordia.analysis.dispersion import (
     longitudinal_rates,
     max_growth_of_kind,
 )
-from primordia.analysis.linearisation import linearise
+from primordia.analysis.linearisation import linearise, wave_vectors
 from primordia.analysis.polynomials import a0, a0_quadratic, d0, d0_quadratic
 from primordia.core.errors import ConfigError
 from primordia.physics.seed_parameters import seed_parameters
@@ -277,7 +277,7 @@ def _add_critical_curves(ds: xr.Dataset, base, name: str, coupled: bool) -> None
 
 
 def dispersion_relation(params=None, k=None, d: int = 2, coupled: bool = True, nk: int = 241) -> xr.Dataset:
-    """Growth rates phi(k) of one parameter set as a Dataset (all roots of det M, seed eq. (3.2)).
+    """Growth rates phi(k) of one parameter set of the seed's model (hand-derived, seed eq. (3.3)).
 
     Variables: ``growth_rate_real``/``_imag`` (k, branch: the 7 roots of
     P_1 + P_2 P_3 by descending real part), ``transverse_real``/``_imag`` (the
@@ -288,10 +288,41 @@ def dispersion_relation(params=None, k=None, d: int = 2, coupled: bool = True, n
     base = params if params is not None else seed_parameters()
     c = linearise(base)
     k = default_wavenumbers(c, nk, coupled) if k is None else np.asarray(k, dtype=float)
-    roots = growth_rates(c, k, d=d, coupled=coupled)
-    fastest = fastest_growing_mode(c, coupled=coupled)
-    turing = fastest_growing_mode(c, coupled=coupled, kind="stationary")
-    ds = xr.Dataset(
+    ds = _rates_dataset(growth_rates(c, k, d=d, coupled=coupled), fastest_growing_mode(c, coupled=coupled),
+                        fastest_growing_mode(c, coupled=coupled, kind="stationary"), base,
+                        title="primordia dispersion relation (seed section 3)", coupled=int(coupled))
+    ds["a0"] = ("k", a0(c, k), {"long_name": "a_0(k^2) = P_2(0)"})
+    ds["d0"] = ("k", d0(c, k), {"long_name": "d_0(k^2) = P_1(0) + P_2(0) P_3(0)"})
+    return ds
+
+
+def model_dispersion_relation(linear, k=None, d: int = 2, nk: int = 241) -> xr.Dataset:
+    """Growth rates phi(k) of a composed model's derived analysis (:mod:`primordia.analysis.composed`).
+
+    ``linear`` is a :class:`~primordia.analysis.composed.LinearisedModel`.  The
+    variables of :func:`dispersion_relation` (``branch`` runs over every root but
+    the shear waves), with ``constant_term`` = det M(0, k), scaled by the product of
+    its diagonal entries, in place of a_0 and d_0 (negative: a real positive root);
+    attributes also name the physics, the kinetics and the steady state.
+    """
+    k = linear.wavenumbers(nk) if k is None else np.asarray(k, dtype=float)
+    M0 = linear.pencil(wave_vectors(k, d))[0]
+    ds = _rates_dataset(linear.growth_rates(k, d=d), linear.fastest_mode(), linear.fastest_mode("stationary"),
+                        linear.parameters, title=f"primordia dispersion relation of {linear.name or 'a model'}",
+                        coupled=int(linear.coupled),
+                        physics=", ".join(linear.physics), kinetics=linear.kinetics,
+                        species=", ".join(linear.species), notes="; ".join(linear.notes),
+                        **{f"steady_state_{name}": value for name, value in linear.steady_state.values.items()})
+    diagonal = np.prod(np.abs(np.diagonal(M0, axis1=-2, axis2=-1)), axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ds["constant_term"] = ("k", np.linalg.det(M0).real / diagonal, {
+            "long_name": "det M(0, k) / prod_i |M_ii(0, k)|: negative where a real root phi > 0 exists"})
+    return ds
+
+
+def _rates_dataset(roots, fastest, turing, params: Mapping, title: str, **attrs) -> xr.Dataset:
+    """The roots of a dispersion relation over k, and its fastest modes, as a Dataset."""
+    return xr.Dataset(
         {
             "growth_rate_real": (("k", "branch"), roots.rates.real, {"long_name": "Re phi"}),
             "growth_rate_imag": (("k", "branch"), roots.rates.imag, {"long_name": "Im phi"}),
@@ -299,25 +330,16 @@ def dispersion_relation(params=None, k=None, d: int = 2, coupled: bool = True, n
                 "long_name": "Re phi of the roots of B^(d-1) = (rho phi^2 + mu k^2)^(d-1) (neutral)"}),
             "transverse_imag": (("k", "transverse_branch"), roots.transverse.imag),
             "max_growth_rate": ("k", max_growth_of_kind(roots.rates, "any"), {
-                "long_name": "max Re phi over the roots of P_1 + P_2 P_3"}),
+                "long_name": "max Re phi over the roots but the shear waves"}),
             "turing_growth_rate": ("k", max_growth_of_kind(roots.rates, "stationary"), {
                 "long_name": "largest real root (stationary mode); -inf where none"}),
-            "a0": ("k", a0(c, k), {"long_name": "a_0(k^2) = P_2(0)"}),
-            "d0": ("k", d0(c, k), {"long_name": "d_0(k^2) = P_1(0) + P_2(0) P_3(0)"}),
         },
-        coords={"k": ("k", k, {"units": "dimensionless"}),
+        coords={"k": ("k", roots.k, {"units": "dimensionless"}),
                 "branch": np.arange(roots.rates.shape[-1]),
                 "transverse_branch": np.arange(roots.transverse.shape[-1])},
-        attrs={
-            "title": "primordia dispersion relation (seed section 3)",
-            "d": d,
-            "coupled": int(coupled),
-            **_mode_attrs("fastest", fastest),
-            **_mode_attrs("turing", turing),
-            **_attrs_of(base),
-        },
+        attrs={"title": title, "d": roots.d, **attrs, **_mode_attrs("fastest", fastest),
+               **_mode_attrs("turing", turing), **_attrs_of(params)},
     )
-    return ds
 
 
 def _mode_attrs(prefix: str, mode) -> dict:
@@ -380,6 +402,7 @@ __all__ = [
     "as_range",
     "boundary_agreement",
     "dispersion_relation",
+    "model_dispersion_relation",
     "patterning_space",
     "save_dataset",
 ]

@@ -4,6 +4,8 @@ import math
 import subprocess
 import sys
 
+import pytest
+
 from primordia.core.plugins import get_plugin_manager, registry
 from primordia.model import Model
 
@@ -41,3 +43,15 @@ def test_its_parameters_are_validated():
         assert "r_m must be > 0" in str(error)
     else:
         raise AssertionError("a negative proliferation rate was accepted")
+
+
+def test_its_analysis_follows_its_own_reactions():
+    """primordia stability of example 1a with this kinetics: the proliferation term is in the derived Jacobian."""
+    from primordia.analysis import linearise_model
+
+    at_rest = OVERRIDES + ['kinetics.name="painter2018_logistic"', "parameters.r_m=0.05", "parameters.m_cap=0.75"]
+    linear = linearise_model(Model.from_file("examples/ex01a.toml", at_rest))
+    assert linear.steady_state.conserved == () and linear.steady_state.values["m"] == 0.75
+    assert linear.reaction_jacobian[0, 0] == pytest.approx(-0.05, rel=1e-14)  # d/dm [r m (1 - m / m_cap)] at m = m_cap
+    mode = linear.fastest_mode(kind="stationary")
+    assert (round(mode.k_max, 3), round(mode.growth_rate, 4)) == (2.854, 0.1253)  # painter2018: 2.784, 0.1546

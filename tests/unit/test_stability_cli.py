@@ -1,6 +1,7 @@
 """``primordia stability`` through a small argparse harness, its inputs, errors and files."""
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +12,8 @@ from primordia.analysis.inputs import read_parameters
 from primordia.analysis.patterning import ParameterRange, save_dataset
 from primordia.core.errors import ConfigError
 
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
 
 def run(argv):
     parser = argparse.ArgumentParser(prog="primordia")
@@ -20,22 +23,73 @@ def run(argv):
 
 
 def test_dispersion_command_writes_curves_and_reports_the_fastest_mode(tmp_path, capsys):
-    config = tmp_path / "run.toml"
-    config.write_text('[model]\nname = "ignored"\n[parameters]\nm0 = 0.75\n[mesh]\ncells = [4, 4]\n')
+    config = tmp_path / "table.toml"  # no [model]: a parameter set of the seed's full model
+    config.write_text("[parameters]\nm0 = 0.75\n")
     assert run(["stability", str(config), "--set", "parameters.D_m=0.03", "--uncoupled", "--out",
                 str(tmp_path / "out")]) == 0
     printed = capsys.readouterr().out
+    assert "seed: physics chemotaxis, poroelasticity, active_stress, mechanochemical" in printed
     assert "Table 3.1 with m0=0.75, D_m=0.03" in printed
+    assert "uncoupled: the volume sink xi_f div u left out (xi_f = 0)" in printed
     assert "fastest stationary (Turing) mode: k_max =" in printed
     ds = xr.open_dataset(tmp_path / "out" / "dispersion.nc", engine="scipy")
     assert ds.attrs["parameter_m0"] == 0.75 and ds.attrs["parameter_D_m"] == 0.03
-    assert ds.attrs["parameter_xi_f"] == 0.0 and ds.attrs["coupled"] == 0
-    assert ds["growth_rate_real"].shape == (ds.sizes["k"], 7)
+    assert ds.attrs["coupled"] == 0 and ds.attrs["kinetics"] == "painter2018"
+    assert ds.attrs["steady_state_m"] == 0.75
+    assert ds["growth_rate_real"].shape == (ds.sizes["k"], 7)  # 4 chemical + 3 poroelastic roots
+    assert ds["transverse_real"].shape == (ds.sizes["k"], 2)
     k_max = ds.attrs["turing_k_max"]
     assert ds.attrs["turing_wavelength"] == pytest.approx(2 * np.pi / k_max)
     assert f"k_max = {k_max:.4g}" in printed
     assert (tmp_path / "out" / "dispersion.png").stat().st_size > 10_000
     ds.close()
+
+
+def test_a_run_configuration_is_analysed_as_it_runs(tmp_path, capsys):
+    """examples/ex01a.toml: the chemistry alone, the spacing of seed example 1a's spots (issue 11's numbers)."""
+    assert run(["stability", str(EXAMPLES / "ex01a.toml"), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "physics chemotaxis; kinetics painter2018 (species m, e, f, b); no mechanics" in printed
+    assert ("fastest stationary (Turing) mode: k_max = 2.784, wavelength 2 pi / k_max = 2.257, "
+            "growth rate 0.1546") in printed
+    assert "homogeneous steady state: m = 0.75, e = 0.0313889, f = 0.0313889, b = 0.0165037" in printed
+    assert "cross-check: the seed's hand-derived M(phi, k)" in printed
+    assert "uncoupled (xi_f = 0 or tau = 0, seed section 3.4): patterns" in printed
+    assert "coupled (seed section 3.6)" not in printed  # example 1a has no mechanics to couple
+
+
+def test_example_1b_is_the_coupled_analysis_at_its_own_tau_and_xi_f(tmp_path, capsys):
+    assert run(["stability", str(EXAMPLES / "ex01b.toml"), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "with mechanics" in printed and "tau=0.001, xi_f=0.001" in printed
+    assert "coupled (seed section 3.6): Turing patterns" in printed
+    ds = xr.open_dataset(tmp_path / "dispersion.nc", engine="scipy")
+    assert ds.attrs["coupled"] == 1 and ds.attrs["parameter_tau"] == 0.001
+    ds.close()
+
+
+def test_a_third_party_kinetics_is_analysed(tmp_path, capsys):
+    assert run(["stability", str(EXAMPLES / "schnakenberg.toml"), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "kinetics schnakenberg (species activator, inhibitor)" in printed
+    assert "homogeneous steady state: activator = 1, inhibitor = 0.9" in printed
+    assert "k_max = 2.176, wavelength 2 pi / k_max = 2.887, growth rate 0.2632" in printed
+    assert "cross-check" not in printed  # the seed's matrix does not describe this model
+    with pytest.raises(ConfigError, match="kinetics schnakenberg: primordia stability"):
+        run(["stability", "map", str(EXAMPLES / "schnakenberg.toml"), "--x", "a:0:1:3", "--y", "b:0:1:3"])
+
+
+def test_a_growing_tissue_is_one_line_and_exit_2_unless_the_chemistry_is_asked_for(tmp_path, capsys):
+    from primordia.cli import main
+
+    config = str(EXAMPLES / "ex02a.toml")
+    assert main(["stability", config, "--out", str(tmp_path)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count("\n") == 0 and error.startswith("primordia: error: ex02a grows at finite strain")
+    assert main(["stability", config, "--chemistry-only", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "chemistry only: poroelastic_growth, mechanochemical left out" in printed
+    assert "k_max = 2.784" in printed
 
 
 def test_map_command_writes_patterning_space(tmp_path, capsys):
@@ -68,6 +122,8 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     (["stability", "map", "--x", "m0:0.1:4:5", "--y", "alfa:0:1:5"], "unknown parameter 'alfa'"),
     (["stability", "map", "--x", "m0:0.1:4:5"], "stability map needs --x"),
     (["stability", "map", "--x", "tau:0:1:5", "--y", "m0:1:2:5", "--uncoupled"], "--uncoupled sets xi_f = 0"),
+    (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--set", "parameters.tau=1"],
+     "unknown parameter 'tau'"),  # example 1a has no active stress
 ])
 def test_bad_input_is_one_line_config_error(argv, message):
     with pytest.raises(ConfigError) as error:

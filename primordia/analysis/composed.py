@@ -1,0 +1,525 @@
+r"""The linear stability analysis of whatever model is composed, derived from its own equations.
+
+Seed section 3 linearises one model, typed in by hand (:mod:`.linearisation`).
+Here the same analysis is derived for a composed :class:`~primordia.model.Model`
+(physics modules + kinetics + parameters), so that ``primordia stability CONFIG``
+analyses exactly the model ``primordia run CONFIG`` runs:
+
+1. **the homogeneous steady state**, from the kinetics: its homogeneous form
+   (:meth:`Kinetics.homogeneous`; painter2018: the priming wave saturated,
+   w = omega_1) starting from its initial state; a species that does not react
+   is conserved and held at its initial value, the others are relaxed to R = 0
+   by backward-Euler steps of the well-mixed kinetics with growing time steps
+   (pseudo-transient continuation: it ends as Newton's method).  For painter2018
+   this is seed eq. (2.6);
+2. **the reaction Jacobian** dR/dc, from the kinetics' own ``rates`` evaluated on
+   dual numbers (:mod:`.autodiff`): the code the simulation runs, differentiated;
+3. **one Fourier symbol per physics module present** (plane waves
+   exp(i k.x + phi t), seed Proposition 3.1: grad -> i k, d/dt -> phi),
+   ``K = |k|^2``:
+
+   ===============  ===========================================================================
+   chemotaxis       each species row: (phi + D_s K) c_s - sum_j dR_s/dc_j c_j, and
+                    - chi(c_0) c_0 K c_a for a species climbing attractant a (seed (2.3a)-(2.3d));
+                    D_s and the attractants from the kinetics' species declarations
+   poroelasticity   u_i: (rho phi^2 + mu K) u_i + (mu + lambda) k_i k.u + i k_i p   (2.1c), (2.2)
+                    p:   i alpha_BW phi k.u + (C_0 phi + (kappa/eta) K) p             (2.1a)
+                    with the module's own Lame constants (options ``shear_modulus``,
+                    ``lame_lambda`` honoured)
+   active_stress    u_i: - i s k_i m, s = d sigma_act / dm at m_0 (2.5), by UFL
+                    differentiation of the module's ``active_stress``
+   mechanochemical  + i xi_f k.u in the rows of the species the kinetics declares
+                    ``volume_sink`` (FGF: (2.3c)); the advection u_t . grad c is a product
+                    of two perturbations about a homogeneous state: no linear term
+   ===============  ===========================================================================
+
+   No mechanics in the model: no u, p rows.  A module with no Fourier symbol
+   here, a spatially varying conductivity, or finite strain (``poroelastic_growth``:
+   a growing tissue has no steady state to linearise about, seed section 6) is
+   refused in one line; ``chemistry_only=True`` analyses the chemistry alone.
+
+The growth rates phi(k) are the roots of det M(phi, k), M = M0 + phi M1 +
+phi^2 M2, by the eigenvalue machinery of :mod:`.dispersion`.  For painter2018
+the derived M equals the hand-derived matrix of seed Definition 3.1
+(:func:`seed_cross_check`), which stays as the independent check.
+
+From Python::
+
+    from primordia import Model
+    from primordia.analysis import linearise_model
+
+    linear = linearise_model(Model.from_file("examples/ex01a.toml"))
+    linear.steady_state.values                     # {'m': 0.75, 'e': ..., 'f': ..., 'b': ...}
+    mode = linear.fastest_mode(kind="stationary")  # k_max, wavelength, growth_rate
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from primordia.analysis.autodiff import DUAL, Dual, seeded, value_and_gradient
+from primordia.analysis.dispersion import (
+    FastestMode,
+    GrowthRates,
+    choose_method,
+    fastest_mode_of,
+    max_growth_of_kind,
+    pencil_roots,
+    sort_by_growth,
+    split_transverse,
+)
+from primordia.analysis.linearisation import made_real, wave_vectors
+from primordia.core.errors import ConfigError
+
+#: Largest number of pseudo-transient steps towards the steady state.
+STEADY_STATE_STEPS = 200
+#: |R| below this times the reaction scale |dR/dc| (1 + |c|) is a steady state.
+STEADY_STATE_TOLERANCE = 1e-13
+
+
+# -- the steady state and the reaction Jacobian -------------------------------------------------------
+def reaction_jacobian(kinetics, state: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(R, dR/dc) at ``state``: the kinetics' own ``rates`` on dual numbers (species order, t = 0)."""
+    names = kinetics.species_names
+    rates = kinetics.rates(seeded(state, names), 0.0, DUAL)
+    R, J = np.empty(len(names)), np.empty((len(names), len(names)))
+    for i, name in enumerate(names):
+        R[i], J[i] = value_and_gradient(rates[name], (), len(names))
+    return R, J
+
+
+def conserved_species(kinetics, state: Mapping[str, float]) -> tuple[str, ...]:
+    """Species whose split rate is the plain (0, 0): no reaction, conserved."""
+    names = kinetics.species_names
+    split = kinetics.split_rates(seeded(state, names), 0.0, DUAL)
+    return tuple(name for name in names
+                 if not any(isinstance(part, Dual) or part != 0 for part in split[name]))
+
+
+@dataclass(frozen=True)
+class SteadyState:
+    """The homogeneous steady state of a kinetics (dimensionless concentrations)."""
+
+    values: dict  #: species -> concentration at rest
+    conserved: tuple  #: species that do not react, held at their initial value
+    steps: int  #: pseudo-transient steps taken from the initial state (0: it was at rest)
+    residual: float  #: max |R| at the state
+
+    def __str__(self) -> str:
+        return ", ".join(f"{name} = {value:.6g}" for name, value in self.values.items())
+
+
+def homogeneous_steady_state(kinetics) -> SteadyState:
+    """The state the well-mixed kinetics rests at, from its initial state (see the module docstring)."""
+    names = kinetics.species_names
+    start = kinetics.initial_state(0.0, DUAL)
+    state = np.array([float(np.asarray(start[name])) for name in names])
+    conserved = conserved_species(kinetics, dict(zip(names, state)))
+    free = np.array([name not in conserved for name in names])
+    dt, previous, steps = None, None, 0
+    while True:
+        R, J = reaction_jacobian(kinetics, dict(zip(names, state)))
+        residual = float(np.max(np.abs(R[free]), initial=0.0))
+        scale = float(np.max(np.abs(J), initial=0.0)) * (1.0 + float(np.max(np.abs(state))))
+        if residual <= STEADY_STATE_TOLERANCE * max(scale, 1e-300):
+            return SteadyState(dict(zip(names, state.tolist())), conserved, steps, residual)
+        if steps == STEADY_STATE_STEPS or not np.isfinite(residual):
+            raise ConfigError(f"kinetics {kinetics.name}: no homogeneous steady state reached from its initial "
+                              f"state ({', '.join(names)}) in {steps} steps (max |R| = {residual:.3g})")
+        free_jacobian = J[np.ix_(free, free)]
+        # backward Euler of dc/dt = R(c), the time step growing as the residual falls (SER)
+        dt = 1.0 / max(float(np.max(np.abs(free_jacobian))), 1e-12) if dt is None \
+            else min(dt * previous / residual, 1e16)
+        step = np.linalg.solve(np.eye(free.sum()) / dt - free_jacobian, R[free])
+        state[free] += step
+        previous, steps = residual, steps + 1
+
+
+# -- the Fourier symbols of the physics modules --------------------------------------------------------
+class FourierSystem:
+    """M(phi, k) = M0 + phi M1 + phi^2 M2 being assembled, for wave vectors ``k`` (shape ``batch + (d,)``).
+
+    Unknowns: the displacement u_1..u_d and the pressure p when the model has
+    mechanics, then the species in the kinetics' order.
+    """
+
+    def __init__(self, species: tuple[str, ...], mechanics: bool, k_vector):
+        self.k = np.asarray(k_vector, dtype=float)
+        self.d = self.k.shape[-1]
+        self.K = np.sum(self.k**2, axis=-1)
+        self.displacement = tuple(f"u_{i + 1}" for i in range(self.d)) if mechanics else ()
+        self.names = self.displacement + (("p",) if mechanics else ()) + tuple(species)
+        self._index = {name: i for i, name in enumerate(self.names)}
+        n = len(self.names)
+        self.M = tuple(np.zeros(self.K.shape + (n, n), dtype=complex) for _ in range(3))
+
+    def add(self, order: int, row: str, column: str, value) -> None:
+        """M_order[row, column] += value (broadcast over the wave vectors)."""
+        self.M[order][..., self._index[row], self._index[column]] += value
+
+
+@dataclass(frozen=True)
+class SpeciesTransport:
+    """chemotaxis: accumulation, diffusion, chemotaxis and linearised reactions of each species (2.3a)-(2.3d)."""
+
+    species: tuple  #: names, in the kinetics' order
+    diffusivity: dict  #: species -> D (0 for immobile species)
+    chemotactic: tuple  #: (species, attractant, chi(c_0) c_0) for each climbing species
+    jacobian: np.ndarray  #: dR/dc at the steady state
+
+    def add_to(self, system: FourierSystem) -> None:
+        for i, name in enumerate(self.species):
+            system.add(1, name, name, 1.0)  # dc/dt
+            system.add(0, name, name, self.diffusivity[name] * system.K)  # -div(D grad c)
+            for j, other in enumerate(self.species):
+                system.add(0, name, other, -self.jacobian[i, j])  # -R(c), linearised
+        for name, attractant, coefficient in self.chemotactic:
+            system.add(0, name, attractant, -coefficient * system.K)  # +div(chi(c_0) c_0 grad a)
+
+
+@dataclass(frozen=True)
+class PoroelasticWaves:
+    """poroelasticity: momentum (2.1c) with stress (2.2), and fluid mass (2.1a)."""
+
+    mu: float
+    lam: float
+    rho: float
+    C_0: float
+    mobility: float  #: kappa / eta
+    alpha_BW: float
+
+    def add_to(self, system: FourierSystem) -> None:
+        k, u = system.k, system.displacement
+        for i, row in enumerate(u):
+            system.add(2, row, row, self.rho)  # rho u_tt
+            system.add(0, row, row, self.mu * system.K)  # -div(2 mu eps(u)) ...
+            for j, column in enumerate(u):
+                system.add(0, row, column, (self.mu + self.lam) * k[..., i] * k[..., j])  # ... - grad(lambda div u)
+            system.add(0, row, "p", 1j * k[..., i])  # grad p
+            system.add(1, "p", row, 1j * self.alpha_BW * k[..., i])  # d/dt alpha_BW div u
+        system.add(1, "p", "p", self.C_0)  # d/dt C_0 p
+        system.add(0, "p", "p", self.mobility * system.K)  # -div((kappa/eta) grad p)
+
+
+@dataclass(frozen=True)
+class ActiveStressCoupling:
+    """active_stress: -div(sigma_act) linearised, - i s k_i m (2.5)."""
+
+    species: str
+    slope: float  #: d sigma_act / dm at the steady state
+
+    def add_to(self, system: FourierSystem) -> None:
+        for i, row in enumerate(system.displacement):
+            system.add(0, row, self.species, -1j * self.slope * system.k[..., i])
+
+
+@dataclass(frozen=True)
+class VolumeSink:
+    """mechanochemical: + xi_f div u in the balance of each sink species (2.3c); advection has no linear term."""
+
+    species: tuple
+    xi_f: float
+
+    def add_to(self, system: FourierSystem) -> None:
+        for name in self.species:
+            for j, column in enumerate(system.displacement):
+                system.add(0, name, column, 1j * self.xi_f * system.k[..., j])
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What the Fourier symbols of the modules are built from."""
+
+    kinetics: object
+    steady_state: SteadyState
+    jacobian: np.ndarray
+    params: Mapping
+
+
+def _transport(module, context: _Context) -> SpeciesTransport:
+    kinetics, rest = context.kinetics, context.steady_state.values
+    chemotactic = tuple(
+        (s.name, s.attractant, float(kinetics.sensitivity(s.name, rest[s.name], DUAL)) * rest[s.name])
+        for s in kinetics.species if s.attractant is not None)
+    return SpeciesTransport(
+        species=kinetics.species_names,
+        diffusivity={s.name: float(context.params[s.diffusivity]) if s.mobile else 0.0 for s in kinetics.species},
+        chemotactic=chemotactic, jacobian=context.jacobian)
+
+
+def _poroelastic(module, context: _Context) -> PoroelasticWaves:
+    if module.opts.get("conductivity") is not None:
+        raise ConfigError("physics.poroelasticity.conductivity varies in space: the plane-wave analysis "
+                          "needs a uniform hydraulic conductivity kappa")
+    mu, lam = module.lame()
+    p = module.params
+    return PoroelasticWaves(mu=float(mu), lam=float(lam), rho=p["rho"], C_0=p["C_0"],
+                            mobility=p["kappa"] / p["eta"], alpha_BW=p["alpha_BW"])
+
+
+def active_stress_slope(m0: float, mu: float, lam: float, tau: float, zeta: float) -> float:
+    """d sigma_act / dm at m0: the module's own ``active_stress`` (seed (2.5)) differentiated by UFL."""
+    import ufl
+    from ufl.algorithms import expand_derivatives
+
+    from primordia.physics.active_stress import active_stress
+
+    m = ufl.variable(ufl.as_ufl(float(m0)))
+    sigma = active_stress(m, mu, lam, tau, zeta, 1)
+    return float(expand_derivatives(ufl.diff(sigma[0, 0], m)))
+
+
+def _active_stress(module, context: _Context, mechanics: PoroelasticWaves) -> ActiveStressCoupling:
+    species = "m"  # the module reads the cell density m (primordia.physics.active_stress)
+    if species not in context.steady_state.values:
+        raise ConfigError(f"active_stress reads the cell density m, which kinetics {context.kinetics.name} "
+                          f"does not declare ({', '.join(context.steady_state.values)})")
+    p = module.params
+    return ActiveStressCoupling(species, active_stress_slope(context.steady_state.values[species], mechanics.mu,
+                                                             mechanics.lam, p["tau"], p["zeta"]))
+
+
+def _volume_sink(module, context: _Context, mechanics) -> VolumeSink:
+    return VolumeSink(tuple(s.name for s in context.kinetics.species if s.volume_sink), module.params["xi_f"])
+
+
+#: The physics modules the analysis knows, and how each contributes.  The mechanical couplings
+#: (active stress, volume sink) also need the poroelastic module's Lame constants.
+CHEMISTRY = {"chemotaxis": _transport}
+MECHANICS = {"poroelasticity": _poroelastic}
+COUPLINGS = {"active_stress": _active_stress, "mechanochemical": _volume_sink}
+
+
+# -- the linearised model ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LinearisedModel:
+    """A composed model linearised about its homogeneous steady state: M(phi, k) and its roots phi(k)."""
+
+    name: str
+    physics: tuple  #: the modules analysed
+    kinetics: str
+    species: tuple
+    steady_state: SteadyState
+    reaction_jacobian: np.ndarray  #: dR/dc at the steady state (species order)
+    terms: tuple  #: the Fourier symbols, one per module
+    mechanics: PoroelasticWaves | None
+    parameters: Mapping
+    notes: tuple = field(default_factory=tuple)  #: what was left out, and why
+
+    # -- the matrix ----------------------------------------------------------------------
+    def pencil(self, k_vector) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M0, M1, M2), complex arrays ``batch + (n, n)`` for wave vectors ``batch + (d,)``."""
+        system = FourierSystem(self.species, self.mechanics is not None, k_vector)
+        for term in self.terms:
+            term.add_to(system)
+        return system.M
+
+    @property
+    def coupled(self) -> bool:
+        """Whether the mechano-chemical loop is closed (a volume sink; with active stress, seed section 3.6)."""
+        return any(isinstance(term, VolumeSink) for term in self.terms)
+
+    def unknowns(self, d: int) -> tuple[str, ...]:
+        return FourierSystem(self.species, self.mechanics is not None, np.zeros(d)).names
+
+    def matrix(self, phi, k_vector) -> np.ndarray:
+        """M(phi, k) = M0 + phi M1 + phi^2 M2."""
+        M0, M1, M2 = self.pencil(k_vector)
+        phi = np.asarray(phi)[..., None, None]
+        return M0 + phi * M1 + phi**2 * M2
+
+    # -- its roots -------------------------------------------------------------------------
+    def _method(self) -> str:
+        if self.mechanics is None:
+            return "standard"  # M1 = I: the eigenvalues of -M0
+        return choose_method(self.mechanics.rho > 0 and self.mechanics.C_0 > 0, "auto")
+
+    def _roots(self, k, d: int, direction=None):
+        """Every root of det M at |k| = ``k`` (1-D array), wave vectors along ``direction``: (k.size, size)."""
+        M0, M1, M2 = self.pencil(wave_vectors(k, d, direction))
+        d_u = d if self.mechanics is not None else 0
+        if d_u:
+            M0, M1, M2 = made_real((M0, M1, M2), d_u)
+        size = M0.shape[-1] + d_u
+        roots = pencil_roots(M0.real, M1.real, self.mechanics.rho if d_u else 0.0, d_u, self._method(), size)
+        at_rest = k == 0
+        if np.any(at_rest):  # every coupling carries k: the kinetics' rates, and 0 for the mechanics
+            chemistry = np.linalg.eigvals(self.reaction_jacobian).astype(complex)
+            neutral = np.zeros(size - chemistry.size, dtype=complex)
+            if self.mechanics is not None and not (self.mechanics.rho > 0 and self.mechanics.C_0 > 0):
+                neutral[:] = np.nan  # the degree drops with rho or C_0
+            roots[at_rest] = np.concatenate([chemistry, neutral])
+        return roots
+
+    def rates(self, k) -> np.ndarray:
+        """Roots of the longitudinal (d = 1) dispersion relation at each ``k``, shape ``k.shape + (n,)``.
+
+        Sorted by descending real part; NaN where the degree is lower.  For an isotropic
+        model these are every root but the neutral shear waves (see :meth:`growth_rates`).
+        """
+        k = np.asarray(k, dtype=float)
+        return sort_by_growth(self._roots(k.ravel(), 1)).reshape(k.shape + (-1,))
+
+    def growth_rates(self, k, d: int = 2, direction=None) -> GrowthRates:
+        """Every root of det M for d = 1, 2, 3, the shear waves (+-i k sqrt(mu/rho), d-1 times) apart."""
+        k = np.atleast_1d(np.asarray(k, dtype=float))
+        if np.any(k < 0):
+            raise ValueError("wavenumbers must be >= 0")
+        roots = self._roots(k, d, direction)
+        mechanics = self.mechanics
+        n_transverse = 2 * (d - 1) if mechanics is not None and mechanics.rho > 0 else 0
+        keep = roots.shape[-1] - (2 * (d - 1) if mechanics is not None else 0)
+        speed = np.sqrt(mechanics.mu / mechanics.rho) if n_transverse else np.inf
+        rates, transverse = split_transverse(roots, speed, k, d, n_transverse, keep)
+        transverse[k == 0] = 0.0
+        return GrowthRates(k=k, rates=rates, transverse=transverse, d=d)
+
+    def wavenumbers(self, n: int = 241) -> np.ndarray:
+        """A log-spaced k grid from 1e-3 past the end of the unstable band.
+
+        The band of a reaction-diffusion(-taxis) system ends near the k where the
+        slowest diffusion outruns the fastest reaction, sqrt(max |dR/dc| / min D);
+        the grid reaches 3 times that (at least 10), and grows until the top is stable.
+        """
+        transport = next((t for t in self.terms if isinstance(t, SpeciesTransport)), None)
+        mobile = [D for D in (transport.diffusivity.values() if transport else ()) if D > 0]
+        reaction = float(np.max(np.abs(self.reaction_jacobian), initial=0.0))
+        k_high = max(10.0, 3.0 * np.sqrt(reaction / min(mobile))) if mobile else 10.0
+        for _ in range(8):
+            if max_growth_of_kind(self.rates(np.array([k_high])))[0] <= 0:
+                break
+            k_high *= 3.0
+        return np.logspace(-3.0, np.log10(k_high), n)
+
+    def fastest_mode(self, kind: str = "any", k=None) -> FastestMode:
+        """k_max, growth rate, wavelength 2 pi / k_max (``kind``: "any", "stationary", "oscillatory")."""
+        k = self.wavenumbers() if k is None else np.sort(np.asarray(k, dtype=float))
+        return fastest_mode_of(self.rates, k, kind)
+
+    def describe(self) -> str:
+        mechanics = "with mechanics" if self.mechanics is not None else "no mechanics"
+        return (f"physics {', '.join(self.physics)}; kinetics {self.kinetics} (species {', '.join(self.species)}); "
+                f"{mechanics}")
+
+
+#: The seed's full poro-mechano-chemical model (seed section 2): what a parameter set alone describes.
+SEED_PHYSICS = ("chemotaxis", "poroelasticity", "active_stress", "mechanochemical")
+
+
+def linearise_seed(params: Mapping, chemistry_only: bool = False, uncoupled: bool = False) -> LinearisedModel:
+    """The linearisation of the seed's full model (painter2018 and :data:`SEED_PHYSICS`) at ``params``."""
+    from primordia.core.plugins import lookup
+
+    kinetics = lookup("kinetics", "painter2018")(params)
+    modules = [lookup("physics", name)(params, kinetics=kinetics) for name in SEED_PHYSICS]
+    return linearise_composition(modules, kinetics, params, name="seed", chemistry_only=chemistry_only,
+                                 uncoupled=uncoupled)
+
+
+def linearise_model(model, chemistry_only: bool = False, uncoupled: bool = False) -> LinearisedModel:
+    """The linearisation of a :class:`~primordia.model.Model` (see the module docstring).
+
+    ``chemistry_only``: the kinetics and the transport of its species alone, whatever
+    mechanics the model has.  ``uncoupled``: drop the volume sink (xi_f = 0, seed section 3.4).
+    """
+    return linearise_composition(model.physics_objects, model.kinetics_object, model.parameters,
+                                 name=model.name, chemistry_only=chemistry_only, uncoupled=uncoupled)
+
+
+def linearise_composition(modules, kinetics, params: Mapping, name: str = "", chemistry_only: bool = False,
+                          uncoupled: bool = False) -> LinearisedModel:
+    """The linearisation of physics ``modules`` (instances) with ``kinetics`` at ``params``."""
+    if kinetics is None or not any(module.name in CHEMISTRY for module in modules):
+        raise ConfigError("the linear stability analysis linearises reacting, moving species: "
+                          "the model needs chemotaxis and a kinetics")
+    notes = []
+    if chemistry_only:
+        dropped = [module.name for module in modules if module.name not in CHEMISTRY]
+        modules = [module for module in modules if module.name in CHEMISTRY]
+        if dropped:
+            notes.append(f"chemistry only: {', '.join(dropped)} left out")
+    for module in modules:
+        if module.finite_strain:
+            raise ConfigError(
+                f"{name or 'this model'} grows at finite strain ({module.name}): a growing tissue has no "
+                f"homogeneous steady state, so the linear analysis of seed section 3 does not apply (seed "
+                f"section 6); --chemistry-only analyses the chemistry alone")
+        if module.name not in CHEMISTRY | MECHANICS | COUPLINGS:
+            raise ConfigError(f"physics {module.name} has no Fourier symbol in primordia.analysis.composed: "
+                              f"the analysis would not be the model that runs")
+    homogeneous = kinetics.homogeneous()
+    rest = homogeneous_steady_state(homogeneous)
+    _, jacobian = reaction_jacobian(homogeneous, rest.values)
+    context = _Context(homogeneous, rest, jacobian, params)
+
+    terms, mechanics = [], None
+    for module in modules:
+        if module.name in CHEMISTRY:
+            terms.append(CHEMISTRY[module.name](module, context))
+        elif module.name in MECHANICS:
+            mechanics = MECHANICS[module.name](module, context)
+            terms.append(mechanics)
+    for module in modules:
+        if module.name not in COUPLINGS:
+            continue
+        if mechanics is None:
+            raise ConfigError(f"{module.name} couples the species to a solid, but the model has no mechanics "
+                              f"(add poroelasticity)")
+        if module.name == "mechanochemical" and uncoupled:
+            notes.append("uncoupled: the volume sink xi_f div u left out (xi_f = 0)")
+            continue
+        terms.append(COUPLINGS[module.name](module, context, mechanics))
+    if uncoupled and "mechanochemical" not in [module.name for module in modules]:
+        notes.append("uncoupled: the model has no mechano-chemical loop to cut")
+    return LinearisedModel(name=name, physics=tuple(module.name for module in modules), kinetics=kinetics.name,
+                           species=homogeneous.species_names, steady_state=rest, reaction_jacobian=jacobian,
+                           terms=tuple(terms), mechanics=mechanics, parameters=params, notes=tuple(notes))
+
+
+# -- the cross-check with the hand-derived seed analysis -------------------------------------------------
+def seed_cross_check(linear: LinearisedModel, k=(0.0, 0.3, 1.0, 2.7, 8.0), phi=(0.0, 0.7, -1.3 + 0.4j),
+                     d: int = 2) -> float | None:
+    """max |M_derived - M_seed| / max |M_seed| over ``k``, ``phi`` (wave vectors off the axes, in ``d`` dims).
+
+    M_seed is seed Definition 3.1 as typed in by hand (:mod:`.linearisation`), at the
+    model's parameters with xi_f = 0 where the model has no volume sink and tau = 0
+    where it has no active stress; without mechanics, its species block.  None when
+    the seed's matrix does not describe the model: another kinetics, or Lame
+    constants given as options (the seed reads them from E and nu).
+    """
+    from primordia.analysis.linearisation import linearise, matrix_pencil
+    from primordia.physics.seed_parameters import lame
+
+    if linear.kinetics != "painter2018":
+        return None
+    values = seed_values(linear.parameters)
+    if linear.mechanics is not None and not np.allclose((linear.mechanics.mu, linear.mechanics.lam),
+                                                        lame(values), rtol=1e-14, atol=0):
+        return None
+    kinds = {type(term) for term in linear.terms}
+    seed = linearise(values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,
+                                    tau=values["tau"] if ActiveStressCoupling in kinds else 0.0))
+    direction = np.arange(1.0, d + 1.0) / np.linalg.norm(np.arange(1.0, d + 1.0))
+    k_vector = np.asarray(k, dtype=float)[:, None] * direction
+    blocks = slice(None) if linear.mechanics is not None else slice(d + 1, None)
+    derived = linear.pencil(k_vector)
+    hand = [matrix[..., blocks, blocks] for matrix in matrix_pencil(seed, k_vector)]
+    worst, scale = 0.0, 0.0
+    for value in np.asarray(phi, dtype=complex):
+        M_derived = derived[0] + value * derived[1] + value**2 * derived[2]
+        M_seed = hand[0] + value * hand[1] + value**2 * hand[2]
+        worst = max(worst, float(np.max(np.abs(M_derived - M_seed))))
+        scale = max(scale, float(np.max(np.abs(M_seed))))
+    return worst / scale
+
+
+def seed_values(params: Mapping):
+    """Table 3.1 overridden by the values of ``params`` the seed's model has (others, e.g. growth's, left out)."""
+    from primordia.physics.seed_parameters import seed_parameters
+
+    known = seed_parameters()
+    names = {declaration.name for declaration in known.declarations()}
+    return known.replace(**{name: value for name, value in params.items() if name in names})

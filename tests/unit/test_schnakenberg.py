@@ -1,0 +1,142 @@
+"""The third-party plugin plugins/primordia-schnakenberg: found by entry point, its textbook Turing conditions.
+
+The derived analysis (primordia.analysis.composed) knows nothing of Schnakenberg's
+system: it reads the plugin's species declaration and differentiates its ``rates``.
+Here it must reproduce the classical results, written out independently from
+
+    J. D. Murray, *Mathematical Biology II: Spatial Models and Biomedical Applications*,
+    3rd ed., Springer (2003), chapter 2, section 2.3 ("general conditions for
+    diffusion-driven instability") applied to the Schnakenberg kinetics of section 2.2/2.4.
+
+For u_t = gamma f(u, v) + Laplacian u, v_t = gamma g(u, v) + d Laplacian v with
+f = a - u + u^2 v, g = b - u^2 v, at the steady state u_0 = a + b, v_0 = b / (a + b)^2:
+
+    f_u = (b - a)/(a + b),  f_v = (a + b)^2,  g_u = -2b/(a + b),  g_v = -(a + b)^2;
+
+the steady state is driven unstable by diffusion if and only if
+
+    (i)   f_u + g_v < 0,            (ii) f_u g_v - f_v g_u > 0,
+    (iii) d f_u + g_v > 0,          (iv) (d f_u + g_v)^2 - 4 d (f_u g_v - f_v g_u) > 0;
+
+the critical diffusion ratio d_c is the root > 1 of
+
+    d_c^2 f_u^2 + 2 (2 f_v g_u - f_u g_v) d_c + g_v^2 = 0,
+
+at which the critical wavenumber is k_c^2 = gamma (d_c f_u + g_v) / (2 d_c), and for
+d > d_c the unstable band is between the roots of d k^4 - gamma (d f_u + g_v) k^2 +
+gamma^2 (f_u g_v - f_v g_u) = 0.  For a = 0.1, b = 0.9: d_c = 8.5676 (with D_u = 1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.optimize
+
+from primordia.analysis import linearise_model
+from primordia.analysis.composed import homogeneous_steady_state
+from primordia.analysis.dispersion import max_growth_of_kind
+from primordia.core.meshes import rectangle
+from primordia.core.plugins import get_plugin_manager, registry
+from primordia.model import Model
+
+
+def murray(a: float, b: float) -> dict:
+    """The Jacobian entries of f, g at the steady state (without gamma), and the critical ratio d_c."""
+    f_u, f_v, g_u, g_v = (b - a) / (a + b), (a + b) ** 2, -2 * b / (a + b), -(a + b) ** 2
+    roots = np.roots([f_u**2, 2 * (2 * f_v * g_u - f_u * g_v), g_v**2])
+    return {"f_u": f_u, "f_v": f_v, "g_u": g_u, "g_v": g_v, "det": f_u * g_v - f_v * g_u,
+            "d_c": float(np.max(roots.real))}
+
+
+def turing_unstable(a: float, b: float, d: float) -> bool:
+    """Murray's conditions (i)-(iv)."""
+    m = murray(a, b)
+    return bool(m["f_u"] + m["g_v"] < 0 and m["det"] > 0 and d * m["f_u"] + m["g_v"] > 0
+                and (d * m["f_u"] + m["g_v"]) ** 2 - 4 * d * m["det"] > 0)
+
+
+def schnakenberg(**parameters) -> Model:
+    return Model(physics=["chemotaxis"], kinetics="schnakenberg", parameters=parameters,
+                 mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.1)
+
+
+def diffusion_driven(linear) -> bool:
+    """Stable without diffusion (k = 0), a real growth rate > 0 at some k > 0: a Turing instability."""
+    homogeneous = np.max(np.linalg.eigvals(linear.reaction_jacobian).real) < 0
+    return bool(homogeneous and linear.fastest_mode("stationary").growth_rate > 1e-12)
+
+
+def test_it_is_found_through_its_entry_point():
+    piece, origin = registry("kinetics", get_plugin_manager())["schnakenberg"]
+    assert origin.startswith("primordia-schnakenberg ")
+    assert [s.name for s in piece.species] == ["activator", "inhibitor"]
+
+
+@pytest.mark.parametrize("a, b, gamma", [(0.1, 0.9, 1.0), (0.2, 1.3, 3.0), (0.05, 0.6, 0.5)])
+def test_steady_state_and_jacobian_are_murrays(a, b, gamma):
+    linear = linearise_model(schnakenberg(a=a, b=b, gamma=gamma))
+    assert linear.steady_state.values["activator"] == pytest.approx(a + b, rel=1e-14)
+    assert linear.steady_state.values["inhibitor"] == pytest.approx(b / (a + b) ** 2, rel=1e-14)
+    m = murray(a, b)
+    expected = gamma * np.array([[m["f_u"], m["f_v"]], [m["g_u"], m["g_v"]]])
+    np.testing.assert_allclose(linear.reaction_jacobian, expected, rtol=1e-13)
+
+
+def test_the_steady_state_is_found_from_elsewhere_too():
+    """Started off its rest state (a kinetics need not know it), the relaxation lands on Murray's."""
+    kinetics = schnakenberg(a=0.1, b=0.9).kinetics_object
+    kinetics.initial_state = lambda t0, ops: {"activator": 1.6, "inhibitor": 0.5}
+    rest = homogeneous_steady_state(kinetics)
+    assert rest.steps > 0 and rest.conserved == ()
+    assert rest.values == pytest.approx({"activator": 1.0, "inhibitor": 0.9}, rel=1e-12)
+
+
+@pytest.mark.parametrize("a, b", [(0.1, 0.9), (0.2, 1.3), (0.05, 0.6)])
+def test_critical_diffusion_ratio_and_wavenumber_are_murrays(a, b):
+    """d_c: where the largest real growth rate of the derived analysis crosses zero (D_u = 1, gamma = 2)."""
+    m, gamma = murray(a, b), 2.0
+
+    def onset(d):
+        linear = linearise_model(schnakenberg(a=a, b=b, gamma=gamma, D_u=1.0, D_v=d))
+        return linear.fastest_mode("stationary").growth_rate
+
+    d_c = scipy.optimize.brentq(onset, 0.5 * m["d_c"], 2.0 * m["d_c"], xtol=1e-12)
+    print(f"\na = {a}, b = {b}: d_c = {d_c:.8f} from the derived analysis, {m['d_c']:.8f} from Murray's formula")
+    assert d_c == pytest.approx(m["d_c"], rel=1e-6)
+    at_onset = linearise_model(schnakenberg(a=a, b=b, gamma=gamma, D_u=1.0, D_v=m["d_c"] * (1 + 1e-9)))
+    k_c = np.sqrt(gamma * (m["d_c"] * m["f_u"] + m["g_v"]) / (2 * m["d_c"]))
+    assert at_onset.fastest_mode("stationary").k_max == pytest.approx(k_c, rel=1e-3)
+    assert m["d_c"] > 1.0
+
+
+def test_a_0_1_b_0_9_has_the_textbook_critical_ratio():
+    assert murray(0.1, 0.9)["d_c"] == pytest.approx(8.5676, abs=1e-4)
+
+
+def test_unstable_band_is_between_the_roots_of_h_of_k_squared():
+    a, b, gamma, d = 0.1, 0.9, 3.0, 20.0
+    m = murray(a, b)
+    K = np.sort(np.roots([d, -gamma * (d * m["f_u"] + m["g_v"]), gamma**2 * m["det"]]).real)
+    linear = linearise_model(schnakenberg(a=a, b=b, gamma=gamma, D_u=1.0, D_v=d))
+    inside = np.sqrt(np.linspace(K[0], K[1], 7)[1:-1])
+    outside = np.sqrt(np.array([0.5 * K[0], 0.99 * K[0], 1.01 * K[1], 2.0 * K[1]]))
+    assert np.all(max_growth_of_kind(linear.rates(inside), "stationary") > 0)
+    assert np.all(max_growth_of_kind(linear.rates(outside), "any") < 0)
+
+
+def test_turing_space_is_murrays_conditions():
+    """Over random (a, b, d), the derived analysis patterns exactly where Murray's (i)-(iv) hold."""
+    rng = np.random.default_rng(4)
+    agree = patterns = 0
+    for _ in range(40):
+        a, b, d = rng.uniform(0.0, 0.4), rng.uniform(0.1, 2.0), rng.uniform(1.0, 60.0)
+        unstable = diffusion_driven(linearise_model(schnakenberg(a=a, b=b, D_u=1.0, D_v=d)))
+        expected = turing_unstable(a, b, d)
+        m = murray(a, b)
+        margin = min(abs(d - m["d_c"]) / m["d_c"], abs(m["f_u"] + m["g_v"]))  # far from every boundary
+        if margin > 1e-3:
+            assert unstable == expected, (a, b, d)
+            agree += 1
+            patterns += expected
+    assert agree >= 35 and 5 <= patterns <= agree - 5  # both sides of the boundary were sampled
