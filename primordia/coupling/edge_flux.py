@@ -58,6 +58,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._stiffness_form = ufl.inner(gradient, ufl.grad(test)) * disc.dx_degree(quadrature_degree)
         self._moving = metric is not None  # the metric follows the deformation: reassemble at every update
         self.negative_weights = 0  # edges with w_ij < 0 at the last update (0: an M-matrix)
+        self.most_negative_weight = 0.0  # the most negative w_ij relative to the largest one (<= 0)
         stiffness = backend.assemble_matrix(self._stiffness_form)
         self._stiffness = stiffness.duplicate(copy=True) if self._moving else None
         self._A = stiffness
@@ -86,6 +87,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         comm = self.disc.backend.comm
         scale = comm.allreduce(float(np.abs(values).max(initial=0.0)), op=_max_op())
         self.negative_weights = comm.allreduce(int((weights < -1e-12 * scale).sum())) // 2  # each edge twice
+        largest = comm.allreduce(float(weights.max(initial=0.0)), op=_max_op())
+        self.most_negative_weight = -comm.allreduce(float(-weights.min(initial=0.0)), op=_max_op()) / largest
         self._scaled_weights = weights * self.diffusivity  # w_ij D
 
     def _prepare_gather(self, template):

@@ -267,6 +267,8 @@ class Simulation:
         for diagnostic in self.diagnostics:
             if diagnostic.kind == "integral":
                 values[diagnostic.name] = self.backend.assemble_scalar(diagnostic.expression)
+            elif diagnostic.kind == "value":
+                values[diagnostic.name] = float(diagnostic.expression())
             else:
                 low, high = self.backend.extrema(diagnostic.expression, self.disc.mesh)
                 values[f"{diagnostic.name}_min"], values[f"{diagnostic.name}_max"] = low, high

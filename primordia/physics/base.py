@@ -82,9 +82,10 @@ class Diagnostic:
     """A derived quantity a physics module asks the run to record in its series.
 
     ``kind`` is ``"integral"`` (``expression`` is then a functional, a UFL form
-    with its measure, recorded as ``NAME``) or ``"extrema"`` (``expression`` is a
+    with its measure, recorded as ``NAME``), ``"extrema"`` (``expression`` is a
     UFL expression, whose minimum and maximum over the cell vertices are recorded
-    as ``NAME_min`` and ``NAME_max``).
+    as ``NAME_min`` and ``NAME_max``) or ``"value"`` (``expression`` is a callable
+    returning a number the module computes itself, the same on every rank).
     """
 
     name: str

@@ -219,8 +219,18 @@ class Chemotaxis(Physics):
         motion = self.disc.kinematics
         if not motion.finite_strain or "m" not in self.kinetics.species_names:
             return []
-        return [Diagnostic("cell_amount", "integral", motion.volume_ratio * self.disc.field("m") * self.disc.dx_lumped,
-                           "cells in the current configuration, int J m dX over the reference one")]
+        diagnostics = [Diagnostic("cell_amount", "integral",
+                                  motion.volume_ratio * self.disc.field("m") * self.disc.dx_lumped,
+                                  "cells in the current configuration, int J m dX over the reference one")]
+        for name, operator in getattr(self, "_fitted_operators", {}).items():
+            diagnostics += [Diagnostic(f"{name}_negative_edge_weights", "value",
+                                       lambda operator=operator: operator.negative_weights,
+                                       f"edges with a negative weight in the metric's stiffness: the "
+                                       f"transport matrix of {name} is not an M-matrix there"),
+                            Diagnostic(f"{name}_most_negative_edge_weight", "value",
+                                       lambda operator=operator: operator.most_negative_weight,
+                                       "the most negative edge weight relative to the largest (0: an M-matrix)")]
+        return diagnostics
 
     def _fitted(self, species: Species) -> bool:
         return species.attractant is not None and self.opts["flux_scheme"] == "exponential_fitting"
@@ -243,6 +253,7 @@ class Chemotaxis(Physics):
                     sensitivity=lambda c, species=species: self.sensitivity(species, c, ops_.NUMPY),
                     metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
+                self._fitted_operators = {**getattr(self, "_fitted_operators", {}), species.name: operator}
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
                 linear=True, constant_jacobian=jacobian_is_constant(jacobian, self.disc),
