@@ -54,9 +54,6 @@ SEED_KEY = "physics.chemotaxis.seed"
 DATASET_FILE = "sweep.nc"
 PICTURE_FILE = "sweep_map.png"
 RECORD_FILE = "sweep.json"
-#: Variables of a run's metrics.nc gathered into the sweep Dataset (over time, configuration, species).
-GATHERED = ("dominant_wavelength", "dominant_wavenumber", "spectral_prominence", "spot_count", "spacing_mean",
-            "spacing_std", "hexatic_order", "spot_fraction", "orientation_order")
 #: Environment variables by which an MPI launcher tells a process it is one rank of a job.
 MPI_LAUNCHER_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "HYDRA_")
 
@@ -264,8 +261,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
         with client:
             yield client
         return
+    # the scheduler's HTTP routes on any free loopback port (None would mean port 8787, and a warning if taken)
     with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+                      dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
         yield client
 
 
@@ -319,7 +318,7 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
     import xarray as xr
 
     from primordia.analysis.patterns.metrics import PATTERN_KINDS
-    from primordia.analysis.patterns.run import METRICS_FILE, predicted_mode
+    from primordia.analysis.patterns.run import METRICS_FILE, SCALAR_METRICS, predicted_mode
     from primordia.core.config import apply_overrides, load_config
 
     dims = sweep.dimensions
@@ -359,7 +358,7 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
         inner = {"time": first["time"].values, "configuration": first["configuration"].values,
                  "species": first["species"].values}
         full = names + list(inner)
-        for variable in GATHERED + ("pattern",):
+        for variable in [name for name, _, _ in SCALAR_METRICS] + ["pattern"]:
             fill = -1 if variable == "pattern" else np.nan
             array = np.full(shape + tuple(len(v) for v in inner.values()), fill,
                             dtype=np.int8 if variable == "pattern" else float)

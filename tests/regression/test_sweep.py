@@ -2,8 +2,10 @@
 
 A 2 x 2 sweep of coarse runs (16 x 16 squares, 10 steps) over alpha and D_m, where
 D_m = -0.03 is a value every run rejects: those runs are recorded as failed with the
-reason, the others complete with their metrics, all gathered into one Dataset.  Running
-the same command again skips the completed runs and retries the failed ones.
+reason, the others complete with their metrics, all gathered into one Dataset.  It runs
+on a cluster started beforehand (as ``--scheduler ADDRESS`` uses one); running the same
+command again, on the command's own local cluster, skips the completed runs and retries
+the failed ones.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from conftest import SMALL_CONFIG
+from dask.distributed import LocalCluster
 
 from primordia.core.errors import ConfigError
 from primordia.sweep import SEED_KEY, Axis, Sweep, execute, run_sweep
@@ -25,7 +28,9 @@ def test_sweep_records_failures_gathers_metrics_and_skips_what_is_done(tmp_path,
     config = small_config(COARSE)
     out = tmp_path / "sweep"
     sweep = Sweep(config, tuple(Axis.parse(text) for text in VARY), out=out)
-    ds = run_sweep(sweep, workers=2)
+    # first through an existing cluster (--scheduler), then, below, the command's own local cluster
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address="127.0.0.1:0") as cluster:
+        ds = run_sweep(sweep, scheduler=cluster.scheduler_address)
 
     assert ds.sizes["alpha"] == 2 and ds.sizes["D_m"] == 2
     assert list(ds["alpha"].values) == [2, 6] and list(ds["D_m"].values) == [-0.03, 0.03]

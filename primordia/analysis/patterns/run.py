@@ -38,7 +38,7 @@ METRICS_FILE = "metrics.nc"
 SCALAR_METRICS = (
     ("dominant_wavelength", "dominant_wavelength", "2 pi / peak of the radially averaged power spectrum"),
     ("dominant_wavenumber", "dominant_wavenumber", "peak of the radially averaged power spectrum"),
-    ("spectral_prominence", "prominence", "peak power / median power (noise ~1-5, patterns >> 10)"),
+    ("spectral_prominence", "prominence", "peak power over the spectrum around it (noise, fronts ~1-5; patterns >> 10)"),
     ("spot_count", "spot_count", "number of spots (compact regions above the level)"),
     ("spacing_mean", "spacing_mean", "mean distance from a spot to its nearest neighbour"),
     ("spacing_std", "spacing_std", "standard deviation of the nearest-neighbour distances"),
