@@ -472,8 +472,11 @@ def plot_fields_grid(
     ncols = len(fields) if ncols is None else max(1, min(int(ncols), len(fields)))
     rows_per_view = -(-len(fields) // ncols)
     nrows = rows_per_view * len(views)
-    figure = Figure(figsize=(4.2 * ncols + (0.8 if shared_colour_scale else 0.0), 4.0 * nrows), layout="constrained")
-    axes = figure.subplots(nrows, ncols, squeeze=False)
+    # each view's rows as tall as its drawn extent needs (a slice of a thin slab is a thin strip)
+    heights = [max(0.25, view.aspect(mesh)) for view in views for _ in range(rows_per_view)]
+    figure = Figure(figsize=(4.2 * ncols + (0.8 if shared_colour_scale else 0.0), 0.6 + 3.6 * sum(heights)),
+                    layout="constrained")
+    axes = figure.subplots(nrows, ncols, squeeze=False, gridspec_kw={"height_ratios": heights})
     slots = [axes[v * rows_per_view + i // ncols, i % ncols] for v in range(len(views)) for i in range(len(fields))]
     used = {id(ax) for ax in slots}
     for ax in axes.ravel():
@@ -505,6 +508,11 @@ class _View:
     @property
     def axis_names(self) -> tuple[str, str]:
         return tuple("xyz"[a] for a in self.axes)
+
+    def aspect(self, mesh: MeshData) -> float:
+        """Height over width of the undeformed view."""
+        extent = np.ptp(mesh.points[self.vertices][:, self.axes], axis=0)
+        return float(extent[1] / extent[0]) if extent[0] > 0 else 1.0
 
 
 def _plot_surface(mesh: MeshData) -> _View:
