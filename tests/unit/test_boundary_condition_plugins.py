@@ -1,0 +1,63 @@
+"""Boundary-condition kinds are plugins (hook ``primordia_boundary_conditions``): a third-party kind
+is listed, chosen by ``type = "..."`` and contributes its own term, with no edit of primordia."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import ufl
+
+from primordia.core.errors import ConfigError
+from primordia.core.meshes import rectangle
+from primordia.core.plugins import get_plugin_manager, hookimpl, registry
+from primordia.model import Model
+from primordia.physics.boundary_conditions import Condition, conditions_from_config
+
+
+class NormalPressure(Condition):
+    """A follower-free pressure load on a boundary: sigma n = -value n (a third party's kind)."""
+
+    kind, field = "normal_pressure", "u"
+
+    def terms(self, disc):
+        pressure = self.formula.ufl(disc.x, disc.t)
+        return {"u": [pressure * ufl.inner(disc.n, disc.test("u")) * disc.ds(self.boundary)]}
+
+
+class _Plugin:
+    @hookimpl
+    def primordia_boundary_conditions(self):
+        return [NormalPressure]
+
+
+@pytest.fixture
+def third_party_kind():
+    pm = get_plugin_manager()
+    plugin = pm.register(_Plugin(), name="tests.third_party_condition")
+    yield
+    pm.unregister(name=plugin)
+
+
+def squeezed(load: str | None):
+    boundary = [{"boundary": "bottom", "type": "clamped"}]
+    if load is not None:
+        boundary.append({"boundary": "top", "type": "normal_pressure", "value": load})
+    model = Model(physics=["poroelasticity"], parameters={"E": 100.0, "nu": 0.3},
+                  mesh=rectangle((0, 0), (1, 1), (4, 4)), dt=0.1, t_final=0.2,
+                  physics_options={"poroelasticity": {"boundary": boundary}}, output={"pictures": False})
+    return model
+
+
+def test_a_plugin_kind_is_registered_and_contributes_its_term(third_party_kind, tmp_path):
+    assert registry("boundary_conditions")["normal_pressure"][0] is NormalPressure
+    pressed = squeezed("2.0").run(backend="fenicsx", out=tmp_path / "pressed").vertex_values()["u"]
+    free = squeezed(None).run(backend="fenicsx", out=tmp_path / "free").vertex_values()["u"]
+    assert np.abs(free).max() < 1e-12  # nothing loads the free block
+    assert pressed[:, 1].min() < -1e-3  # the pressure on top pushes it down
+
+
+def test_an_unknown_kind_names_the_registered_ones(third_party_kind):
+    with pytest.raises(ConfigError) as failure:
+        conditions_from_config([{"boundary": "top", "type": "pressure"}], rectangle((0, 0), (1, 1), (2, 2)), 2)
+    assert "unknown boundary condition type 'pressure'" in str(failure.value)
+    assert "normal_pressure" in str(failure.value) and "robin" in str(failure.value)
