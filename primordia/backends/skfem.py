@@ -72,9 +72,11 @@ def _reference_normals(tdim: int) -> np.ndarray:
     return np.vstack([np.ones((1, tdim)), -np.eye(tdim)])
 
 
-#: Cells per chunk are chosen so that an array of (test x trial x points x cells) values,
-#: the largest an integrand of a tangent typically builds, stays below this (32 MB).
+#: Cells per chunk are chosen so that the element tensors (cells x test x trial) and an array
+#: of test x trial values per point, but at most _POINT_VALUES (a node of a tangent's integrand
+#: holds test x trial directions x a tensor, about as many), stay below this (32 MB).
 _CHUNK_VALUES = 2 ** 22
+_POINT_VALUES = 256
 
 #: Preprocessed forms kept (a physics module reuses a handful of forms at every step).
 _CACHED_FORMS = 256
@@ -496,10 +498,12 @@ class _Chunk:
         self._check_space(space)
         key = (id(function), derivatives)
         if key not in self._field_cache:
-            parts = np.broadcast_arrays(*(self._interpolate(function.array, block, derivatives)
-                                          for block in space.blocks))
-            values = np.stack(parts).reshape(space.value_shape + parts[0].shape)
-            self._field_cache[key] = np.swapaxes(values, -1, -2)
+            parts = [self._interpolate(function.array, block, derivatives) for block in space.blocks]
+            points = max(part.shape[-2] for part in parts)
+            values = np.empty((space.value_size,) + parts[0].shape[:-2] + (points, self.num_entities))
+            for block, part in zip(space.blocks, parts):
+                values[block.component] = part
+            self._field_cache[key] = np.swapaxes(values.reshape(space.value_shape + values.shape[1:]), -1, -2)
         return self._field_cache[key]
 
     def _interpolate(self, values: np.ndarray, block: _Block, derivatives: int) -> np.ndarray:
@@ -513,6 +517,8 @@ class _Chunk:
             reference = (table[:, :, 0].reshape(len(table), -1).T @ dofs.T).reshape(len(mapping), -1, len(dofs))
         else:
             reference = np.einsum("ei,ireq->rqe", dofs, table)                     # (R, Q, E)
+        if derivatives == 0:
+            return reference[0]  # values map to themselves
         mapping = np.swapaxes(mapping, -1, -2)
         return sum(mapping[r] * reference[r] for r in range(len(mapping)))
 
@@ -726,7 +732,8 @@ class SkfemBackend(Backend):
             if len(cells) == 0:
                 continue
             rule = self._rule(mesh, plan)
-            chunk = max(1, _CHUNK_VALUES // (sizes[0] * sizes[1] * rule.num_points))
+            per_point = min(sizes[0] * sizes[1], _POINT_VALUES)
+            chunk = max(1, _CHUNK_VALUES // max(sizes[0] * sizes[1], per_point * rule.num_points))
             whole = local_facets is None and cell_mask is None  # chunks are runs of cells: slice them
             for start in range(0, len(cells), chunk):
                 part = slice(start, min(start + chunk, len(cells)))

@@ -257,8 +257,8 @@ def evaluate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContext
         evaluator = _Evaluator(context, integrand)
         if not evaluator.arguments:
             return _swap_points(evaluator.value(integrand))
-        parts = [(test, trial, np.einsum("abqe,iaeq,jbeq->ijeq", value, test_table, trial_table))
-                 for test, trial, value, test_table, trial_table in evaluator.block_values()]
+        parts = [(test, trial, sum(np.einsum("abqe,iaeq,jbeq->ijeq", *contribution) for contribution in contributions))
+                 for test, trial, contributions in evaluator.block_pairs()]
         points = np.broadcast_shapes((1, 1), *(part.shape[2:] for *_, part in parts))
         values = np.zeros(evaluator.num_local + points)
         for test, trial, part in parts:
@@ -277,28 +277,34 @@ def integrate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContex
     with np.errstate(all="ignore"):
         evaluator = _Evaluator(context, integrand)
         tensors = np.zeros((len(weights),) + evaluator.num_local)
-        for test, trial, value, test_table, trial_table in evaluator.block_values():
-            tensors[:, test.local[:, None], trial.local] = _block_tensor(value, weights, test_table, trial_table)
+        for test, trial, contributions in evaluator.block_pairs():
+            tensors[:, test.local[:, None], trial.local] = _block_tensor(contributions, weights)
         return tensors
 
 
-def _block_tensor(value: np.ndarray, weights: np.ndarray, test_table: np.ndarray,
-                  trial_table: np.ndarray) -> np.ndarray:
-    """``sum_{a,b,q} value[a,b,q,e] weights[e,q] test_table[i,a,e,q] trial_table[j,b,e,q]``: (E, n_i, n_j).
+def _block_tensor(contributions: list[tuple[np.ndarray, np.ndarray, np.ndarray]], weights: np.ndarray) -> np.ndarray:
+    """Element tensors (E, n_i, n_j) of a block pair: the sum over its (value, test table, trial table)
+    contributions, one per pair of derivative orders, of
+    ``sum_{a,b,q} value[a,b,q,e] weights[e,q] test_table[i,a,e,q] trial_table[j,b,e,q]``.
 
-    When neither table depends on the entity (cells), this is one matrix product
-    of a constant (i j, a b q) matrix, the products of the reference tables, with
-    the weighted values (a b q, E): the work per cell of a compiled kernel.
+    When no table depends on the entity (cells), this is one matrix product of the
+    weighted values (E, a b q) with a constant (a b q, i j) matrix, the products of
+    the reference tables: the work per cell of a compiled kernel.
     """
-    (n_test, test_directions), (n_trial, trial_directions) = test_table.shape[:2], trial_table.shape[:2]
     entities, points = weights.shape
-    weighted = np.broadcast_to(value * weights.T, (test_directions, trial_directions, points, entities))
-    if test_table.shape[2] == 1 and trial_table.shape[2] == 1:
+    if any(table.shape[2] > 1 for _, *tables in contributions for table in tables):
+        return sum(np.einsum("abqe,iaeq,jbeq->eij", value * weights.T, test_table, trial_table, optimize=True)
+                   for value, test_table, trial_table in contributions)
+    references, weighted = [], []
+    for value, test_table, trial_table in contributions:
+        (n_test, test_directions), (n_trial, trial_directions) = test_table.shape[:2], trial_table.shape[:2]
         test_table = np.broadcast_to(test_table[:, :, 0], (n_test, test_directions, points))
         trial_table = np.broadcast_to(trial_table[:, :, 0], (n_trial, trial_directions, points))
-        reference = np.einsum("iaq,jbq->ijabq", test_table, trial_table).reshape(n_test * n_trial, -1)
-        return (reference @ weighted.reshape(-1, entities)).reshape(n_test, n_trial, entities).transpose(2, 0, 1)
-    return np.einsum("abqe,iaeq,jbeq->eij", weighted, test_table, trial_table, optimize=True)
+        references.append(np.einsum("iaq,jbq->ijabq", test_table, trial_table).reshape(n_test * n_trial, -1))
+        value = np.broadcast_to(value * weights.T, (test_directions, trial_directions, points, entities))
+        weighted.append(value.reshape(-1, entities))
+    product = np.concatenate(weighted).T @ np.concatenate(references, axis=1).T   # BLAS reads them transposed
+    return product.reshape(entities, n_test, n_trial)
 
 
 def _swap_points(array: np.ndarray) -> np.ndarray:
@@ -323,8 +329,17 @@ def _dense_argument_block(context: QuadratureContext, argument: uc.Argument) -> 
     return ArgumentBlock(None, np.arange(size), lambda derivatives: (identity, context.argument(space, derivatives)))
 
 
-#: The block of an absent argument (a linear form has no trial function): one DOF, value 1.
-_ABSENT = ArgumentBlock(0, np.zeros(1, dtype=np.int64), lambda derivatives: (np.ones((1, 1, 1, 1)), np.ones((1, 1, 1))))
+@dataclass(frozen=True)
+class _Part:
+    """An argument block in one derivative order: what an argument axis runs over, ``tdim ** k``
+    reference directions (or, for the one block of a dense context, its basis functions)."""
+
+    block: ArgumentBlock
+    derivatives: int
+
+
+#: The part of an absent argument (a linear form has no trial function): one DOF, value 1.
+_ABSENT = _Part(ArgumentBlock(0, np.zeros(1, dtype=np.int64), lambda derivatives: (np.ones((1, 1, 1, 1)), None)), 0)
 _MISSING = object()
 
 _ARGS, _POINTS = "AB", "YZ"
@@ -421,68 +436,51 @@ class _Evaluator:
         analysis = _analysis(integrand)
         self.arguments, self._all_orders = analysis.arguments, analysis.orders
         self._masks, self._memoised = analysis.masks, analysis.memoised
-        self.blocks = [self._argument_blocks(number) for number in (0, 1)]
-        self.num_local = tuple(1 + max(int(block.local.max()) for block in blocks) for blocks in self.blocks)
+        blocks = [self._argument_blocks(number) for number in (0, 1)]
+        self.num_local = tuple(1 + max(int(block.local.max()) for block in each) for each in blocks)
+        self.parts = [[_Part(block, derivatives) for block in each for derivatives in self._orders(number, block)]
+                      if number in self.arguments else [_ABSENT] for number, each in enumerate(blocks)]
         self._pair = (0, 0)
         self._memo: dict[object, np.ndarray | None] = {}
-        self._factors_memo: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
-        self._tables: dict[tuple[int, int], np.ndarray] = {}
-        self._offsets: dict[tuple[int, int], dict[int | None, int]] = {}
+        self._factors: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     # -- arguments, block by block --------------------------------------------------------
     def _argument_blocks(self, number: int) -> list[ArgumentBlock]:
         argument = self.arguments.get(number)
         if argument is None:
-            return [_ABSENT]
+            return [_ABSENT.block]
         if hasattr(self.context, "argument_blocks"):
             return list(self.context.argument_blocks(argument.ufl_function_space()))
         return [_dense_argument_block(self.context, argument)]
 
-    def _factors(self, number: int, index: int, derivatives: int) -> tuple[np.ndarray, np.ndarray]:
-        key = (number, index, derivatives)
-        if key not in self._factors_memo:
-            self._factors_memo[key] = self.blocks[number][index].factors(derivatives)
-        return self._factors_memo[key]
-
-    def _orders(self, number: int, index: int) -> list[int]:
+    def _orders(self, number: int, block: ArgumentBlock) -> list[int]:
         """The derivative orders a block appears with: its component's, and those of every component."""
-        component = self.blocks[number][index].component
         return sorted(set().union(*(orders for (n, c), orders in self._all_orders.items()
-                                    if n == number and (c is None or component is None or c == component))))
+                                    if n == number and (None in (c, block.component) or c == block.component))))
 
-    def _direction_offsets(self, number: int, index: int) -> dict[int | None, int]:
-        """Where each derivative order's directions start on a block's axis; ``None``: the total."""
+    def factors(self, number: int, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(table, map) of an argument part (:class:`ArgumentBlock`), from the context once per chunk."""
         key = (number, index)
-        if key not in self._offsets:
-            offsets, start = {}, 0
-            for derivatives in self._orders(number, index):
-                offsets[derivatives] = start
-                start += len(self._factors(number, index, derivatives)[1])
-            offsets[None] = start
-            self._offsets[key] = offsets
-        return self._offsets[key]
+        if key not in self._factors:
+            part = self.parts[number][index]
+            self._factors[key] = part.block.factors(part.derivatives)
+        return self._factors[key]
 
-    def table(self, number: int, index: int) -> np.ndarray:
-        """Reference tables of a block in all the directions of its argument's axis: (n_block, directions, E, Q)."""
-        key = (number, index)
-        if key not in self._tables:
-            if number not in self.arguments:
-                self._tables[key] = np.ones((1, 1, 1, 1))
-            else:
-                parts = [self._factors(number, index, derivatives)[0] for derivatives in self._orders(number, index)]
-                points = np.broadcast_shapes(*(part.shape[2:] for part in parts))
-                self._tables[key] = np.concatenate([np.broadcast_to(p, p.shape[:2] + points) for p in parts], axis=1)
-        return self._tables[key]
-
-    def block_values(self):
-        """Yield (test block, trial block, integrand value, test table, trial table) for every block
-        pair on which the integrand does not vanish; the value is (test directions, trial directions, Q, E)."""
-        for test_index, test in enumerate(self.blocks[0]):
-            for trial_index, trial in enumerate(self.blocks[1]):
-                self._pair = (test_index, trial_index)
-                value = self._value(self.integrand)
-                if value is not None:
-                    yield test, trial, value, self.table(0, test_index), self.table(1, trial_index)
+    def block_pairs(self):
+        """Yield (test block, trial block, contributions) for every block pair on which the integrand
+        does not vanish: one (value, test table, trial table) per pair of derivative orders, the
+        value (test directions, trial directions, Q, E)."""
+        for test_block, test_parts in _by_block(self.parts[0]):
+            for trial_block, trial_parts in _by_block(self.parts[1]):
+                contributions = []
+                for test_index in test_parts:
+                    for trial_index in trial_parts:
+                        self._pair = (test_index, trial_index)
+                        value = self._value(self.integrand)
+                        if value is not None:
+                            contributions.append((value, self.factors(0, test_index)[0], self.factors(1, trial_index)[0]))
+                if contributions:
+                    yield test_block, trial_block, contributions
 
     # -- memoised evaluation -----------------------------------------------------------------
     def _key(self, o):
@@ -513,7 +511,7 @@ class _Evaluator:
         if argument is None:
             return False
         component = _fixed_component(argument, multiindex)
-        block = self.blocks[argument.number()][self._pair[argument.number()]]
+        block = self.parts[argument.number()][self._pair[argument.number()]].block
         return None not in (component, block.component) and component != block.component
 
     # -- helpers -----------------------------------------------------------------------
@@ -541,21 +539,18 @@ class _Evaluator:
 
     # -- terminals ----------------------------------------------------------------------
     def argument(self, o, derivatives=0):
-        """The current block of an argument in its directions: zero but in the block's component,
-        where it is the map from the reference derivatives of this order (identity for values)."""
+        """The current part of an argument in its directions: zero but in the block's component, where it
+        is the map from reference derivatives (identity for values); ``None`` in another derivative order."""
         number = o.number()
-        block = self.blocks[number][self._pair[number]]
-        mapping = _swap_points(self._factors(number, self._pair[number], derivatives)[1])
-        offsets = self._direction_offsets(number, self._pair[number])
-        rows = slice(offsets[derivatives], offsets[derivatives] + len(mapping))
-        if block.component is None:
-            array = np.zeros((offsets[None],) + mapping.shape[1:])
-            array[rows] = mapping
-        else:
-            array = np.zeros((offsets[None], int(np.prod(o.ufl_shape))) + mapping.shape[1:])
-            array[rows, block.component] = mapping
-            array = array.reshape(array.shape[:1] + o.ufl_shape + mapping.shape[1:])
-        return array[:, None] if number == 0 else array[None, :]
+        part = self.parts[number][self._pair[number]]
+        if derivatives != part.derivatives:
+            return None
+        mapping = _swap_points(self.factors(number, self._pair[number])[1])
+        if part.block.component is not None:
+            array = np.zeros((len(mapping), int(np.prod(o.ufl_shape))) + mapping.shape[1:])
+            array[:, part.block.component] = mapping
+            mapping = array.reshape(array.shape[:1] + o.ufl_shape + mapping.shape[1:])
+        return mapping[:, None] if number == 0 else mapping[None, :]
 
     def coefficient(self, o, derivatives=0):
         return _swap_points(self.context.coefficient(o, derivatives))[None, None]
@@ -629,25 +624,29 @@ class _Evaluator:
         return np.einsum(f"{_ARGS}{free}{_POINTS}->{_ARGS}{shape}{out}{_POINTS}", array)
 
     def index_sum(self, o):
-        summand, multiindex = o.ufl_operands
-        summed = multiindex[0].count()
-        rank = len(summand.ufl_shape)
-        if isinstance(summand, uc.Product) and self._key(summand) not in self._memo:
-            # a[i] * b[i] summed over i: one contraction, no (..., i, ...) temporary
-            a, b = summand.ufl_operands
+        inner = o.ufl_operands[0]
+        while isinstance(inner, uc.IndexSum) and id(inner) not in self._memoised:
+            inner = inner.ufl_operands[0]
+        if isinstance(inner, uc.Product) and id(inner) not in self._memoised:
+            # a[i, j] * b[i, j] summed over i (and j): one contraction, no (..., i, j, ...) temporary
+            a, b = inner.ufl_operands
             values = self._factor_values((a, b))
             if values is None:
                 return None
             first, second, out = _subscripts(a.ufl_free_indices, b.ufl_free_indices, o.ufl_free_indices)
             return np.einsum(f"{_ARGS}{first}{_POINTS},{_ARGS}{second}{_POINTS}->{_ARGS}{out}{_POINTS}",
                              *_same_entities(values))
+        summand, multiindex = o.ufl_operands
         array = self._value(summand)
         if array is None:
             return None
-        axis = 2 + rank + summand.ufl_free_indices.index(summed)
+        axis = 2 + len(summand.ufl_shape) + summand.ufl_free_indices.index(multiindex[0].count())
         return array.sum(axis=axis)
 
     def list_tensor(self, o):
+        rows = _rows_of(o)
+        if rows is not None and not self._masks[id(rows[0])]:  # a field of a mixed function: a view
+            return self._value(rows[0])[:, :, rows[1]]
         parts = [self._value(op) for op in o.ufl_operands]
         if all(part is None for part in parts):
             return None
@@ -738,6 +737,34 @@ def _same_entities(values: list[np.ndarray]) -> list[np.ndarray]:
     entities = max(value.shape[-1] for value in values)
     return [value if value.shape[-1] == entities
             else np.ascontiguousarray(np.broadcast_to(value, value.shape[:-1] + (entities,))) for value in values]
+
+
+def _rows_of(o: uc.ListTensor) -> tuple[ufl.core.expr.Expr, slice] | None:
+    """``(X, rows)`` when the list tensor ``o`` is ``X[rows]`` along X's first axis, as ``ufl.split``
+    writes a field of a mixed function: operands ``X[k]``, or ``as_tensor(X[k, i, ...], (i, ...))``."""
+    sources, rows = set(), []
+    for op in o.ufl_operands:
+        indices = ()
+        if isinstance(op, uc.ComponentTensor):
+            op, indices = op.ufl_operands[0], tuple(op.ufl_operands[1])
+        if not isinstance(op, uc.Indexed):
+            return None
+        source, (first, *rest) = op.ufl_operands
+        if not isinstance(first, uc.FixedIndex) or tuple(rest) != indices or len(source.ufl_shape) != 1 + len(rest):
+            return None
+        sources.add(id(source))
+        rows.append(int(first))
+    if len(sources) != 1 or rows != list(range(rows[0], rows[0] + len(rows))):
+        return None
+    return source, slice(rows[0], rows[0] + len(rows))
+
+
+def _by_block(parts: list[_Part]) -> list[tuple[ArgumentBlock, list[int]]]:
+    """The blocks of an argument's parts, each with the indices of its parts."""
+    blocks: dict[int, tuple[ArgumentBlock, list[int]]] = {}
+    for index, part in enumerate(parts):
+        blocks.setdefault(id(part.block), (part.block, []))[1].append(index)
+    return list(blocks.values())
 
 
 def _subscripts(*groups) -> list[str]:

@@ -277,6 +277,7 @@ FORMS = {
                                                   *ufl.split(s.test("Taylor-Hood"))),
     "Taylor-Hood nonlinear tangent": lambda s: ufl.derivative(
         mixed_nonlinear(*ufl.split(s["w"]), *ufl.split(s.test("Taylor-Hood"))), s["w"], s.trial("Taylor-Hood")),
+    "P2-P1-P1, one field only": lambda s: s["m"] * ufl.split(s.test("P2-P1-P1"))[1] * ufl.ds,
     "P2-P1-P1 growth residual": lambda s: growth_residual(s),
     "P2-P1-P1 growth tangent": lambda s: ufl.derivative(growth_residual(s), s["growth"], s.trial("P2-P1-P1")),
     "P2-P1-P1 unsplit": lambda s: (ufl.inner(ufl.grad(s.trial("P2-P1-P1")), ufl.grad(s.test("P2-P1-P1")))
