@@ -167,12 +167,14 @@ def test_run_directory_in_reference_and_current_configuration(tmp_path):
 
 
 def test_predicted_mode_of_example_1a():
-    mode = predicted_mode("examples/ex01a.toml")  # primordia stability examples/ex01a.toml --uncoupled
+    mode = predicted_mode("examples/ex01a.toml")  # primordia stability examples/ex01a.toml
     assert mode.k_max == pytest.approx(2.784, abs=1e-3)
     assert mode.wavelength == pytest.approx(2.257, abs=1e-3)
     assert mode.rate > 0
-    assert "uncoupled" in mode.note
-    assert "uncoupled" not in predicted_mode("examples/ex01b.toml").note
+    assert "no mechanics" in mode.note
+    assert "with mechanics" in predicted_mode("examples/ex01b.toml").note
+    growing = predicted_mode("examples/ex02a.toml")  # no linear analysis at finite strain: the chemistry alone
+    assert growing.k_max == pytest.approx(2.784, abs=1e-3) and "chemistry alone" in growing.note
     stable = predicted_mode({"model": {"physics": ["chemotaxis"]}, "parameters": {"m0": 0.25, "alpha": 1.0}})
     assert np.isnan(stable.k_max) and np.isnan(stable.wavelength) and stable.rate <= 0 and "stable" in stable.note
 

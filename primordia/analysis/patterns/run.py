@@ -80,26 +80,37 @@ def linear_model(config: Mapping):
 def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
     """k_max, wavelength 2 pi / k_max and growth rate of the linear analysis for a run's configuration.
 
-    ``config``: a configuration mapping (e.g. a run's resolved ``config.toml``)
-    or a path to one; see :func:`linear_model` for what is analysed.  This is
-    the one place simulations meet the linear analysis, so a composed-model
-    analysis can replace it.
+    ``config``: a configuration mapping (e.g. a run's resolved ``config.toml``) or
+    a path to one.  The analysis is derived from the very model the configuration
+    composes (:func:`primordia.analysis.composed.linearise_model`): its kinetics,
+    species and mechanics, whatever plugins they come from.  A finite-strain growth
+    model has no linear analysis (seed section 6): its chemistry alone is analysed,
+    which predicts the wavelength in the current configuration (where, in 2D, the
+    growing tissue's chemistry keeps its diffusivities).
     """
-    from primordia.analysis.dispersion import fastest_growing_mode
+    from primordia.analysis.composed import linearise_model
+    from primordia.model import Model
 
     if not isinstance(config, Mapping):
         from primordia.core.config import load_config
 
         config = load_config(config)
+    # only the composition matters: a run's metadata may lack a mesh or times, and any will do
+    composition = {key: value for key, value in config.items() if key != "output"}
+    composition.setdefault("mesh", {"type": "rectangle", "upper": [1.0, 1.0], "cells": [1, 1]})
+    composition["time"] = {"dt": 1.0, "t_final": 1.0}
     try:
-        params, coupled = linear_model(config)
+        model = Model.from_config(composition)
+        growing = any(module.finite_strain for module in model.physics_objects)
+        linear = linearise_model(model, chemistry_only=growing)
     except ConfigError as error:
         return PredictedMode(np.nan, np.nan, np.nan, f"no linear analysis for this model: {error}")
-    mode = fastest_growing_mode(params, coupled=coupled, kind="stationary")
-    note = "coupled" if coupled else "uncoupled (xi_f = 0)"
+    mode = linear.fastest_mode("stationary")
+    note = ("chemistry alone (a growing tissue has no linear analysis): the current configuration's wavelength"
+            if growing else linear.describe())
     if not mode.unstable:  # no wavelength is selected; the largest (negative) rate still says how stable
         return PredictedMode(np.nan, np.nan, mode.growth_rate, f"{note}, stable: no Turing mode grows")
-    return PredictedMode(mode.k_max, mode.wavelength, mode.growth_rate, note)
+    return PredictedMode(mode.k_max, 2.0 * np.pi / mode.k_max, mode.growth_rate, note)
 
 
 @dataclass(frozen=True)
