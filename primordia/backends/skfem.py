@@ -754,7 +754,11 @@ class SkfemBackend(Backend):
         test, trial = self._form_spaces(form)
         pattern = self._pattern(test, trial)
         indptr, indices, row, col = pattern.indptr, pattern.indices, pattern.row, pattern.col
-        data = np.zeros(len(indices))
+        # a matrix made here on this pattern holds our arrays (createAIJWithArrays): write its values in place
+        csr = None if A is None else A.getAttr("__csr__")
+        in_place = csr is not None and csr[0] is indptr and csr[1] is indices
+        data = csr[2] if in_place else np.zeros(len(indices))
+        data[:] = 0.0
         for cells, tensors in self._element_tensors(form):
             pattern.add(data, cells, tensors)
         row_fixed = self._constrained(bcs, test)
@@ -769,13 +773,13 @@ class SkfemBackend(Backend):
             if test is trial and row_fixed is not None:
                 data[zero & (row == col) & row_fixed[row]] = diagonal
         if A is None:
-            A = PETSc.Mat().createAIJ(size=(test.num_dofs, trial.num_dofs), csr=(indptr, indices, data),
-                                      comm=PETSc.COMM_SELF)
+            A = PETSc.Mat().createAIJWithArrays((test.num_dofs, trial.num_dofs), (indptr, indices, data),
+                                                comm=PETSc.COMM_SELF)
             A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)  # re-assembly keeps the pattern
-        else:
+        elif not in_place:
             A.zeroEntries()
             A.setValuesCSR(indptr, indices, data)
-        A.assemble()
+        A.assemble()  # also marks changed values, so that solvers factorise again
         return A
 
     @staticmethod

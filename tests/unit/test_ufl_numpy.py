@@ -464,6 +464,39 @@ def test_reproduces_scikit_fem_assembly(skfem_setup):
     assert abs(ours - theirs).max() < 1e-12 * abs(theirs).max()
 
 
+def test_reassembly_into_a_matrix_is_seen_by_its_solver(skfem_setup):
+    """Re-assembly writes the values of a matrix made by the backend in place: a factorisation redone
+    on the same matrix must see them."""
+    s = skfem_setup
+    form = (ufl.exp(s["m"]) * ufl.inner(ufl.grad(s.trial("P1")), ufl.grad(s.test("P1")))
+            + s.trial("P1") * s.test("P1")) * ufl.dx
+    A = s.backend.assemble_matrix(form)
+    solver = PETSc.KSP().create(PETSc.COMM_SELF)
+    solver.setOperators(A)
+    solver.setType("preonly")
+    solver.getPC().setType("lu")
+    rhs, solution = A.createVecLeft(), A.createVecRight()
+    rhs.set(1.0)
+    solver.solve(rhs, solution)
+    before = solution.array.copy()
+    saved = s["m"].array.copy()
+    s["m"].array[:] += 1.0
+    try:
+        assert s.backend.assemble_matrix(form, A=A) is A
+        solver.solve(rhs, solution)
+        fresh = s.backend.assemble_matrix(form)
+        expected = fresh.createVecRight()
+        fresh_solver = PETSc.KSP().create(PETSc.COMM_SELF)
+        fresh_solver.setOperators(fresh)
+        fresh_solver.setType("preonly")
+        fresh_solver.getPC().setType("lu")
+        fresh_solver.solve(rhs, expected)
+    finally:
+        s["m"].array[:] = saved
+    assert np.abs(solution.array - before).max() > 1e-3 * np.abs(before).max()
+    np.testing.assert_allclose(solution.array, expected.array, rtol=1e-12)
+
+
 def test_unsupported_operator_is_named(skfem_setup):
     s = skfem_setup
     with pytest.raises(UnsupportedUFL, match="'BesselJ' is not supported by the scikit-fem backend"):
