@@ -20,6 +20,13 @@ Two kinds of hooks:
   choosers run last (``trylast``), so a plugin can override a choice.
 
 Built-in pieces register through these very same hooks.
+
+The contract is versioned (:data:`CONTRACT_VERSION`, major.minor): a new hook, a new
+optional argument or a new optional method raises the minor version; removing or
+renaming a hook, changing what it returns or adding a required method raises the
+major one.  A plugin module may state the major version it was written for
+(``PRIMORDIA_CONTRACT = 1``); one written for another major version is refused with
+one warning.  The plugin author's guide is docs/plugins.md.
 """
 
 from __future__ import annotations
@@ -27,6 +34,9 @@ from __future__ import annotations
 import pluggy
 
 hookspec = pluggy.HookspecMarker("primordia")
+
+#: (major, minor) of this hook contract.  1.1: growth laws and boundary-condition kinds.
+CONTRACT_VERSION = (1, 1)
 
 
 @hookspec

@@ -96,6 +96,7 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
         origin = _distribution_label(entry_point)
         try:
             plugin = entry_point.load()
+            _check_contract(plugin)
             pm.register(plugin, name=entry_point.name)
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
             reason = f"{type(exc).__name__}: {exc}".splitlines()[0]
@@ -106,6 +107,14 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
         pm.load_report.sources[entry_point.name] = origin
     _manager = pm
     return pm
+
+
+def _check_contract(plugin) -> None:
+    """Refuse a plugin that states it was written for another major version of the hook contract."""
+    stated = getattr(plugin, "PRIMORDIA_CONTRACT", None)
+    major = hookspecs.CONTRACT_VERSION[0]
+    if stated is not None and stated != major:
+        raise PluginError(f"it was written for version {stated} of primordia's hook contract, this is {major}")
 
 
 def _distribution_label(entry_point) -> str:

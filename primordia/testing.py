@@ -1,0 +1,103 @@
+"""Testing a plugin against both backends: what primordia's own tests use, shipped for plugin authors.
+
+A plugin (a kinetics, a growth law, a boundary-condition kind, a physics module...)
+should run, and give the same answer, on every finite element backend.  This module
+gives the three pieces that takes::
+
+    import pytest
+    from primordia.testing import BACKENDS, assert_backends_agree, registered, run_on_backends
+
+    @pytest.fixture
+    def my_plugin():
+        with registered(MyPlugin()):          # in the process-wide plugin manager, for the test
+            yield
+
+    def test_my_kinetics_agrees_between_backends(my_plugin, tmp_path):
+        sims = run_on_backends(lambda: Model(physics=["chemotaxis"], kinetics="mine", ...), tmp_path)
+        assert_backends_agree(sims, rtol=1e-8)
+
+and a pytest fixture, ``primordia_backend``, parametrised over :data:`BACKENDS`
+(import it into your ``conftest.py``: ``from primordia.testing import primordia_backend``).
+
+An installed plugin (entry point in the group ``primordia``) needs no
+:func:`registered`; it is for plugin objects defined in a test.  A backend that
+cannot be imported fails these helpers: a plugin is not tested on a backend it
+was never run on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+
+#: The backends every plugin should be tested on.
+BACKENDS = ("fenicsx", "skfem")
+
+
+@contextlib.contextmanager
+def registered(*plugins, name: str = "primordia.testing"):
+    """Register plugin objects (modules or instances with ``@hookimpl`` methods) for the block."""
+    from primordia.core.plugins import get_plugin_manager
+
+    pm = get_plugin_manager()
+    names = [pm.register(plugin, name=f"{name}.{index}") for index, plugin in enumerate(plugins)]
+    try:
+        yield pm
+    finally:
+        for registered_name in names:
+            pm.unregister(name=registered_name)
+
+
+def run_on_backends(model_factory: Callable[[], object], out_dir: str | Path,
+                    backends: Iterable[str] = BACKENDS) -> dict[str, object]:
+    """Run a fresh model from ``model_factory()`` on each backend; the finished simulations by backend.
+
+    Each run writes to ``out_dir / backend``.  A backend that cannot be imported raises
+    (:class:`~primordia.core.errors.PluginError`), it is not skipped.
+    """
+    out_dir = Path(out_dir)
+    return {backend: model_factory().run(backend=backend, out=out_dir / backend) for backend in backends}
+
+
+def assert_backends_agree(sims: Mapping[str, object], fields: Iterable[str] | None = None,
+                          rtol: float = 1e-8) -> dict[str, float]:
+    """Every field (or ``fields``) at the vertices agrees between the backends' runs to ``rtol``.
+
+    The difference is relative to the largest value of the field in the first run; a
+    field that is uniform in the first run fails (nothing would be compared).  Returns
+    the differences by field, for a report.
+    """
+    names = list(sims)
+    if len(names) < 2:
+        raise AssertionError("cross-validation needs runs on at least two backends")
+    values = {backend: sim.vertex_values() for backend, sim in sims.items()}
+    reference = values[names[0]]
+    differences = {}
+    for field in fields or reference:
+        expected = np.asarray(reference[field])
+        scale = float(np.abs(expected).max())
+        if not np.ptp(expected) > 0:
+            raise AssertionError(f"field {field} is uniform on {names[0]}: nothing is compared")
+        for other in names[1:]:
+            difference = float(np.abs(np.asarray(values[other][field]) - expected).max()) / scale
+            differences[field] = max(differences.get(field, 0.0), difference)
+            if difference > rtol:
+                raise AssertionError(f"field {field}: {other} differs from {names[0]} by {difference:.2e} "
+                                     f"(relative), more than {rtol:g}")
+    return differences
+
+
+try:
+    import pytest
+except ImportError:  # pytest is a test dependency; the helpers above work without it
+    pytest = None
+
+if pytest is not None:
+
+    @pytest.fixture(params=BACKENDS)
+    def primordia_backend(request) -> str:
+        """Each backend's name in turn (import this fixture into your conftest.py)."""
+        return request.param
