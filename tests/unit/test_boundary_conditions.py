@@ -1,0 +1,115 @@
+"""Boundary-condition kinds (primordia.physics.boundary_conditions): what each one contributes.
+
+On the scikit-fem backend (serial, no JIT); the kinds are cross-validated on both backends in
+tests/regression/test_crossval.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import ufl
+
+from primordia.backends.skfem import SkfemBackend
+from primordia.core.errors import ConfigError
+from primordia.core.mesh import MeshData
+from primordia.core.meshes import rectangle
+from primordia.coupling.discretisation import Discretisation
+from primordia.physics.base import FieldSpec
+from primordia.physics.boundary_conditions import conditions_from_config, encloses
+from primordia.physics.kinematics import Kinematics
+
+MESH = rectangle((0, 0), (2, 1), (4, 2))
+
+
+@pytest.fixture
+def disc():
+    disc = Discretisation(SkfemBackend(), MESH)
+    disc.add_group("mech", [FieldSpec("u", vector=True, group="mech"), FieldSpec("p", group="mech")],
+                   {"u": "mechanics", "p": "mechanics"})
+    return disc
+
+
+def conditions(*tables):
+    return conditions_from_config(list(tables), MESH, 2)
+
+
+def total(disc, forms) -> np.ndarray:
+    return sum(disc.backend.assemble_vector(form).array for form in forms)
+
+
+def test_dirichlet_kinds_fix_what_they_say_at_the_boundary_nodes(disc):
+    clamp, normal, pressure = conditions({"boundary": "left", "type": "clamped"},
+                                         {"boundary": "bottom", "type": "normal_displacement", "value": "0.5 * t"},
+                                         {"boundary": "top", "type": "fluid_pressure", "value": "x[0]"})
+    space = disc.unknown("u").function_space
+    (left,) = clamp.dirichlet(disc)
+    assert set(space.dof_component[left.handle.dofs]) == {0, 1}       # both components of u
+    assert np.all(space.dof_coordinates[0, left.handle.dofs] == 0.0)
+    (bottom,) = normal.dirichlet(disc)
+    assert set(space.dof_component[bottom.handle.dofs]) == {1}        # only u_y: the normal of y = 0
+    (top,) = pressure.dirichlet(disc)
+    assert set(space.dof_component[top.handle.dofs]) == {2}
+    np.testing.assert_allclose(top.handle.values, space.dof_coordinates[0, top.handle.dofs])
+    normal.update(disc, 2.0)                                         # time-dependent: refreshed
+    np.testing.assert_allclose(bottom.handle.values, 1.0)
+
+
+def test_neumann_kinds_add_their_loads(disc):
+    traction, flux = conditions({"boundary": "top", "type": "traction", "value": ["0", "-3"]},
+                                {"boundary": "right", "type": "fluid_flux", "value": "2"})
+    (load,) = traction.terms(disc)["u"]
+    (inflow,) = flux.terms(disc)["p"]
+    space = disc.unknown("u").function_space
+    residual = total(disc, [load, inflow])
+    y = space.dof_component == 1
+    assert residual[y].sum() == pytest.approx(3.0 * 2.0)              # -(-3) over |top| = 2
+    assert residual[space.dof_component == 2].sum() == pytest.approx(-2.0 * 1.0)  # -(2) over |right| = 1
+
+
+def test_robin_springs_are_xi_u_at_small_strain_and_xi_J_F_inverse_transpose_u_at_finite_strain(disc):
+    (springs,) = conditions({"boundary": "right", "type": "robin", "value": "0.5"})
+    disc.interpolate("u", lambda x: np.stack([0.1 * x[0], 0.2 * x[1]]))
+    (small,) = springs.terms(disc)["u"]
+    space = disc.unknown("u").function_space
+    residual = total(disc, [small])
+    # int over x = 2, y in (0, 1): 0.5 * u_x = 0.5 * 0.2 = 0.1 and 0.5 * u_y = 0.1 y -> 0.05
+    assert residual[space.dof_component == 0].sum() == pytest.approx(0.1)
+    assert residual[space.dof_component == 1].sum() == pytest.approx(0.05)
+    F = ufl.Identity(2) + ufl.grad(disc.field("u"))
+    disc.provide_kinematics(Kinematics(volume_ratio=ufl.det(F), deformation_gradient=F), "mechanics")
+    (finite,) = springs.terms(disc)["u"]
+    residual = total(disc, [finite])
+    # F = diag(1.1, 1.2), J = 1.32: J F^-T u = (1.32 / 1.1 * 0.2, 1.32 / 1.2 * 0.2 y)
+    assert residual[space.dof_component == 0].sum() == pytest.approx(0.5 * 1.2 * 0.2)
+    assert residual[space.dof_component == 1].sum() == pytest.approx(0.5 * 1.1 * 0.1)
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"boundary": "left", "type": "clamp"}, "unknown boundary condition type 'clamp'"),
+    ({"boundary": "north", "type": "clamped"}, "names boundary 'north', which the mesh lacks"),
+    ({"boundary": "top", "type": "traction", "value": ["1"]}, "value needs 2 components, got 1"),
+    ({"boundary": "top", "type": "robin"}, "boundary condition 'robin' on 'top' needs a value"),
+    ({"boundary": "top", "type": "fluid_flux", "value": "y + 1"}, "unknown name 'y'"),
+    ({"boundary": "top", "type": "fluid_flux", "valu": "1"}, "unknown key 'valu'"),
+])
+def test_a_bad_condition_is_one_line_naming_it(table, message):
+    with pytest.raises(ConfigError) as failure:
+        conditions(table)
+    assert message in str(failure.value) and "\n" not in str(failure.value)
+
+
+def test_normal_displacement_needs_an_axis_aligned_boundary(disc):
+    slanted = MeshData(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([[0, 1, 2]]),
+                       {"hypotenuse": np.array([[1, 2]])})
+    (condition,) = conditions_from_config([{"boundary": "hypotenuse", "type": "normal_displacement"}], slanted, 2)
+    other = Discretisation(SkfemBackend(), slanted)
+    other.add_group("u", [FieldSpec("u", vector=True)], {"u": "mechanics"})
+    with pytest.raises(ConfigError, match="needs a flat boundary normal to a coordinate axis"):
+        condition.dirichlet(other)
+
+
+def test_a_tissue_held_normally_on_every_side_is_enclosed():
+    held = [{"boundary": side, "type": "normal_displacement"} for side in ("left", "right", "bottom", "top")]
+    assert encloses(conditions(*held), MESH)
+    assert not encloses(conditions(*held[:3], {"boundary": "top", "type": "robin", "value": "1"}), MESH)
