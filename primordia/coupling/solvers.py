@@ -135,16 +135,21 @@ class _Solver:
         set_default_options(subproblem.prefix,
                             _parallel_safe({**self.defaults, **subproblem.petsc_options}, backend.comm), overrides)
         self._jacobian = None  # assembled UFL Jacobian
+        self._stale = False  # a constant Jacobian to assemble again (dt changed)
         self._combined = None  # UFL Jacobian + algebraic operator
         self._preconditioner = None  # assembled preconditioning form, when the subproblem has one
         self._residual = None
 
+    def step_size_changed(self) -> None:
+        """dt changed (an adaptive time step): a constant Jacobian holds 1/dt, so the next solve assembles it again."""
+        self._stale = True
+
     def _assemble_jacobian(self):
         """The tangent (with the algebraic operator added) and whether it changed."""
         sub, backend = self.sub, self.backend
-        if self._jacobian is None or not sub.constant_jacobian:
+        if self._jacobian is None or not sub.constant_jacobian or self._stale:
             self._jacobian = backend.assemble_matrix(sub.jacobian, sub.bcs, A=self._jacobian)
-            fresh = True
+            fresh, self._stale = True, False
         else:
             fresh = False
         if sub.operator is None:
