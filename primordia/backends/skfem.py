@@ -43,7 +43,7 @@ from primordia.backends.ufl_numpy import (
     UnsupportedUFL,
     cell_quantities,
     evaluate_integrand,
-    integrate_integrand,
+    integrate_blocks,
     preprocess_form,
     reference_quadrature,
     unsupported,
@@ -615,23 +615,36 @@ class _Pattern:
                                      ).astype(PETSc.IntType)
         self.indices = self.col.astype(PETSc.IntType)
         self.positions = positions.reshape(keys.shape).astype(np.int32 if len(unique) < 2 ** 31 else np.int64)
-        self._runs: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._runs: dict[tuple, tuple[np.ndarray, np.ndarray, list]] = {}
 
-    def add(self, data: np.ndarray, cells: np.ndarray | slice, tensors: np.ndarray) -> None:
-        """``data[positions[cells]] += tensors``, entries at the same position summed.
+    def add(self, data: np.ndarray, cells: np.ndarray | slice, blocks: list) -> None:
+        """``data[positions[cells]] += tensors`` for the (rows, columns, tensors) of each block pair,
+        entries at the same position summed.
 
-        A run of cells (a slice) goes through the distinct positions it touches,
+        A run of cells (a slice) goes through the distinct positions its blocks touch,
         found once and kept: its cost is that of the run, not a pass over ``data``.
         """
+        values = _flat([tensors for *_, tensors in blocks])
         if not isinstance(cells, slice):
-            data += np.bincount(self.positions[cells].ravel(), weights=tensors.ravel(), minlength=len(data))
+            positions = self.positions[cells]
+            data += np.bincount(_flat([positions[:, rows[:, None], columns] for rows, columns, _ in blocks]),
+                                weights=values, minlength=len(data))
             return
-        run = self._runs.get((cells.start, cells.stop))
+        key = (cells.start, cells.stop) + tuple((id(rows), id(columns)) for rows, columns, _ in blocks)
+        run = self._runs.get(key)
         if run is None:
-            unique, inverse = np.unique(self.positions[cells], return_inverse=True)
-            run = self._runs[(cells.start, cells.stop)] = (unique, inverse.ravel().astype(self.positions.dtype))
-        unique, inverse = run
-        data[unique] += np.bincount(inverse, weights=tensors.ravel(), minlength=len(unique))
+            positions = self.positions[cells]
+            unique, inverse = np.unique(_flat([positions[:, rows[:, None], columns] for rows, columns, _ in blocks]),
+                                        return_inverse=True)
+            locals_ = [(rows, columns) for rows, columns, _ in blocks]  # keeps the ids of the key unique
+            run = self._runs[key] = (unique, inverse.astype(self.positions.dtype), locals_)
+        unique, inverse, _ = run
+        data[unique] += np.bincount(inverse, weights=values, minlength=len(unique))
+
+
+def _flat(arrays: list[np.ndarray]) -> np.ndarray:
+    """The arrays' entries one after the other (no copy for one contiguous array)."""
+    return arrays[0].ravel() if len(arrays) == 1 else np.concatenate([array.ravel() for array in arrays])
 
 
 # ---------------------------------------------------------------------------------------
@@ -712,9 +725,10 @@ class SkfemBackend(Backend):
         return spaces
 
     def _element_tensors(self, form: ufl.Form, cell_mask: np.ndarray | None = None):
-        """Yield (cells, element tensors (E, n_test, n_trial)) chunk by chunk over all integrals.
+        """Yield (cells, blocks) chunk by chunk over all integrals, ``blocks`` the (test local DOFs,
+        trial local DOFs, element tensors (E, n_test_block, n_trial_block)) of each block pair.
 
-        Linear forms give n_trial = 1 and functionals n_test = n_trial = 1.
+        Linear forms give trial local DOFs ``[0]``, functionals test ones too.
         ``cell_mask`` restricts integration to the marked cells (used for lifting).
         """
         mesh = self._form_mesh(form)
@@ -739,8 +753,9 @@ class SkfemBackend(Backend):
                 part = slice(start, min(start + chunk, len(cells)))
                 entities = part if whole else cells[part]
                 context = _Chunk(mesh, rule, entities, None if local_facets is None else local_facets[part])
-                tensors = integrate_integrand(plan.integrand, context, context.weights)
-                yield entities, np.broadcast_to(tensors, (context.num_entities, sizes[0], sizes[1]))
+                blocks = integrate_blocks(plan.integrand, context, context.weights)
+                if blocks:
+                    yield entities, blocks
 
     def _pattern(self, test: SkfemFunctionSpace, trial: SkfemFunctionSpace) -> _Pattern:
         key = (id(test), id(trial))
@@ -759,8 +774,8 @@ class SkfemBackend(Backend):
         in_place = csr is not None and csr[0] is indptr and csr[1] is indices
         data = csr[2] if in_place else np.zeros(len(indices))
         data[:] = 0.0
-        for cells, tensors in self._element_tensors(form):
-            pattern.add(data, cells, tensors)
+        for cells, blocks in self._element_tensors(form):
+            pattern.add(data, cells, blocks)
         row_fixed = self._constrained(bcs, test)
         col_fixed = self._constrained(bcs, trial)
         if row_fixed is not None or col_fixed is not None:
@@ -796,9 +811,10 @@ class SkfemBackend(Backend):
     def _assemble_array(self, form) -> np.ndarray:
         (test,) = self._form_spaces(form)
         values = np.zeros(test.num_dofs)
-        for cells, tensors in self._element_tensors(form):
-            values += np.bincount(test.cell_dofs[cells].ravel(), weights=tensors[:, :, 0].ravel(),
-                                  minlength=test.num_dofs)
+        for cells, blocks in self._element_tensors(form):
+            dofs = test.cell_dofs[cells]
+            values += np.bincount(_flat([dofs[:, rows] for rows, _, _ in blocks]),
+                                  weights=_flat([tensors[:, :, 0] for *_, tensors in blocks]), minlength=test.num_dofs)
         return values
 
     def assemble_vector(self, form, b=None):
@@ -811,7 +827,7 @@ class SkfemBackend(Backend):
     def assemble_scalar(self, form) -> float:
         if form.arguments():
             raise PrimordiaError("assemble_scalar needs a functional (a form without test or trial functions)")
-        return float(sum(tensors.sum() for _, tensors in self._element_tensors(form)))
+        return float(sum(tensors.sum() for _, blocks in self._element_tensors(form) for *_, tensors in blocks))
 
     def assemble_residual(self, residual, jacobian, bcs, state, b=None):
         values = self._assemble_array(residual)
@@ -827,9 +843,11 @@ class SkfemBackend(Backend):
                     fixed[bc.handle.dofs] = True
             if fixed.any():
                 touched = fixed[trial.cell_dofs].any(axis=1)
-                for cells, tensors in self._element_tensors(jacobian, cell_mask=touched):
-                    local = np.einsum("eij,ej->ei", tensors, shift[trial.cell_dofs[cells]])
-                    values += np.bincount(test.cell_dofs[cells].ravel(), weights=local.ravel(),
+                for cells, blocks in self._element_tensors(jacobian, cell_mask=touched):
+                    test_dofs, trial_dofs = test.cell_dofs[cells], trial.cell_dofs[cells]
+                    local = [np.einsum("eij,ej->ei", tensors, shift[trial_dofs[:, columns]])
+                             for _, columns, tensors in blocks]
+                    values += np.bincount(_flat([test_dofs[:, rows] for rows, _, _ in blocks]), weights=_flat(local),
                                           minlength=test.num_dofs)
             # as dolfinx set_bc(b, bcs, x, scale=-1): b = -(g - x) on fixed rows
             for bc in bcs:

@@ -266,20 +266,36 @@ def evaluate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContext
         return values
 
 
+def integrate_blocks(integrand: ufl.core.expr.Expr, context: QuadratureContext,
+                     weights: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Element tensors ``sum_q integrand * weights``, block pair by block pair.
+
+    Returns (test local DOFs, trial local DOFs, tensors (entity, n_test_block,
+    n_trial_block)) for each (test block, trial block) on which the integrand
+    does not vanish (:func:`_block_tensor`); a linear form's trial local DOFs are
+    ``[0]``.  ``weights`` (entity, point) are the quadrature weights times the
+    Jacobian determinant.
+    """
+    _, pairs = _integrated(integrand, context, weights)
+    return [(test.local, trial.local, tensors) for test, trial, tensors in pairs]
+
+
 def integrate_integrand(integrand: ufl.core.expr.Expr, context: QuadratureContext,
                         weights: np.ndarray) -> np.ndarray:
-    """Element tensors ``sum_q integrand * weights``: an array (entity, test, trial).
+    """Element tensors ``sum_q integrand * weights``: an array (entity, test, trial), all blocks at their places."""
+    evaluator, pairs = _integrated(integrand, context, weights)
+    tensors = np.zeros((len(weights),) + evaluator.num_local)
+    for test, trial, block in pairs:
+        tensors[:, test.local[:, None], trial.local] = block
+    return tensors
 
-    ``weights`` (entity, point) are the quadrature weights times the Jacobian
-    determinant.  Each (test block, trial block) pair is integrated on its own
-    (:func:`_block_tensor`) and written at its blocks' local positions.
-    """
+
+def _integrated(integrand, context: QuadratureContext, weights: np.ndarray):
+    """The integrand's evaluator on the chunk, and (test block, trial block, element tensors) per pair."""
     with np.errstate(all="ignore"):
         evaluator = _Evaluator(context, integrand)
-        tensors = np.zeros((len(weights),) + evaluator.num_local)
-        for test, trial, contributions in evaluator.block_pairs():
-            tensors[:, test.local[:, None], trial.local] = _block_tensor(contributions, weights)
-        return tensors
+        return evaluator, [(test, trial, _block_tensor(contributions, weights))
+                           for test, trial, contributions in evaluator.block_pairs()]
 
 
 def _block_tensor(contributions: list[tuple[np.ndarray, np.ndarray, np.ndarray]], weights: np.ndarray) -> np.ndarray:
@@ -478,19 +494,16 @@ class _Evaluator:
                         self._pair = (test_index, trial_index)
                         value = self._value(self.integrand)
                         if value is not None:
-                            contributions.append((value, self.factors(0, test_index)[0], self.factors(1, trial_index)[0]))
+                            tables = self.factors(0, test_index)[0], self.factors(1, trial_index)[0]
+                            contributions.append((value, *tables))
                 if contributions:
                     yield test_block, trial_block, contributions
 
     # -- memoised evaluation -----------------------------------------------------------------
-    def _key(self, o):
-        """Memo key of ``o``: the node, and the current block of each argument it depends on."""
-        mask = self._masks.get(id(o), 0)
-        return id(o) if not mask else (id(o), self._pair[0] if mask & 1 else -1, self._pair[1] if mask & 2 else -1)
-
     def _value(self, o) -> np.ndarray | None:
         """The value of ``o`` on the current block pair; ``None`` where it vanishes on it."""
-        key = self._key(o)
+        mask = self._masks[id(o)]  # the memo key: the node, and the current part of each argument it depends on
+        key = id(o) if not mask else (id(o), self._pair[0] if mask & 1 else -1, self._pair[1] if mask & 2 else -1)
         hit = self._memo.get(key, _MISSING)
         if hit is _MISSING:
             hit = _handler(type(o))(self, o)
@@ -530,12 +543,14 @@ class _Evaluator:
     def _factor_values(self, operands) -> list[np.ndarray] | None:
         """Values of a product's factors, ``None`` when one vanishes; factors depending on
         arguments come first, so that a vanishing one spares evaluating the others."""
-        values = {}
-        for op in sorted(operands, key=lambda op: -self._masks[id(op)]):
-            value = values[id(op)] = self._value(op)
-            if value is None:
-                return None
-        return [values[id(op)] for op in operands]
+        a, b = operands
+        if self._masks[id(b)] > self._masks[id(a)]:
+            second = self._value(b)
+            first = None if second is None else self._value(a)
+        else:
+            first = self._value(a)
+            second = None if first is None else self._value(b)
+        return None if first is None or second is None else [first, second]
 
     # -- terminals ----------------------------------------------------------------------
     def argument(self, o, derivatives=0):
@@ -661,7 +676,8 @@ class _Evaluator:
         values = self._factor_values(o.ufl_operands)
         if values is None:
             return None
-        a, b = (self._align(value, op.ufl_free_indices, o.ufl_free_indices) for value, op in zip(values, o.ufl_operands))
+        a, b = (self._align(value, op.ufl_free_indices, o.ufl_free_indices)
+                for value, op in zip(values, o.ufl_operands))
         return a * b
 
     def division(self, o):

@@ -20,10 +20,15 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from primordia.backends import skfem as skfem_backend
-from primordia.backends import ufl_numpy
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.backends.skfem import SkfemBackend
-from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, preprocess_form, reference_quadrature
+from primordia.backends.ufl_numpy import (
+    UnsupportedUFL,
+    evaluate_integrand,
+    integrate_integrand,
+    preprocess_form,
+    reference_quadrature,
+)
 from primordia.core.mesh import MeshData
 from primordia.core.meshes import box, rectangle
 from dof_keys import dolfinx_dof_keys, skfem_dof_keys
@@ -462,6 +467,25 @@ def test_reproduces_scikit_fem_assembly(skfem_setup):
 
     theirs = reference.assemble(skfem.Basis(s.mesh.skfem, space.skfem_element, intorder=4))
     assert abs(ours - theirs).max() < 1e-12 * abs(theirs).max()
+
+
+def test_dense_element_tensors_assemble_to_the_matrix(skfem_setup):
+    """integrate_integrand places every block pair's tensors at their local DOFs: summed over the
+    cells' DOFs, they give the backend's matrix."""
+    s = skfem_setup
+    form = FORMS["P2-P1-P1 growth tangent"](s)
+    space = s.spaces["P2-P1-P1"]
+    (plan,) = preprocess_form(form)
+    backend, mesh = s.backend, s.mesh
+    context = skfem_backend._Chunk(mesh, backend._rule(mesh, plan), slice(0, s.data.num_cells), None)
+    tensors = integrate_integrand(plan.integrand, context, context.weights)
+    rows = np.broadcast_to(space.cell_dofs[:, :, None], tensors.shape)
+    cols = np.broadcast_to(space.cell_dofs[:, None, :], tensors.shape)
+    dense = scipy.sparse.coo_matrix((tensors.ravel(), (rows.ravel(), cols.ravel())), shape=(space.num_dofs,) * 2)
+    A = backend.assemble_matrix(form)
+    indptr, indices, values = A.getValuesCSR()
+    reference = scipy.sparse.csr_matrix((values, indices, indptr), shape=A.getSize())
+    assert abs(dense.tocsr() - reference).max() < 1e-12 * abs(reference).max()
 
 
 def test_reassembly_into_a_matrix_is_seen_by_its_solver(skfem_setup):
