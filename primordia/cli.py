@@ -1,6 +1,7 @@
 """The ``primordia`` command.
 
-    primordia run CONFIG.toml [--backend NAME] [--out DIR] [--set section.key=value ...]
+    primordia run CONFIG.toml [--backend NAME] [--out DIR] [--set section.key=value ...] [--overwrite]
+    primordia run --restart OUT_DIR [--set time.t_final=...]
     primordia plugins
     primordia stability [CONFIG.toml] [--set ...] [--out DIR]
     primordia stability map --x NAME:LO:HI:N --y NAME:LO:HI:N [--coupled|--uncoupled]
@@ -9,17 +10,20 @@
 
 A user's mistake (unknown parameter, wrong sign, missing file, impossible mesh,
 unknown backend or plugin) is printed as one line ``primordia: error: ...`` and
-exits with status 2; outputs already written stay on disk.
+exits with status 2; outputs already written stay on disk.  Ctrl-C and SIGTERM
+stop a run between two steps with a checkpoint (exit status 128 + the signal:
+130, 143); ``--restart OUT_DIR`` continues it in place.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
+import traceback
 from pathlib import Path
 
-from primordia.core.errors import PrimordiaError
+from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, is_root_process
+from primordia.core.signals import INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
 
@@ -36,11 +40,17 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = commands.add_parser("run", help="run a model from a TOML configuration")
-    run.add_argument("config", help="TOML configuration file")
+    run.add_argument("config", nargs="?", help="TOML configuration file (with --restart: the run's own, if given)")
     run.add_argument("--backend", help="finite element backend (default: [model] backend, else fenicsx)")
     run.add_argument("--out", help="output directory (default: out/<config name>)")
     run.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                      help="override a config value, e.g. --set parameters.D_m=0.03 (repeatable)")
+    run.add_argument("--restart", metavar="OUT_DIR",
+                     help="continue the run in OUT_DIR from its checkpoint, in place (--set may change "
+                          "time.t_final, output, checkpoint and solver options)")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the run already in the output directory (otherwise it is refused)")
+    run.add_argument("--dry-run", action="store_true", help="check the input (config, mesh, formulas) and stop")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=command_run)
 
@@ -68,18 +78,69 @@ def _version() -> str:
 
 
 def command_run(args) -> int:
+    from primordia.core import config as config_
     from primordia.model import Model
 
+    if args.restart is not None and args.overwrite:
+        raise ConfigError("--restart continues the run in its directory, --overwrite replaces it: choose one")
+    if args.restart is not None and args.out is not None and Path(args.out) != Path(args.restart):
+        raise ConfigError(f"--restart {args.restart} continues the run in place; --out {args.out} names another "
+                          f"directory")
+    if args.config is None and args.restart is None:
+        raise ConfigError("run needs a config file, CONFIG.toml (or --restart OUT_DIR)")
+    if args.restart is not None and not args.restart.strip():
+        raise ConfigError("--restart needs the output directory of the run to continue")
     overrides = list(args.overrides)
-    if args.backend:
+    if args.backend is not None:
+        if not args.backend.strip():
+            raise ConfigError("--backend needs a name (registered backends: see primordia plugins)")
         overrides.append(f"model.backend={args.backend}")
-    model = Model.from_file(args.config, overrides)
-    out = Path(args.out) if args.out else Path("out") / Path(args.config).stem
-    sim = model.run(out=out, progress=not args.no_progress)
+    if args.restart is not None:
+        out = Path(args.restart)
+        config = config_.load_config(args.config) if args.config is not None else _checkpointed_config(out)
+        model = Model.from_config(config_.apply_overrides(config, overrides))
+    else:
+        model = Model.from_file(args.config, overrides)
+        out = Path(args.out) if args.out is not None else Path("out") / Path(args.config).stem
+        if not str(args.out if args.out is not None else out).strip():
+            raise ConfigError("--out needs a directory name")
+    if args.dry_run:
+        return _report_dry_run(model, out)
+    sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
+                    restart=args.restart is not None)
     final = sim.summary(sim.status)  # collective (reductions over ranks): every rank calls it
     if sim.is_root:
-        print(f"primordia: {sim.status}: {sim.step_index} steps on {final['backend']} "
+        restarted = f" (restart {sim.restarts})" if sim.restarts else ""
+        rejected = f", {final['rejected_steps']} rejected and retried" if final["rejected_steps"] else ""
+        print(f"primordia: {sim.status}{restarted}: {sim.step_index} steps{rejected} on {final['backend']} "
               f"({final['cells']} cells, {final['dofs_total']} dofs) in {sim.wall_time:.1f} s -> {out}")
+    return 0
+
+
+def _checkpointed_config(out: Path) -> dict:
+    """The configuration of the run whose checkpoint is in ``out``."""
+    from primordia.core import checkpoint
+    from primordia.core.outputs import existing_run
+
+    path = out / checkpoint.CHECKPOINT_FILE
+    if not path.is_file():
+        found = existing_run(out)
+        raise ConfigError(f"{out} holds no checkpoint to restart from" + (f" ({found})" if found else
+                                                                          " (it holds no run)"))
+    return checkpoint.read_meta(path)["config"]
+
+
+def _report_dry_run(model, out: Path) -> int:
+    from primordia.core.outputs import directory_problem, existing_run
+
+    problem = directory_problem(out)
+    if problem is not None:
+        raise ConfigError(problem)
+    found = existing_run(out)
+    if is_root_process():
+        print(f"primordia: the input is valid: {model.mesh_data.num_cells} cells, {model.num_steps} steps of "
+              f"dt = {model.dt:g} to t = {model.t_final:g} on {model.backend}"
+              + (f"; {out} already holds {found}" if found else "") + "; nothing was run")
     return 0
 
 
@@ -96,31 +157,54 @@ def command_plugins(args) -> int:
                 reason = piece.availability()
                 note = "  [available]" if reason is None else f"  [unavailable: {reason}]"
             print(f"  {name:<22} {origin}{note}")
-    for failure in pm.load_report.failures:
-        print(f"failed: {failure}")
+    if pm.load_report.broken:
+        print("broken:")
+        for plugin, problems in pm.load_report.broken.items():
+            origin = pm.load_report.sources.get(plugin, "")
+            print(f"  {plugin:<22} {origin + '  ' if origin else ''}[{'; '.join(problems)}]")
     return 0
 
 
-def _is_root() -> bool:
-    """Whether this is MPI rank 0 (errors are printed once, not once per rank)."""
-    if "mpi4py.MPI" in sys.modules:
-        return sys.modules["mpi4py.MPI"].COMM_WORLD.rank == 0
-    rank = os.environ.get("OMPI_COMM_WORLD_RANK") or os.environ.get("PMI_RANK") or "0"
-    return rank == "0"
-
-
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except PrimordiaError as exc:
-        if _is_root():
-            print(f"primordia: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("primordia: interrupted", file=sys.stderr)
-        return 130
+    with INTERRUPTS.installed():  # SIGTERM, like Ctrl-C, stops the program with a word, from the very start
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            return args.func(args)
+        except KeyboardInterrupt as interrupted:
+            return _interrupted(interrupted)
+        except PrimordiaError as exc:
+            if INTERRUPTS.received:  # a signal that came back as a failed solve or an unreadable file
+                return _interrupted(InterruptedRun(INTERRUPTS.received))
+            if is_root_process():
+                print(f"primordia: error: {(str(exc).splitlines() or [''])[0]}", file=sys.stderr)
+            return EXIT_USAGE
+        except Exception as exc:
+            if INTERRUPTS.received:
+                return _interrupted(InterruptedRun(INTERRUPTS.received))
+            _abort_other_ranks(exc)
+            raise
+
+
+def _interrupted(interrupted: KeyboardInterrupt) -> int:
+    """One line saying the program was interrupted (and where, for a run), and the exit status 128 + signal."""
+    import signal
+
+    signum = getattr(interrupted, "signum", None) or INTERRUPTS.received or signal.SIGINT
+    detail = str(interrupted) or f"interrupted ({signal_name(signum)}) during start-up, before the first step"
+    if is_root_process():
+        print(f"primordia: {detail}", file=sys.stderr)
+    return 128 + signum
+
+
+def _abort_other_ranks(exc: Exception) -> None:
+    """A bug raised on one MPI rank: print it and abort the job, so that no other rank waits for it forever."""
+    mpi = sys.modules.get("mpi4py.MPI")
+    if mpi is None or mpi.COMM_WORLD.size == 1:
+        return
+    traceback.print_exception(exc)
+    sys.stderr.flush()
+    mpi.COMM_WORLD.Abort(1)
 
 
 if __name__ == "__main__":

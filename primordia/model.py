@@ -19,6 +19,8 @@ import copy
 import math
 from pathlib import Path
 
+import numpy as np
+
 from primordia.core import config as config_
 from primordia.core.errors import ConfigError
 from primordia.core.mesh import MeshData
@@ -27,6 +29,16 @@ from primordia.core.plugins import lookup
 
 DEFAULT_OUTPUT = {"times": None, "snapshot_fields": None, "series_every": 10, "pictures": True,
                   "displacement_scale": 1.0}
+#: Checkpoints: every N steps (0: never by steps) and every M minutes of wall time (0: never by time).
+#: A run shorter than ``every_minutes`` writes none but its last, at the end or when stopped.
+DEFAULT_CHECKPOINT = {"every_steps": 0, "every_minutes": 10.0}
+#: More steps than this is a dt in the wrong units, not a run (at a millisecond per step: three hours).
+MAX_STEPS = 10_000_000
+#: Adaptive steps go down to dt / 2^10 unless ``time.dt_min`` says otherwise.
+DEFAULT_HALVINGS = 10
+#: Keys a restart may change: how long, what is written, how often checkpoints are, how solves are done.
+CHANGEABLE_ON_RESTART = ("time.t_final", "time.adaptive", "time.dt_min", "output", "checkpoint", "solver",
+                         "model.name", "model.description")
 
 
 class Model:
@@ -36,13 +48,22 @@ class Model:
                  mesh: MeshData | dict | None = None, dt: float | None = None, t_final: float | None = None,
                  t_start: float = 0.0, output: dict | None = None, physics_options: dict | None = None,
                  coupling: str | dict = "sequential", solver: dict | None = None, backend: str = "fenicsx",
-                 name: str = "", base_dir: str | Path = ".", growth_law: str | dict | None = None):
-        self.name = name
-        self.backend = backend
+                 name: str = "", base_dir: str | Path = ".", growth_law: str | dict | None = None,
+                 adaptive: bool = True, dt_min: float | None = None, checkpoint: dict | None = None,
+                 description: str = ""):
+        self.name = _text(name, "model.name")
+        self.description = _text(description, "model.description")
+        self.backend = _backend_name(backend, "model.backend")
         self.base_dir = Path(base_dir)
+        if not isinstance(coupling, (str, dict)):
+            raise ConfigError(f"[coupling] must be a table (scheme = \"...\" and its options), got {coupling!r}")
         coupling = {"scheme": coupling} if isinstance(coupling, str) else dict(coupling)
         self.coupling = coupling.pop("scheme", "sequential")
+        if not isinstance(self.coupling, str):
+            raise ConfigError(f"coupling.scheme must be the name of a splitting scheme, got {self.coupling!r}")
         self.coupling_options = coupling
+        if not isinstance(solver, (dict, type(None))):
+            raise ConfigError(f"[solver] must be a table of [solver.PREFIX] tables, got {solver!r}")
         self.solver = dict(solver or {})
         self._mesh_spec = mesh
         self.physics_classes = [lookup("physics", p) for p in _as_list(physics, "model.physics")]
@@ -55,9 +76,13 @@ class Model:
         self.parameters = self._parameter_set(parameters or {})
         self.physics_options = self._physics_options(physics_options or {})
         self.t_start, self.dt, self.t_final = _time(t_start, dt, t_final)
+        self.adaptive, self.dt_min = _adaptivity(adaptive, dt_min, self.dt)
         self.output = self._output(output or {})
+        self.checkpoint = _checkpoint(checkpoint)
         self._instantiate_physics()  # validates kinetics and physics options now
         self.mesh_data = self._mesh()
+        for module in self.physics_objects:  # what only the mesh and the time span show: boundary formulas
+            module.check_inputs(self.mesh_data, self.sample_times())
 
     # -- construction from a config --------------------------------------------------------
     @classmethod
@@ -75,8 +100,9 @@ class Model:
             t_start=time.get("t_start", 0.0), output=config.get("output"),
             physics_options=config.get("physics"), coupling=config.get("coupling", {}),
             solver=config.get("solver"), backend=model_table.get("backend", "fenicsx"),
-            name=model_table.get("name", ""), base_dir=config.get("_base_dir", "."),
-            growth_law=config.get("growth_law"),
+            name=model_table.get("name", ""), description=model_table.get("description", ""),
+            base_dir=config.get("_base_dir", "."), growth_law=config.get("growth_law"),
+            adaptive=time.get("adaptive", True), dt_min=time.get("dt_min"), checkpoint=config.get("checkpoint"),
         )
 
     @classmethod
@@ -95,6 +121,11 @@ class Model:
 
     def _physics_options(self, table: dict) -> dict:
         names = {cls.name for cls in self.physics_classes}
+        if not isinstance(table, dict):
+            raise ConfigError(f"[physics] must be a table of [physics.NAME] tables, got {table!r}")
+        for name, options in table.items():
+            if not isinstance(options, dict):
+                raise ConfigError(f"physics.{name} must be a table of options ([physics.{name}]), got {options!r}")
         for name in table:
             if name not in names:
                 raise ConfigError(f"[physics.{name}] configures a module that is not in model.physics "
@@ -107,8 +138,8 @@ class Model:
             raise ConfigError(f"unknown key output.{sorted(unknown)[0]} (known: {', '.join(DEFAULT_OUTPUT)})")
         output = {**DEFAULT_OUTPUT, **table}
         times = output["times"] if output["times"] is not None else [self.t_final]
-        if not isinstance(times, list) or not all(isinstance(t, (int, float)) for t in times):
-            raise ConfigError("output.times must be a list of numbers")
+        if not isinstance(times, list) or not all(_is_number(t) for t in times):
+            raise ConfigError(f"output.times must be a list of numbers, got {times!r}")
         for t in times:
             if not self.t_start < t <= self.t_final + 1e-12:
                 raise ConfigError(f"output time {t:g} lies outside (t_start, t_final] = "
@@ -117,8 +148,13 @@ class Model:
                 raise ConfigError(f"output time {t:g} is not a multiple of dt = {self.dt:g} after t_start")
         output["times"] = sorted(float(t) for t in times)
         scale = output["displacement_scale"]
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or scale < 0:
+        if not _is_number(scale) or scale < 0:
             raise ConfigError(f"output.displacement_scale must be a number >= 0, got {scale!r}")
+        if not isinstance(output["pictures"], bool):
+            raise ConfigError(f"output.pictures must be true or false, got {output['pictures']!r}")
+        fields = output["snapshot_fields"]
+        if fields is not None and (not isinstance(fields, list) or not all(isinstance(f, str) for f in fields)):
+            raise ConfigError(f"output.snapshot_fields must be a list of field names, got {fields!r}")
         every = output["series_every"]
         if not isinstance(every, int) or isinstance(every, bool) or every < 1:
             raise ConfigError(f"output.series_every must be a positive integer (steps), got {every!r}")
@@ -162,20 +198,31 @@ class Model:
     def num_steps(self) -> int:
         return int(round((self.t_final - self.t_start) / self.dt))
 
+    def sample_times(self, count: int = 65) -> list[float]:
+        """Times at which inputs that vary in time are checked: the run's span and its output times."""
+        span = np.linspace(self.t_start, self.t_final, count)
+        return sorted({*map(float, span), *self.output["times"]})
+
     def resolved_config(self) -> dict:
         """The fully resolved configuration (defaults filled in), as written to ``config.toml``."""
         mesh = (copy.deepcopy(self._mesh_spec) if isinstance(self._mesh_spec, dict)
                 else {"type": "in-memory", "vertices": self.mesh_data.num_vertices,
                       "cells": self.mesh_data.num_cells, "description": self.mesh_data.description})
+        if mesh.get("type") == "file":  # readable from wherever the resolved config is read (a restart)
+            mesh["path"] = str((self.base_dir / Path(mesh["path"]).expanduser()).resolve())
         resolved = {
             "model": {"name": self.name, "physics": [p.name for p in self.physics_objects], "backend": self.backend},
             "parameters": dict(self.parameters),
             "physics": {p.name: dict(p.opts) for p in self.physics_objects},
             "mesh": mesh,
-            "time": {"t_start": self.t_start, "dt": self.dt, "t_final": self.t_final},
+            "time": {"t_start": self.t_start, "dt": self.dt, "t_final": self.t_final, "adaptive": self.adaptive,
+                     "dt_min": self.dt_min},
             "output": dict(self.output),
+            "checkpoint": dict(self.checkpoint),
             "coupling": {"scheme": self.coupling, **self.coupling_options},
         }
+        if self.description:
+            resolved["model"]["description"] = self.description
         if self.kinetics_object is not None:
             resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.opts}
         if self.growth_law_object is not None:
@@ -184,14 +231,26 @@ class Model:
             resolved["solver"] = copy.deepcopy(self.solver)
         return _without_none(resolved)
 
-    def run(self, backend: str | None = None, out: str | Path = "out/run", progress: bool = False, comm=None):
-        """Set up and run; returns the finished :class:`~primordia.coupling.orchestrator.Simulation`."""
+    def run(self, backend: str | None = None, out: str | Path = "out/run", progress: bool = False, comm=None,
+            overwrite: bool = False, restart: bool = False):
+        """Set up and run; returns the finished :class:`~primordia.coupling.orchestrator.Simulation`.
+
+        An ``out`` directory that already holds a run is refused, unless ``overwrite``
+        (its run files are removed first) or ``restart`` (the run continues from the
+        checkpoint in ``out``, which must be of this same model).
+        """
         from primordia.coupling.orchestrator import Simulation
 
-        sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm)
+        existing = "restart" if restart else "overwrite" if overwrite else "refuse"
+        sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
         sim.setup()
         sim.run(progress=progress)
         return sim
+
+    def differences(self, resolved: dict, allowed=CHANGEABLE_ON_RESTART) -> list[str]:
+        """Dotted keys where ``resolved`` (another run's resolved config) differs from this model's, except ``allowed``."""
+        return [key for key in _differences(self.resolved_config(), resolved)
+                if not any(key == a or key.startswith(a + ".") for a in allowed)]
 
 
 def _without_none(value):
@@ -203,12 +262,68 @@ def _without_none(value):
     return value
 
 
+def _differences(a, b, prefix: str = "") -> list[str]:
+    """Dotted keys at which two nested tables differ."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [key for name in dict.fromkeys([*a, *b])
+                for key in _differences(a.get(name), b.get(name), f"{prefix}{name}.")]
+    return [] if a == b else [prefix.rstrip(".")]
+
+
 def _as_list(value, where: str) -> list[str]:
     if isinstance(value, str):
-        return [value]
-    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value) or not value:
-        raise ConfigError(f"{where} must be a non-empty list of names")
+        value = [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v.strip() for v in value) or not value:
+        raise ConfigError(f"{where} must be a non-empty list of names, got {value!r}")
+    for name in value:
+        if value.count(name) > 1:
+            raise ConfigError(f"{where} lists '{name}' twice; each physics module joins a model once")
     return list(value)
+
+
+def _text(value, where: str) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(f"{where} must be a string, got {value!r}")
+    return value
+
+
+def _backend_name(value, where: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ConfigError(f"{where} must name a backend (e.g. \"fenicsx\" or \"skfem\"), got {value!r}")
+    return value
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _adaptivity(adaptive, dt_min, dt: float) -> tuple[bool, float]:
+    """(time.adaptive, time.dt_min): whether failed steps are retried smaller, and down to which dt."""
+    if not isinstance(adaptive, bool):
+        raise ConfigError(f"time.adaptive must be true or false, got {adaptive!r}")
+    if dt_min is None:
+        return adaptive, dt / 2 ** DEFAULT_HALVINGS
+    if not _is_number(dt_min) or not 0 < dt_min <= dt:
+        raise ConfigError(f"time.dt_min must be a number in (0, dt = {dt:g}], got {dt_min!r}")
+    return adaptive, float(dt_min)
+
+
+def _checkpoint(table) -> dict:
+    """The ``[checkpoint]`` table with its defaults, checked."""
+    if table is None:
+        table = {}
+    if not isinstance(table, dict):
+        raise ConfigError(f"[checkpoint] must be a table (every_steps, every_minutes), got {table!r}")
+    unknown = set(table) - set(DEFAULT_CHECKPOINT)
+    if unknown:
+        raise ConfigError(f"unknown key checkpoint.{sorted(unknown)[0]} (known: {', '.join(DEFAULT_CHECKPOINT)})")
+    checkpoint = {**DEFAULT_CHECKPOINT, **table}
+    steps, minutes = checkpoint["every_steps"], checkpoint["every_minutes"]
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise ConfigError(f"checkpoint.every_steps must be an integer >= 0 (0: never by steps), got {steps!r}")
+    if not _is_number(minutes) or minutes < 0:
+        raise ConfigError(f"checkpoint.every_minutes must be a number >= 0 (0: never by time), got {minutes!r}")
+    return {"every_steps": steps, "every_minutes": float(minutes)}
 
 
 def _kinetics_table(kinetics, physics_classes) -> dict | None:
@@ -222,7 +337,10 @@ def _kinetics_table(kinetics, physics_classes) -> dict | None:
         return {"name": kinetics}
     if not isinstance(kinetics, dict):
         raise ConfigError("[kinetics] must be a table with a name")
-    return {"name": "painter2018", **kinetics}
+    table = {"name": "painter2018", **kinetics}
+    if not isinstance(table["name"], str):
+        raise ConfigError(f"kinetics.name must be the name of a kinetics, got {table['name']!r}")
+    return table
 
 
 def _growth_law_table(growth_law, physics_classes) -> dict | None:
@@ -255,6 +373,9 @@ def _time(t_start, dt, t_final) -> tuple[float, float, float]:
     if t_final <= t_start:
         raise ConfigError(f"time.t_final ({t_final:g}) must be greater than time.t_start ({t_start:g})")
     steps = (t_final - t_start) / dt
+    if not math.isfinite(steps) or steps > MAX_STEPS:
+        raise ConfigError(f"time.dt = {dt:g} gives {steps:.3g} steps from t_start = {t_start:g} to t_final = "
+                          f"{t_final:g}, more than {MAX_STEPS:,}: is dt in the model's (dimensionless) time units?")
     if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
         raise ConfigError(f"time.t_final - time.t_start = {t_final - t_start:g} is not a multiple of dt = {dt:g}")
     return float(t_start), float(dt), float(t_final)

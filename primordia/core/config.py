@@ -9,8 +9,9 @@ A configuration is a nested mapping with these tables (all optional but
     [physics.NAME] options of one physics module
     [parameters]   model constants by their seed names (Table 3.1)
     [mesh]         type = "rectangle" | "box" | "file", ...
-    [time]         dt, t_final, t_start
-    [output]       times, snapshot_fields, series_every
+    [time]         dt, t_final, t_start, adaptive, dt_min
+    [output]       times, snapshot_fields, series_every, pictures, displacement_scale
+    [checkpoint]   every_steps, every_minutes
     [coupling]     scheme = "sequential" | "strang" | "fixed_point" | "monolithic", and its options
     [solver.PREFIX] PETSc options of one subproblem (e.g. [solver.chemotaxis_m])
 
@@ -35,21 +36,45 @@ SECTIONS = {
     "physics": None,  # open: one sub-table per physics module
     "parameters": None,  # open: validated against the declared parameters
     "mesh": None,  # open: validated by primordia.core.meshes.mesh_from_config
-    "time": {"dt", "t_final", "t_start"},
+    "time": {"dt", "t_final", "t_start", "adaptive", "dt_min"},
     "output": {"times", "snapshot_fields", "series_every", "pictures", "displacement_scale"},
+    "checkpoint": {"every_steps", "every_minutes"},
     "coupling": None,  # open: scheme plus the scheme's own options
     "solver": None,  # open: PETSc options by prefix
 }
+#: Sections whose entries are themselves tables (one per physics module, one per solver prefix).
+TABLES_OF_TABLES = {"physics": "[physics.NAME]", "solver": "[solver.PREFIX]"}
+#: A configuration is a few kilobytes; anything far larger is not one (and is not read into memory).
+MAX_CONFIG_BYTES = 1 << 20
 
 
 def load_config(path: str | Path) -> dict:
-    """Read a TOML configuration; a missing or malformed file is one clear error."""
+    """Read a TOML configuration; a missing, unreadable or malformed file is one clear error.
+
+    Only a regular file is opened (a folder, a FIFO or a device such as /dev/zero
+    would fail, block or never end), and it must be UTF-8 text.
+    """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError(f"config file not found: {path}")
+    if path.is_dir():
+        raise ConfigError(f"config file {path} is a folder, not a TOML file")
+    if not path.is_file():
+        raise ConfigError(f"config file {path} is not a regular file (a device, a pipe or a socket)")
     try:
         with path.open("rb") as stream:
-            config = tomllib.load(stream)
+            data = stream.read(MAX_CONFIG_BYTES + 1)
+    except OSError as error:
+        raise ConfigError(f"cannot read config file {path}: {error.strerror or error}") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"config file {path} is larger than {MAX_CONFIG_BYTES >> 20} MB: not a configuration")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"config file {path} is not UTF-8 text (byte {error.start}: "
+                          f"{data[error.start:error.start + 1]!r}); is it a binary file?") from None
+    try:
+        config = tomllib.loads(text.removeprefix("\ufeff"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: invalid TOML ({exc})") from None
     config.setdefault("_base_dir", str(path.resolve().parent))
@@ -94,6 +119,11 @@ def check_structure(config: dict) -> None:
             raise ConfigError(f"unknown config section [{section}] (known: {', '.join(SECTIONS)})")
         if not isinstance(value, dict):
             raise ConfigError(f"config section [{section}] must be a table")
+        if section in TABLES_OF_TABLES:
+            for name, entry in value.items():
+                if not isinstance(entry, dict):
+                    raise ConfigError(f"{section}.{name} must be a table ({TABLES_OF_TABLES[section]}), "
+                                      f"got {entry!r}")
         allowed = SECTIONS[section]
         if allowed is None:
             continue
@@ -120,9 +150,49 @@ def _kind_name(kind) -> str:
 
 
 def merge_options(where: str, defaults, given) -> dict:
-    """``defaults`` updated with ``given``; an unknown option is one error naming it and the known ones."""
+    """``defaults`` updated with ``given``; an unknown option, or one of the wrong type, is one error naming it.
+
+    The type an option takes is that of its default: true/false for a boolean, an
+    integer for an integer, a number for a float, a string, a list or a table
+    (a default of None takes anything: the module checks it).
+    """
+    if not isinstance(given, dict):
+        raise ConfigError(f"{where}: options must be a table of name = value, got {given!r}")
     unknown = set(given) - set(defaults)
     if unknown:
         raise ConfigError(f"{where}: unknown option '{sorted(unknown)[0]}' "
                           f"(known: {', '.join(defaults) or 'none'})")
+    for key, value in given.items():
+        expected = _expected_kind(defaults[key])
+        if expected is not None and not _is_kind(value, expected):
+            raise ConfigError(f"{where}: option '{key}' must be {expected}, got {value!r}")
     return {**defaults, **given}
+
+
+def _expected_kind(default) -> str | None:
+    """What an option with this default must be, in words (None: anything)."""
+    if isinstance(default, bool):
+        return "true or false"
+    if isinstance(default, int):
+        return "an integer"
+    if isinstance(default, float):
+        return "a number"
+    if isinstance(default, str):
+        return "a string"
+    if isinstance(default, (list, tuple)):
+        return "a list"
+    if isinstance(default, dict):
+        return "a table"
+    return None
+
+
+def _is_kind(value, kind: str) -> bool:
+    checks = {
+        "true or false": lambda v: isinstance(v, bool),
+        "an integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
+        "a number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+        "a string": lambda v: isinstance(v, str),
+        "a list": lambda v: isinstance(v, list),
+        "a table": lambda v: isinstance(v, dict),
+    }
+    return checks[kind](value)

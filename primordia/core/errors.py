@@ -3,7 +3,9 @@
 Every mistake a user can make (an unknown parameter, a wrong sign, a missing
 file, an impossible mesh, an unknown backend or plugin) raises a subclass of
 :class:`PrimordiaError`.  The CLI prints ``primordia: error: <message>`` and
-exits with status 2; anything else is a bug and keeps its traceback.
+exits with status 2; anything else is a bug and keeps its traceback.  A run
+stopped by a signal raises :class:`InterruptedRun` (a ``KeyboardInterrupt``):
+it is reported as interrupted, never as a mistake in the input.
 """
 
 
@@ -25,3 +27,34 @@ class PluginError(PrimordiaError):
 
 class SolverError(PrimordiaError):
     """A solve failed (diverged linear or nonlinear solver, NaN in a field)."""
+
+
+class InterruptedRun(KeyboardInterrupt):
+    """The run was asked to stop (Ctrl-C, SIGTERM): not an error of the input; ``signum`` says which signal."""
+
+    def __init__(self, signum: int, message: str = ""):
+        super().__init__(message)
+        self.signum = signum
+
+
+def is_root_process() -> bool:
+    """Whether this is MPI rank 0 (messages are printed once, not once per rank).
+
+    Read from mpi4py when it is imported, else from the launcher's environment, so
+    that asking never initialises MPI.
+    """
+    import os
+    import sys
+
+    if "mpi4py.MPI" in sys.modules:
+        return sys.modules["mpi4py.MPI"].COMM_WORLD.rank == 0
+    rank = os.environ.get("OMPI_COMM_WORLD_RANK") or os.environ.get("PMI_RANK") or "0"
+    return rank == "0"
+
+
+def warn(message: str) -> None:
+    """One line ``primordia: warning: ...`` on stderr, from rank 0 only."""
+    import sys
+
+    if is_root_process():
+        print(f"primordia: warning: {message}", file=sys.stderr, flush=True)

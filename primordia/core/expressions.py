@@ -4,7 +4,12 @@ Boundary values and spatially varying coefficients are given as strings such as
 ``"s0 * sin(pi * t / t_hat)"`` or ``"1e-4 * (1 + 0.5 * x[0] / 20)"``.  They are
 parsed once with :mod:`ast` against a whitelist (numbers, ``x[i]``, ``t``,
 named constants, + - * / **, and the functions below), so a config cannot run
-arbitrary code, and a mistake is reported naming the formula.
+arbitrary code, and a mistake is reported naming the formula.  Constants must be
+finite numbers that do not shadow ``x``, ``t`` or a function; the parts of a
+formula that depend on neither ``x`` nor ``t`` are evaluated when it is read
+(``1/0``, ``exp(1000)``), and :meth:`Formula.check` evaluates the whole formula
+where and when it will be used (a component of ``x`` the mesh lacks, a division
+by zero on the boundary, an overflow at a later time) before any assembly.
 
 The same :class:`Formula` evaluates to a UFL expression (for weak forms:
 ``x`` = SpatialCoordinate, ``t`` = the run's time constant) or to numpy arrays
@@ -35,7 +40,7 @@ class Formula:
 
     def __init__(self, text, constants: Mapping[str, float] | None = None, where: str = "formula"):
         self.where = where
-        self.constants = {"pi": math.pi, **(constants or {})}
+        self.constants = {"pi": math.pi, **_checked_constants(constants, where)}
         if isinstance(text, (int, float)) and not isinstance(text, bool):
             text = repr(float(text))
         if not isinstance(text, str):
@@ -43,15 +48,21 @@ class Formula:
         self.text = text
         try:
             self.tree = ast.parse(text.strip(), mode="eval").body
-        except SyntaxError:
+            self._check(self.tree)
+            self._check_constant_parts(self.tree)
+        except (SyntaxError, ValueError):
             raise ConfigError(f"{where}: cannot parse formula {text!r}") from None
-        self._check(self.tree)
+        except (RecursionError, MemoryError):
+            raise ConfigError(f"{where}: formula {text[:40]!r}... is nested too deeply to evaluate") from None
 
     def _check(self, node):
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
             return
         if isinstance(node, ast.Name):
-            if node.id not in ("x", "t") and node.id not in self.constants:
+            if node.id == "x":  # a Subscript x[i] returns before reaching its Name
+                raise ConfigError(f"{self.where}: {self.text!r} uses the point x as a number; "
+                                  f"use its components x[0], x[1] (x[2] in 3D)")
+            if node.id != "t" and node.id not in self.constants:
                 raise ConfigError(f"{self.where}: unknown name '{node.id}' in {self.text!r} "
                                   f"(known: x, t, {', '.join(sorted(self.constants))})")
             return
@@ -67,10 +78,56 @@ class Formula:
             self._check(node.args[0])
             return
         if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id == "x" \
-                and isinstance(node.slice, ast.Constant) and node.slice.value in (0, 1, 2):
+                and isinstance(node.slice, ast.Constant) and type(node.slice.value) is int:
+            if node.slice.value not in (0, 1, 2):
+                raise ConfigError(f"{self.where}: {self.text!r} reads x[{node.slice.value}], "
+                                  f"but x has only the components x[0], x[1] (and x[2] in 3D)")
             return
         raise ConfigError(f"{self.where}: {self.text!r} uses something a formula may not contain "
                           f"({ast.dump(node)[:40]}...)")
+
+    def _check_constant_parts(self, node) -> None:
+        """Evaluate every largest part free of ``x`` and ``t``: 1/0, exp(1000), 10**400 fail now, named."""
+        if not any(isinstance(n, ast.Name) and n.id in ("x", "t") for n in ast.walk(node)):
+            self._evaluate_checked(node, None, 0.0, "")
+            return
+        children = node.args if isinstance(node, ast.Call) else ast.iter_child_nodes(node)
+        for child in children:
+            if isinstance(child, ast.expr) and not isinstance(child, ast.Subscript):
+                self._check_constant_parts(child)
+
+    def _evaluate_checked(self, node, x, t, place: str):
+        """The value of ``node``, or a ConfigError saying why it is not a finite number."""
+        try:
+            with np.errstate(all="raise"):
+                value = self._evaluate(node, x, t, _NUMPY_FUNCTIONS)
+        except (ZeroDivisionError, FloatingPointError, OverflowError) as error:
+            raise ConfigError(f"{self.where}: {self.text!r} cannot be evaluated{place}: {_why(error)}") from None
+        finite = np.isfinite(value)
+        if not np.all(finite):
+            raise ConfigError(f"{self.where}: {self.text!r} is not finite{place}")
+        return value
+
+    def check(self, points: np.ndarray, times) -> None:
+        """Raise a ConfigError naming the formula unless it is finite at ``points`` (n, gdim) at every time."""
+        points = np.asarray(points, dtype=float)
+        gdim = points.shape[1]
+        for node in ast.walk(self.tree):
+            if isinstance(node, ast.Subscript) and node.slice.value >= gdim:
+                raise ConfigError(f"{self.where}: {self.text!r} reads x[{node.slice.value}], "
+                                  f"which does not exist in {gdim}D")
+        for t in times:
+            try:
+                self._evaluate_checked(self.tree, points.T, float(t), f" at t = {float(t):g}")
+            except ConfigError:
+                self._name_the_point(points, float(t))
+                raise
+
+    def _name_the_point(self, points: np.ndarray, t: float) -> None:
+        """Re-raise the failure of :meth:`check` at the first point where the formula fails."""
+        for point in points:
+            place = f" at x = ({', '.join(f'{c:g}' for c in point)}), t = {t:g}"
+            self._evaluate_checked(self.tree, point[:, None], t, place)
 
     def depends_on_time(self) -> bool:
         return any(isinstance(n, ast.Name) and n.id == "t" for n in ast.walk(self.tree))
@@ -88,7 +145,11 @@ class Formula:
             return -value if isinstance(node.op, ast.USub) else value
         if isinstance(node, ast.Call):
             return functions[node.func.id](self._evaluate(node.args[0], x, t, functions))
-        return x[node.slice.value]  # ast.Subscript x[i]
+        index = node.slice.value  # ast.Subscript x[i]
+        size = x.ufl_shape[0] if hasattr(x, "ufl_shape") else len(x)
+        if index >= size:
+            raise ConfigError(f"{self.where}: {self.text!r} reads x[{index}], which does not exist in {size}D")
+        return x[index]
 
     def ufl(self, x, t):
         """The formula as a UFL expression (``x`` SpatialCoordinate, ``t`` a UFL constant)."""
@@ -117,5 +178,38 @@ class VectorFormula:
     def ufl(self, x, t):
         return ufl.as_vector([c.ufl(x, t) for c in self.components])
 
+    def check(self, points: np.ndarray, times) -> None:
+        for component in self.components:
+            component.check(points, times)
+
     def numpy(self, x: np.ndarray, t: float) -> np.ndarray:
         return np.stack([c.numpy(x, t) for c in self.components])
+
+
+def _checked_constants(constants, where: str) -> dict[str, float]:
+    """Named constants of a formula: a table of finite numbers that shadow neither x, t nor a function."""
+    if constants is None:
+        return {}
+    if not isinstance(constants, Mapping):
+        raise ConfigError(f"{where}: constants must be a table of name = number, got {constants!r}")
+    for name, value in constants.items():
+        if name in ("x", "t") or name in _UFL_FUNCTIONS:
+            what = "the coordinates" if name == "x" else "the time" if name == "t" else "a function"
+            raise ConfigError(f"{where}: constant '{name}' would shadow {name}, {what} (choose another name)")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: constant '{name}' must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{where}: constant '{name}' must be finite, got {value!r}")
+    return dict(constants)
+
+
+def _why(error: Exception) -> str:
+    """The arithmetic failure in words."""
+    text = str(error)
+    if isinstance(error, ZeroDivisionError) or "divide" in text:
+        return "division by zero"
+    if isinstance(error, OverflowError) or "overflow" in text:
+        return "overflow"
+    if "invalid" in text:
+        return "invalid value (e.g. the log or the square root of a negative number)"
+    return text

@@ -192,6 +192,28 @@ class XdmfSeries:
         self._steps.append((t, {name: (step_file, array.shape) for name, array in arrays.items()}))
         atomic_write_bytes(self.path, self._xdmf_document())
 
+    def state(self) -> dict:
+        """What :meth:`restore` needs to continue this series (the times and datasets written so far)."""
+        return {"steps": [[t, {name: [step_file, list(shape)] for name, (step_file, shape) in fields.items()}]
+                          for t, fields in self._steps]}
+
+    def restore(self, state: Mapping) -> None:
+        """Continue from ``state``: the index on disk lists exactly its times again.
+
+        Heavy-data files written after ``state`` stay on disk unlisted until the
+        continued series writes over them.
+        """
+        self._steps = [(float(t), {name: (step_file, tuple(shape)) for name, (step_file, shape) in fields.items()})
+                       for t, fields in state["steps"]]
+        if not self._steps:
+            with contextlib.suppress(FileNotFoundError):
+                self.path.unlink()
+            return
+        if not (self.heavy_directory / "mesh.h5").is_file():
+            raise PrimordiaError(f"XDMF series {self.path}: cannot continue, {self.heavy_directory / 'mesh.h5'} "
+                                 f"is missing")
+        atomic_write_bytes(self.path, self._xdmf_document())
+
     def _check_time(self, t) -> float:
         if isinstance(t, bool) or not isinstance(t, (int, float, np.number)) or not math.isfinite(t):
             raise PrimordiaError(f"XDMF series {self.path}: time must be a finite number, got {t!r}")
@@ -313,6 +335,12 @@ class ScalarSeries:
     a row that omits a known key is NaN there.  ``attrs`` maps a key (or
     ``"time"``) to netCDF attributes such as ``{"units": "dimensionless",
     "description": "integral of m over the domain"}``.
+
+    Events that do not fall on the rows (e.g. every rejected time step) go to
+    their own dimension: ``add_event("rejection", {"time": 0.4, "dt": 0.1,
+    "reason": "..."})`` gives variables ``rejection_time``, ``rejection_dt`` and
+    ``rejection_reason`` along the dimension ``rejection`` (numbers as float64,
+    text as strings).
     """
 
     def __init__(self, path: str | Path, attrs: Mapping[str, Mapping[str, str]] | None = None):
@@ -320,6 +348,7 @@ class ScalarSeries:
         self._times: list[float] = []
         self._columns: dict[str, list[float]] = {}
         self._attrs: dict[str, dict[str, str]] = {}
+        self._events: dict[str, list[dict]] = {}
         self._add_attrs(attrs)
 
     @property
@@ -338,6 +367,16 @@ class ScalarSeries:
             column.append(values.get(key, math.nan))
         self._write()
 
+    def add_event(self, dimension: str, event: Mapping[str, float | str]) -> None:
+        """Record one event along ``dimension`` (numbers and strings by name) and rewrite the file."""
+        _variable_name(dimension)
+        row = {}
+        for key, value in event.items():
+            _variable_name(f"{dimension}_{key}")
+            row[key] = value if isinstance(value, str) else _scalar(f"{dimension}_{key}", value)
+        self._events.setdefault(dimension, []).append(row)
+        self._write()
+
     def dataset(self):
         """The series so far as an ``xarray.Dataset``."""
         import xarray as xr
@@ -346,8 +385,29 @@ class ScalarSeries:
             key: ("time", np.asarray(column, dtype=np.float64), self._attrs.get(key, {}))
             for key, column in self._columns.items()
         }
+        for dimension, events in self._events.items():
+            for key in dict.fromkeys(k for event in events for k in event):
+                values = [event.get(key) for event in events]
+                text = any(isinstance(v, str) for v in values)
+                column = (np.array(["" if v is None else str(v) for v in values], dtype=str) if text
+                          else np.array([math.nan if v is None else v for v in values], dtype=np.float64))
+                data_vars[f"{dimension}_{key}"] = (dimension, column)
         coords = {"time": ("time", np.asarray(self._times, dtype=np.float64), self._attrs.get("time", {}))}
         return xr.Dataset(data_vars, coords=coords)
+
+    def state(self) -> dict:
+        """The rows and events so far (what :meth:`restore` takes back)."""
+        return {"times": list(self._times), "columns": {k: list(v) for k, v in self._columns.items()},
+                "attrs": {k: dict(v) for k, v in self._attrs.items()},
+                "events": {k: [dict(e) for e in v] for k, v in self._events.items()}}
+
+    def restore(self, state: Mapping) -> None:
+        """Continue from ``state`` and rewrite the file: rows written after it are gone."""
+        self._times = [float(t) for t in state["times"]]
+        self._columns = {k: [float(x) for x in v] for k, v in state["columns"].items()}
+        self._attrs = {k: dict(v) for k, v in state["attrs"].items()}
+        self._events = {k: [dict(e) for e in v] for k, v in state.get("events", {}).items()}
+        self._write()
 
     def _write(self) -> None:
         dataset = self.dataset()

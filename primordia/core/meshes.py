@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -48,6 +49,15 @@ _AUXILIARY_CELL_TYPES = {2: {"vertex", "line"}, 3: {"vertex", "line", "triangle"
 #: A cell counts as degenerate below this fraction of (bounding-box diagonal)^tdim.
 _DEGENERATE_VOLUME_FRACTION = 1e-13
 
+#: Coordinates beyond this size (or a domain smaller than its inverse) are not a dimensionless
+#: domain (seed section 2): squares and cubes of lengths would overflow or vanish in assembly.
+ABSURD_COORDINATE = 1e50
+
+#: What a run needs per cell at the very least (mesh, connectivity, one P1 field's matrices),
+#: measured at a small fraction of example 1a's 10 kB per triangle: a mesh needing more than
+#: the memory available is refused before anything is allocated.
+MIN_BYTES_PER_CELL = {2: 2_000, 3: 4_000}
+
 
 # ---------------------------------------------------------------------------
 # Generators
@@ -70,6 +80,7 @@ def rectangle(
     """
     lower, upper = _check_extent(lower, upper, 2)
     nx, ny = _check_cell_counts(cells, 2)
+    check_affordable((2 if diagonal != "crossed" else 4) * nx * ny, 2)
     if diagonal not in DIAGONALS:
         raise MeshError(f"unknown rectangle diagonal {diagonal!r} (choose one of: {', '.join(DIAGONALS)})")
     points = _grid_points(lower, upper, (nx, ny))
@@ -95,6 +106,7 @@ def box(
     """
     lower, upper = _check_extent(lower, upper, 3)
     counts = _check_cell_counts(cells, 3)
+    check_affordable(6 * math.prod(counts), 3)
     points = _grid_points(lower, upper, counts)
     tetrahedra = _kuhn_tetrahedra(*counts)
     description = f"box {_extent_text(lower, upper)}, {' x '.join(map(str, counts))} hexahedra"
@@ -111,7 +123,51 @@ def _check_extent(lower, upper, gdim: int) -> tuple[np.ndarray, np.ndarray]:
                 f"mesh upper corner must exceed the lower corner along {'xyz'[axis]}, "
                 f"got lower {lower[axis]:g} and upper {upper[axis]:g}"
             )
+    _check_coordinate_range(np.vstack([lower, upper]), "the mesh corners")
     return lower, upper
+
+
+def _check_coordinate_range(points: np.ndarray, what: str) -> None:
+    """MeshError unless coordinates are finite, below :data:`ABSURD_COORDINATE` and span more than its inverse."""
+    if not np.all(np.isfinite(points)):
+        raise MeshError(f"{what}: some coordinates are not finite (nan or inf)")
+    largest = float(np.max(np.abs(points)))
+    if largest > ABSURD_COORDINATE:
+        raise MeshError(f"{what}: coordinates reach {largest:.3g}, beyond {ABSURD_COORDINATE:g}: lengths are "
+                        f"dimensionless (seed section 2), and their squares would overflow; rescale the domain")
+    extent = float(np.max(np.ptp(points, axis=0)))
+    if extent < 1.0 / ABSURD_COORDINATE:
+        raise MeshError(f"{what}: the domain spans only {extent:.3g}, below {1.0 / ABSURD_COORDINATE:g}: "
+                        f"its cell volumes would vanish; rescale the domain")
+
+
+def check_affordable(n_cells: int, tdim: int) -> None:
+    """MeshError when a run on ``n_cells`` cells would need more memory than this machine has available."""
+    needed = n_cells * MIN_BYTES_PER_CELL[tdim]
+    available = available_memory()
+    if needed > available:
+        raise MeshError(f"a mesh of {n_cells:,} cells needs at least {_bytes_text(needed)} of memory "
+                        f"({MIN_BYTES_PER_CELL[tdim] // 1000} kB per cell), more than the {_bytes_text(available)} "
+                        f"available: use fewer cells")
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (MemAvailable on Linux, else the physical memory)."""
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return 1 << 62
+
+
+def _bytes_text(count: int) -> str:
+    for unit, size in (("EB", 1 << 60), ("PB", 1 << 50), ("TB", 1 << 40), ("GB", 1 << 30), ("MB", 1 << 20)):
+        if count >= size:
+            return f"{count / size:.3g} {unit}"
+    return f"{count / 1024:.3g} kB"
 
 
 def _real_vector(values, length: int, what: str) -> np.ndarray:
@@ -190,6 +246,10 @@ def _kuhn_tetrahedra(nx: int, ny: int, nz: int) -> np.ndarray:
 
 def _structured_mesh(points, cells, lower, upper, sides: Mapping[str, tuple[int, int]], description) -> MeshData:
     """MeshData of a generated mesh, with its boundary facets named by the side they lie on."""
+    volumes = np.abs(signed_volumes(points, cells))
+    if not np.all(volumes > 0) or not np.all(np.isfinite(volumes)):
+        raise MeshError(f"mesh {description}: cells so small or so large that their volumes are "
+                        f"{'0' if not np.all(volumes > 0) else 'not finite'}; use fewer cells or rescale the domain")
     cells = orient_cells(points, cells)
     facets = exterior_facets(cells)
     extent = np.max(upper - lower)
@@ -256,8 +316,11 @@ def read_mesh(path: str | Path) -> MeshData:
     boundaries = _tagged_facets(raw, tdim)
     _check_vertex_indices(cells, boundaries, len(points), path)
     points, cells, boundaries = _drop_unused_points(points, cells, boundaries)
+    _check_coordinate_range(points, f"mesh file {path}")
     _check_not_degenerate(points, cells, path)
-    return MeshData(points, orient_cells(points, cells), boundaries, description=f"read from {path}")
+    cells = orient_cells(points, cells)
+    _check_not_overlapping(cells, path)
+    return MeshData(points, cells, boundaries, description=f"read from {path}")
 
 
 def _read_with_meshio(path: Path):
@@ -400,6 +463,39 @@ def _check_not_degenerate(points: np.ndarray, cells: np.ndarray, path: Path) -> 
     if degenerate:
         kind = "area" if points.shape[1] == 2 else "volume"
         raise MeshError(f"mesh file {path} has {degenerate} degenerate (zero-{kind}) cells")
+
+
+def _check_not_overlapping(cells: np.ndarray, path: Path) -> None:
+    """MeshError if cells overlap: a facet shared by more than two cells, or two cells on the same side of one.
+
+    Each facet of a positively oriented cell inherits an orientation (the boundary
+    operator: facet i, without vertex i, has sign (-1)^i); the two cells of a
+    conforming mesh that share a facet induce opposite orientations on it.  A
+    duplicated cell, or a fold where one cell lies on top of its neighbour, gives
+    equal orientations (or a facet shared three or more times).
+    """
+    facets, signs = [], []
+    for i in range(cells.shape[1]):
+        facet = np.delete(cells, i, axis=1)
+        inversions = sum((facet[:, a] > facet[:, b]).astype(np.int64)
+                         for a in range(facet.shape[1]) for b in range(a + 1, facet.shape[1]))
+        facets.append(np.sort(facet, axis=1))
+        signs.append((-1) ** i * (1 - 2 * (inversions % 2)))
+    keys = np.vstack(facets)
+    signs = np.concatenate(signs)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    orientation = np.bincount(inverse, weights=signs, minlength=len(counts))
+    shared = counts[inverse] == 2
+    folded = np.unique(inverse[shared & (orientation[inverse] != 0)])
+    crowded = np.flatnonzero(counts > 2)
+    if len(folded) or len(crowded):
+        cell_of = np.tile(np.arange(len(cells)), cells.shape[1])
+        bad = np.concatenate([folded, crowded])
+        example = np.unique(cell_of[np.isin(inverse, bad)])[:2]
+        raise MeshError(f"mesh file {path} has overlapping cells ({len(bad)} facets shared by cells on the same "
+                        f"side or by more than two cells, e.g. cells {', '.join(map(str, example))}): "
+                        f"a duplicated or folded element")
 
 
 # ---------------------------------------------------------------------------

@@ -9,13 +9,28 @@ Built-in outputs: the resolved configuration (``config.toml``), the fields in
 XDMF (``fields.xdmf`` + ``fields.h5``), the scalar time series
 (``series.nc``), the pictures (``m_t0160.png``..., ``m_snapshots.png``,
 ``final_fields.png``) and the run summary (``summary.json``).
+
+A run continued from a checkpoint (``primordia run --restart``) calls
+:meth:`Output.resume` instead of :meth:`Output.start`, with what
+:meth:`Output.state` returned when the checkpoint was written: the files then
+continue from the checkpoint, whatever the killed run wrote after it.
+:func:`existing_run` and :func:`clear_run` say whether a directory already holds a
+run and remove one, so old and new files never mix.
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
+import os
+import shutil
+import socket
+from pathlib import Path
+
 import numpy as np
 
 from primordia.core import io
+from primordia.core.checkpoint import CHECKPOINT_FILE
 from primordia.core.plugins import hookimpl
 
 
@@ -33,8 +48,22 @@ class Output:
     def snapshot(self, run) -> None:
         """At a field snapshot time (``output.times``)."""
 
+    def rejection(self, run, event: dict) -> None:
+        """A time step was rejected and is retried smaller (``event``: time, dt, reason)."""
+
     def finish(self, run, status: str) -> None:
         """After the last step, or when the run stops early (``status`` says why)."""
+
+    def state(self) -> dict:
+        """What this output must remember across a restart (numbers, strings, lists, dicts, numpy arrays)."""
+        return {}
+
+    def resume(self, run, state: dict) -> None:
+        """Continue a restarted run from ``state`` (what :meth:`state` returned at the checkpoint).
+
+        By default the output starts afresh, as at the start of a run.
+        """
+        self.start(run)
 
 
 class ResolvedConfig(Output):
@@ -58,9 +87,21 @@ class FieldsXdmf(Output):
         if run.is_root:
             self.series.write(run.time, values)
 
+    def state(self):
+        return self.series.state() if self.series is not None else {}
+
+    def resume(self, run, state):
+        self.series = io.XdmfSeries(run.out_dir, run.mesh_data, name="fields") if run.is_root else None
+        if run.is_root:
+            self.series.restore(state)
+
 
 class ScalarSeriesNetcdf(Output):
-    """Per recorded time: integral, min and max of each field, solver iterations."""
+    """Per recorded time: integral, min and max of each field, solver iterations, the time step.
+
+    Rejected time steps are recorded as they happen, along the dimension ``rejection``
+    (``rejection_time``, ``rejection_dt``, ``rejection_reason``).
+    """
 
     name = "series"
 
@@ -75,8 +116,22 @@ class ScalarSeriesNetcdf(Output):
                         f"{name}_max": stats["max"]})
         row.update(run.diagnostic_values())
         row.update(run.iteration_counts())
+        row.update(run.step_sizes())
         if run.is_root and (not self.series.times or run.time > self.series.times[-1]):
             self.series.append(run.time, row)
+
+    def rejection(self, run, event: dict):
+        """A time step was rejected (``event``: time, dt, reason)."""
+        if run.is_root:
+            self.series.add_event("rejection", event)
+
+    def state(self):
+        return self.series.state() if self.series is not None else {}
+
+    def resume(self, run, state):
+        self.series = io.ScalarSeries(run.out_dir / "series.nc") if run.is_root else None
+        if run.is_root:
+            self.series.restore(state)
 
 
 class Pictures(Output):
@@ -116,6 +171,13 @@ class Pictures(Output):
                                 title=f"{name} at the snapshot times",
                                 displacements=self.snapshot_displacements.get(name), displacement_scale=scale)
 
+    def state(self):
+        return {"snapshots": self.snapshots, "displacements": self.snapshot_displacements}
+
+    def resume(self, run, state):
+        self.snapshots = {name: dict(frames) for name, frames in state.get("snapshots", {}).items()}
+        self.snapshot_displacements = {name: dict(frames) for name, frames in state.get("displacements", {}).items()}
+
     def finish(self, run, status):
         if not run.model.output["pictures"]:
             return
@@ -130,14 +192,27 @@ class Pictures(Output):
 
 
 class Summary(Output):
-    """``summary.json``: sizes, steps, wall time, final statistics, mean iterations."""
+    """``summary.json``: status, sizes, steps, wall time, final statistics, mean iterations.
+
+    Rewritten whenever the other outputs write (it is the last output), so it
+    never describes less than the files next to it, and at the end with the
+    reason the run stopped.  While the run goes on its status is ``"running"``,
+    with the process id and host: :func:`existing_run` tells a run that was
+    killed without a word (SIGKILL, a node failure) from one still running.
+    """
 
     name = "summary"
 
     def start(self, run):
         self._write(run, "running")
 
+    def record(self, run):
+        self._write(run, "running")
+
     def snapshot(self, run):
+        self._write(run, "running")
+
+    def resume(self, run, state):
         self._write(run, "running")
 
     def finish(self, run, status):
@@ -146,9 +221,85 @@ class Summary(Output):
     def _write(self, run, status):
         summary = run.summary(status)
         if run.is_root:
+            if status == "running":
+                summary["process"] = {"pid": os.getpid(), "host": socket.gethostname()}
             io.write_json(run.out_dir / "summary.json", summary)
 
 
 @hookimpl
 def primordia_outputs():
     return [ResolvedConfig, FieldsXdmf, ScalarSeriesNetcdf, Pictures, Summary]
+
+
+# -- a directory that already holds a run -----------------------------------------------------------
+
+#: Files whose presence means a directory holds a run.
+RUN_FILES = ("summary.json", "config.toml", "series.nc", "fields.xdmf", CHECKPOINT_FILE)
+#: What a run (and ``primordia analyse`` of it) writes besides: removed with it by :func:`clear_run`.
+RUN_LEFTOVERS = ("fields_h5", "*.png", "metrics.nc", ".*.tmp-*")
+
+
+def existing_run(directory: str | Path) -> str | None:
+    """None if ``directory`` holds no run; else how that run ended, in a few words.
+
+    A summary saying ``"running"`` whose process is gone (on this host) is reported
+    as killed; one whose process is alive as running (``"running in process N"``).
+    """
+    directory = Path(directory)
+    if not directory.is_dir() or not any((directory / name).exists() for name in RUN_FILES):
+        return None
+    try:
+        summary = json.loads((directory / "summary.json").read_text())
+        status = str(summary["status"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "a run without a readable summary.json"
+    where = f"{summary.get('steps', '?')} steps, t = {summary.get('time', '?')}"
+    if status != "running":
+        return f"a run that ended: {status} ({where})"
+    process = summary.get("process") or {}
+    if run_is_alive(process):
+        return f"a run in progress (process {process.get('pid')} on {process.get('host')})"
+    return f"a run that was killed without a word at {where} (its process {process.get('pid', '?')} is gone)"
+
+
+def run_is_alive(process: dict) -> bool:
+    """Whether the process that wrote a "running" summary is still running (on this host)."""
+    pid = process.get("pid")
+    if not isinstance(pid, int) or process.get("host") != socket.gethostname() or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    with contextlib.suppress(OSError):  # a recycled pid belongs to some other program
+        return b"primordia" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    return True
+
+
+def clear_run(directory: str | Path) -> None:
+    """Remove the files of the run in ``directory`` (and nothing else)."""
+    directory = Path(directory)
+    for name in RUN_FILES:
+        with contextlib.suppress(FileNotFoundError):
+            (directory / name).unlink()
+    for pattern in RUN_LEFTOVERS:
+        for path in directory.glob(pattern):
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
+
+
+def directory_problem(directory: str | Path) -> str | None:
+    """Why ``directory`` cannot be a run's output directory (None: it is one, or can be created)."""
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        return f"the output directory {directory} is a file, not a directory"
+    parent = next((p for p in [directory, *directory.absolute().parents] if p.exists()), None)
+    if parent is not None and not parent.is_dir():
+        return f"the output directory {directory} lies inside {parent}, which is a file"
+    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+        return f"the output directory {directory} cannot be written ({parent} is not writable)"
+    return None

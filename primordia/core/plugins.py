@@ -5,14 +5,19 @@
 A plugin that fails to import or register produces one warning naming it and
 is skipped; the rest keeps working.  :func:`registry` turns the contribute
 hooks into name -> class tables and reports where each piece came from.
+
+A plugin is trusted with nothing: a contribute hook that raises, returns
+something other than a list of named pieces of the right kind, or reuses a name
+already taken (a built-in's, or another plugin's) is named in one warning and
+its contribution skipped; a choosing hook (:func:`choose`) that raises or returns
+something of the wrong kind is skipped the same way.  Every such plugin is listed
+as broken by ``primordia plugins`` (:attr:`LoadReport.broken`).
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.metadata
-import sys
-import warnings
 from dataclasses import dataclass, field
 
 import pluggy
@@ -32,6 +37,17 @@ DEFAULT_PLUGINS = (
     "primordia.core.outputs",
     "primordia.core.selection",
 )
+
+#: What a piece of each kind must be ("module:Class": a subclass of it; backends: an instance).
+PIECE_TYPES = {
+    "physics": "primordia.physics.base:Physics",
+    "kinetics": "primordia.physics.kinetics.base:Kinetics",
+    "growth_laws": "primordia.physics.growth_laws:GrowthLaw",
+    "boundary_conditions": "primordia.physics.boundary_conditions:Condition",
+    "backends": "primordia.core.plugins:BackendEntry",
+    "splitting_schemes": "primordia.coupling.splitting:SplittingScheme",
+    "outputs": "primordia.core.outputs:Output",
+}
 
 #: The contribute hooks and the name of the kind of piece each yields.
 KINDS = {
@@ -71,14 +87,25 @@ class BackendEntry:
 
 @dataclass
 class LoadReport:
-    """What was registered from where, and what failed to load."""
+    """What was registered from where, and which plugins are broken (each warned about once)."""
 
     sources: dict[str, str] = field(default_factory=dict)  # plugin name -> origin
-    failures: list[str] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)  # one message per broken plugin and hook
+    broken: dict[str, list[str]] = field(default_factory=dict)  # plugin name -> what is wrong with it
+
+    def report(self, plugin: str, message: str) -> None:
+        """Record (and warn, the first time) that ``plugin`` is broken."""
+        if message in self.failures:
+            return
+        self.failures.append(message)
+        self.broken.setdefault(plugin, []).append(message)
+        _warn(message)
 
 
 def _warn(message: str) -> None:
-    print(f"primordia: warning: {message}", file=sys.stderr)
+    from primordia.core.errors import warn
+
+    warn(message)
 
 
 def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
@@ -99,10 +126,8 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
             _check_contract(plugin)
             pm.register(plugin, name=entry_point.name)
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
-            reason = f"{type(exc).__name__}: {exc}".splitlines()[0]
-            message = f"plugin '{entry_point.name}' ({origin}) failed to load and is skipped: {reason}"
-            pm.load_report.failures.append(message)
-            _warn(message)
+            message = f"plugin '{entry_point.name}' ({origin}) failed to load and is skipped: {_reason(exc)}"
+            pm.load_report.report(entry_point.name, message)
             continue
         pm.load_report.sources[entry_point.name] = origin
     _manager = pm
@@ -124,19 +149,108 @@ def _distribution_label(entry_point) -> str:
     return f"{dist.metadata['Name']} {dist.version}"
 
 
+def _reason(exc: BaseException) -> str:
+    return (f"{type(exc).__name__}: {exc}".splitlines() or [type(exc).__name__])[0]
+
+
+def _origin(pm, plugin_name: str) -> str:
+    return pm.load_report.sources.get(plugin_name, plugin_name)
+
+
 def registry(kind: str, pm: pluggy.PluginManager | None = None) -> dict[str, tuple[object, str]]:
-    """name -> (piece, origin) for one kind of contribution (see :data:`KINDS`)."""
+    """name -> (piece, origin) for one kind of contribution (see :data:`KINDS`).
+
+    Built-ins are registered first, so their names are taken first; a broken
+    contribution is reported (:meth:`LoadReport.report`) and skipped.  The table
+    is computed once per set of registered plugins.
+    """
     pm = pm or get_plugin_manager()
-    hook_name = KINDS[kind]
-    table: dict[str, tuple[object, str]] = {}
-    for impl in getattr(pm.hook, hook_name).get_hookimpls():
-        origin = pm.load_report.sources.get(impl.plugin_name, impl.plugin_name)
-        for piece in impl.function() or ():
-            name = piece.name
-            if name in table:
-                _warn(f"{kind} '{name}' from {origin} replaces the one from {table[name][1]}")
-            table[name] = (piece, origin)
-    return table
+    impls = getattr(pm.hook, KINDS[kind]).get_hookimpls()
+    key = (kind, tuple((impl.plugin_name, id(impl.function)) for impl in impls))
+    cache = pm.__dict__.setdefault("_primordia_registries", {})
+    if key not in cache:
+        table: dict[str, tuple[object, str]] = {}
+        for impl in impls:
+            for name, piece in _contribution(pm, kind, impl, table).items():
+                table[name] = (piece, _origin(pm, impl.plugin_name))
+        cache[key] = table
+    return dict(cache[key])
+
+
+def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
+    """The named pieces one plugin's hook contributes; all of them or, if anything is wrong, none."""
+    plugin, origin = impl.plugin_name, _origin(pm, impl.plugin_name)
+    where = f"plugin '{plugin}' ({origin}): hook {KINDS[kind]}"
+    try:
+        pieces = impl.function()
+    except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
+        pm.load_report.report(plugin, f"{where} raised {_reason(exc)}; its {kind.replace('_', ' ')} are skipped")
+        return {}
+    if pieces is None:
+        return {}
+    problem = _junk(kind, pieces, taken)
+    if problem:
+        pm.load_report.report(plugin, f"{where} {problem}; its {kind.replace('_', ' ')} are skipped")
+        return {}
+    return {piece.name: piece for piece in pieces}
+
+
+def _junk(kind: str, pieces, taken: dict) -> str | None:
+    """What is wrong with a hook's answer (None: a list of named pieces of the right kind, with new names)."""
+    if not isinstance(pieces, (list, tuple)):
+        return f"returned {pieces!r}, not a list of {kind.replace('_', ' ')}"
+    required = _piece_type(kind)
+    names = []
+    for piece in pieces:
+        fits = isinstance(piece, required) if kind == "backends" else (
+            isinstance(piece, type) and issubclass(piece, required))
+        if not fits:
+            return f"returned {piece!r}, which is not a {required.__name__}{'' if kind == 'backends' else ' class'}"
+        name = getattr(piece, "name", None)
+        if not isinstance(name, str) or not name:
+            return f"returned {piece!r}, which has no name"
+        if name in taken or name in names:
+            owner = taken[name][1] if name in taken else "the same hook"
+            return f"reuses the name '{name}', taken by {owner}"
+        names.append(name)
+    return None
+
+
+def _piece_type(kind: str) -> type:
+    module_name, _, class_name = PIECE_TYPES[kind].partition(":")
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def choose(hook_name: str, validate, pm: pluggy.PluginManager | None = None, **kwargs):
+    """The first acceptable answer of a ``firstresult`` hook, asking the plugins in pluggy's order.
+
+    ``validate(answer)`` says whether an answer is of the right kind.  A
+    third-party implementation that raises anything but a user error
+    (:class:`~primordia.core.errors.PrimordiaError`), or answers junk, is reported
+    and skipped; primordia's own choosers raise as they are.
+    """
+    from primordia.core.errors import PrimordiaError
+
+    pm = pm or get_plugin_manager()
+    for impl in reversed(getattr(pm.hook, hook_name).get_hookimpls()):
+        plugin = impl.plugin_name
+        where = f"plugin '{plugin}' ({_origin(pm, plugin)}): hook {hook_name}"
+        try:
+            answer = impl.function(*(kwargs[name] for name in impl.argnames))
+        except PrimordiaError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
+            if plugin in DEFAULT_PLUGINS:
+                raise
+            pm.load_report.report(plugin, f"{where} raised {_reason(exc)}; it is skipped")
+            continue
+        if answer is None:
+            continue
+        if not validate(answer):
+            pm.load_report.report(plugin, f"{where} returned {answer!r}, which is not what it chooses; it is skipped")
+            continue
+        return answer
+    return None
 
 
 def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):

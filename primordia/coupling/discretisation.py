@@ -261,3 +261,28 @@ class Discretisation:
         self.time = t
         self.t.value = t
         self.dt.value = dt
+
+    # -- state: what the next step reads ------------------------------------------------
+    def state_functions(self) -> dict[str, object]:
+        """Every backend function the next step reads, by ``GROUP/current``, ``GROUP/previous``, ``GROUP/rate``.
+
+        A splitting scheme stores a group's start value when it advances that group,
+        so between steps ``previous`` may still hold an older value that another
+        module's forms read (e.g. u^{n-1} while the species are solved): all three are state.
+        """
+        functions = {}
+        for name, group in self._groups.items():
+            functions[f"{name}/current"] = group.current
+            functions[f"{name}/previous"] = group.previous
+            if group.rate is not None:
+                functions[f"{name}/rate"] = group.rate
+        return functions
+
+    def copy_state(self) -> dict[str, object]:
+        """A copy of this rank's values (owned and ghost) of every state function: see :meth:`restore_state`."""
+        return {key: self.backend.local_array(function).copy() for key, function in self.state_functions().items()}
+
+    def restore_state(self, saved: dict[str, object]) -> None:
+        """Put back the values of :meth:`copy_state` (undo a rejected or interrupted step)."""
+        for key, function in self.state_functions().items():
+            self.backend.local_array(function)[:] = saved[key]

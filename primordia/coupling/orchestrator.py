@@ -5,11 +5,27 @@
 operator-splitting scheme shares a step between the physics modules is chosen
 through the ``primordia_select_splitting_scheme`` hook; which backend assembles
 the forms, through ``primordia_select_backend``.
+
+A run survives what a long run meets:
+
+* a step that fails (a solve that does not converge, non-finite values, a negative
+  density a physics module promised to keep >= 0) is undone and retried in smaller
+  sub-steps (:mod:`primordia.core.timestepping`); ``series.nc`` records dt and every
+  rejection;
+* checkpoints (every N steps, every M minutes, and whenever the run stops) hold
+  everything the next step needs (:meth:`Simulation.write_checkpoint`), and a run
+  set up with ``existing="restart"`` continues from the one in its directory, bit for bit;
+* Ctrl-C and SIGTERM stop the run between two steps (:mod:`primordia.core.signals`),
+  and ``summary.json`` always says why a run stopped;
+* an output that fails is disabled with a warning and the run goes on.
+
+Under MPI every decision that ends or changes a step is taken by all ranks together.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import signal
 import time as clock
 from contextlib import contextmanager
 from pathlib import Path
@@ -17,49 +33,111 @@ from pathlib import Path
 import numpy as np
 import ufl
 
-from primordia.core.errors import PrimordiaError, SolverError
-from primordia.core.plugins import get_plugin_manager, registry
+from primordia.core import checkpoint as checkpoint_file
+from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
+from primordia.core.plugins import choose, get_plugin_manager, registry
+from primordia.core.signals import INTERRUPTS, signal_name
+from primordia.core.timestepping import StepController
 from primordia.coupling.discretisation import Discretisation
 from primordia.coupling.solvers import SubproblemSolver, accumulate
 
+#: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
+NEGATIVE_TOLERANCE = 1e-8
+
 
 class Simulation:
-    """One run of a :class:`~primordia.model.Model` on one backend."""
+    """One run of a :class:`~primordia.model.Model` on one backend.
 
-    def __init__(self, model, backend: str = "fenicsx", out_dir: str | Path = "out/run", comm=None):
+    ``existing`` says what to do with an ``out_dir`` that already holds a run:
+    ``"reuse"`` (write over it), ``"refuse"`` (a one-line error), ``"overwrite"``
+    (remove its files first) or ``"restart"`` (continue it from its checkpoint).
+    """
+
+    def __init__(self, model, backend: str = "fenicsx", out_dir: str | Path = "out/run", comm=None,
+                 existing: str = "reuse"):
         self.model = model
         self.backend_name = backend
         self.out_dir = Path(out_dir)
         self.comm = comm
+        self.existing = existing
         self.step_index = 0
         self.time = model.t_start
         self.dt = model.dt
+        self.last_dt = model.dt  # the last sub-step taken (dt unless steps were rejected)
+        self.controller = StepController(model.dt, model.dt_min, adaptive=model.adaptive)
         self.iterations: dict[str, list[int]] = {}  # linear iterations per step, by subproblem
         self.newton: dict[str, list[tuple[int, int]]] = {}  # (Newton iterations, SNES reason) per step, nonlinear ones
         self.coupling_iterations: dict[str, list[int]] = {}  # outer iterations per step, by scheme
+        self.rejections: list[dict] = []  # every rejected sub-step: time, dt, reason
+        self.restarts = 0
+        self.status = "setting up"
+        self.outputs: list = []
+        self._state_version = 0  # counts accepted sub-steps and restores: vertex values are cached per version
         self._vertex_cache: tuple[int, dict] | None = None
+        self._solver_dt = model.dt
+        self._wall_before = 0.0  # wall time of the earlier parts of a restarted run
+        self._checkpoint_step: int | None = None
 
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> "Simulation":
         self._choose_backend()
+        self._claim_directory()
         self._choose_splitting()
         self._discretise()
         self._create_fields()
         self._setup_physics()
-        self._initialise_fields()
+        checkpoint = self._read_checkpoint() if self.existing == "restart" else None
+        if checkpoint is None:
+            self._initialise_fields()
         self._create_solvers()
-        self._attach_outputs()
+        if checkpoint is not None:
+            self._restore(checkpoint)
+        self._attach_outputs(checkpoint)
         return self
 
     def _choose_backend(self):
+        from primordia.core.backend import Backend
+
         pm = get_plugin_manager()
         if self.comm is None:
             from mpi4py import MPI
 
             self.comm = MPI.COMM_WORLD
-        entries = {name: entry for name, (entry, _) in registry("backends", pm).items()}
-        self.backend = pm.hook.primordia_select_backend(name=self.backend_name, entries=entries, comm=self.comm)
         self.is_root = self.comm.rank == 0
+        entries = {name: entry for name, (entry, _) in registry("backends", pm).items()}
+        self.backend = choose("primordia_select_backend", lambda answer: isinstance(answer, Backend), pm,
+                              name=self.backend_name, entries=entries, comm=self.comm)
+        if self.backend is None:
+            raise PluginError(f"no plugin chose a backend for '{self.backend_name}'")
+
+    def _claim_directory(self):
+        """Make ``out_dir`` this run's: refuse, clear or keep a run already in it (decided on rank 0 for all)."""
+        from primordia.core.outputs import clear_run, directory_problem, existing_run
+
+        problem = None
+        if self.is_root:
+            problem = directory_problem(self.out_dir)
+            found = existing_run(self.out_dir) if problem is None else None
+            if found and "in progress" in found:
+                problem = f"{self.out_dir} holds {found}; stop it first"
+            elif found and self.existing == "refuse":
+                problem = (f"{self.out_dir} already holds {found}; use --overwrite to replace it, or "
+                           f"--restart {self.out_dir} to continue it")
+            elif self.existing == "restart" and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file():
+                problem = (f"{self.out_dir} holds no checkpoint to restart from"
+                           + (f" ({found})" if found else "")
+                           + "; checkpoints are written every checkpoint.every_minutes "
+                             f"({self.model.checkpoint['every_minutes']:g}) and when a run stops")
+            elif found and self.existing == "overwrite":
+                clear_run(self.out_dir)
+            if problem is None:
+                try:
+                    self.out_dir.mkdir(parents=True, exist_ok=True)
+                except OSError as error:
+                    problem = f"cannot create the output directory {self.out_dir}: {error.strerror or error}"
+        problem = self.comm.bcast(problem, root=0)
+        if problem is not None:
+            raise ConfigError(problem)
 
     def _discretise(self):
         self.mesh_data = self.model.mesh_data
@@ -120,10 +198,15 @@ class Simulation:
                 raise SolverError(f"initial state at t = {self.time:g}{at}: {error}") from None
 
     def _create_solvers(self):
+        """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
         self.scheme.build(self)
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
         self.diagnostics = [d for physics in self.model.physics_objects for d in physics.diagnostics()]
+        self._nonnegative = [(name, physics.name) for physics in self.model.physics_objects
+                             for name in physics.nonnegative_fields() if self.disc.is_alone(name)]
+        self._fields_of = {solver.sub.name: self.disc.group_fields(self.disc.group_of_function(solver.sub.unknown))
+                           for solver in self.solvers}
 
     @staticmethod
     def _integrand(field):
@@ -135,62 +218,345 @@ class Simulation:
         return SubproblemSolver(self.backend, subproblem, overrides=self.model.solver.get(subproblem.prefix[:-1]))
 
     def _choose_splitting(self):
+        from primordia.coupling.splitting import SplittingScheme
+
         pm = get_plugin_manager()
         schemes = {name: cls for name, (cls, _) in registry("splitting_schemes", pm).items()}
-        self.scheme = pm.hook.primordia_select_splitting_scheme(
-            name=self.model.coupling, options=self.model.coupling_options, schemes=schemes,
-            physics=self.model.physics_objects)
+        self.scheme = choose("primordia_select_splitting_scheme", lambda answer: isinstance(answer, SplittingScheme),
+                             pm, name=self.model.coupling, options=self.model.coupling_options, schemes=schemes,
+                             physics=self.model.physics_objects)
+        if self.scheme is None:
+            raise PluginError(f"no plugin chose a splitting scheme for '{self.model.coupling}'")
 
-    def _attach_outputs(self):
-        if self.is_root:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
+    def _attach_outputs(self, checkpoint: dict | None):
         self.outputs = [cls() for cls, _ in registry("outputs").values()]
         self.wall_start = clock.perf_counter()
+        self._last_checkpoint_wall = self.wall_start
         self.wall_time = 0.0
         self.status = "running"
-        for output in self.outputs:
-            output.start(self)
+        states = (checkpoint or {}).get("outputs", {})
+        try:
+            for output in list(self.outputs):
+                if checkpoint is None:
+                    self._call_output(output, "start")
+                else:
+                    self._call_output(output, "resume", states.get(output.name, {}))
+        except BaseException as exc:  # what started must say why the run did not
+            with INTERRUPTS.mode_of("shielded"):
+                self._finish(self._stop_status(exc))
+            raise
+
+    # -- checkpoints ----------------------------------------------------------------------
+    def write_checkpoint(self) -> None:
+        """Write everything the next step needs to ``checkpoint.npz`` (all ranks call this; rank 0 writes)."""
+        fields, layout = {}, {}
+        for key, function in self.disc.state_functions().items():
+            owned = np.array(self.backend.petsc_vector(function).getArray(readonly=True))
+            if self.comm.size == 1:
+                fields[key] = owned  # serial: the backend's own DOF order, which a restart repeats
+                continue
+            # in parallel the mesh partition differs from run to run: DOFs are stored in an order of their own
+            parts = self.comm.gather((self._dof_keys(key, function), owned), root=0)
+            if self.is_root:
+                keys = np.concatenate([k for k, _ in parts])
+                order = np.argsort(_rows(keys), kind="stable")
+                fields[key], layout[key] = np.concatenate([v for _, v in parts])[order], keys[order]
+        physics = self.comm.gather({p.name: p.state() for p in self.model.physics_objects}, root=0)
+        self._checkpoint_step = self.step_index
+        self._last_checkpoint_wall = clock.perf_counter()
+        if not self.is_root:
+            return
+        tree = {
+            "config": self.model.resolved_config(), "backend": self.backend.name, "mpi_ranks": self.comm.size,
+            "run": {"step": self.step_index, "time": self.time, "last_dt": self.last_dt,
+                    "controller": self.controller.state(), "iterations": self.iterations,
+                    "newton": {name: [list(r) for r in record] for name, record in self.newton.items()},
+                    "coupling_iterations": self.coupling_iterations, "rejections": self.rejections,
+                    "restarts": self.restarts, "wall_time_s": self._wall_time()},
+            "fields": fields, "layout": layout, "physics": physics,
+            "outputs": {output.name: output.state() for output in self.outputs},
+        }
+        try:
+            checkpoint_file.write(self.out_dir / checkpoint_file.CHECKPOINT_FILE, tree)
+        except (OSError, PrimordiaError) as error:  # a full disk must not end the run
+            warn(f"cannot write the checkpoint at t = {self.time:g}: {error}; the run goes on without it")
+
+    def _read_checkpoint(self) -> dict:
+        tree, problem = None, None
+        if self.is_root:
+            try:
+                tree = checkpoint_file.read(self.out_dir / checkpoint_file.CHECKPOINT_FILE)
+                problem = self._incompatibility(tree)
+            except PrimordiaError as error:
+                problem = str(error)
+        problem = self.comm.bcast(problem, root=0)
+        if problem is not None:
+            raise ConfigError(problem)
+        return self.comm.bcast(tree, root=0)
+
+    def _incompatibility(self, tree: dict) -> str | None:
+        """Why this run cannot continue the checkpointed one (None: it can)."""
+        where = f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}"
+        if tree["mpi_ranks"] != self.comm.size:
+            return f"{where}: it was written by {tree['mpi_ranks']} MPI ranks, this run has {self.comm.size}"
+        if tree["backend"] != self.backend.name:
+            return f"{where}: it was written on backend {tree['backend']}, this run is on {self.backend.name}"
+        differences = self.model.differences(tree["config"])
+        if differences:
+            key = differences[0]
+            return f"{where}: {key} differs from the checkpointed run's (a restart continues the same model)"
+        if tree["run"]["step"] > self.model.num_steps:
+            return f"{where}: it is at t = {tree['run']['time']:g}, past time.t_final = {self.model.t_final:g}"
+        return None
+
+    def _restore(self, tree: dict) -> None:
+        """Put the run back where the checkpoint left it (every rank takes its own part of each field)."""
+        wrong = False
+        for key, function in self.disc.state_functions().items():
+            owned = self.backend.petsc_vector(function)
+            values = tree["fields"].get(key)
+            if values is not None and self.comm.size > 1:
+                stored, mine = _rows(tree["layout"][key]), _rows(self._dof_keys(key, function))
+                at = np.minimum(np.searchsorted(stored, mine), len(stored) - 1)
+                wrong |= not np.array_equal(stored[at], mine)
+                values = values[at]
+            if values is None or len(values) != owned.getLocalSize():
+                wrong = True
+                continue
+            owned.array[:] = values
+            self.backend.update_ghosts(function)
+        if self.comm.allreduce(wrong, op=_mpi_max()):
+            raise ConfigError(f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}: its fields are "
+                              f"laid out differently (another mesh partition or another discretisation)")
+        for physics in self.model.physics_objects:
+            physics.restore_state(tree["physics"][self.comm.rank].get(physics.name, {}))
+        run = tree["run"]
+        self.step_index, self.time, self.last_dt = int(run["step"]), float(run["time"]), float(run["last_dt"])
+        self.controller.restore(run["controller"])
+        self.iterations = {k: [int(i) for i in v] for k, v in run["iterations"].items()}
+        self.newton = {k: [tuple(int(i) for i in r) for r in v] for k, v in run["newton"].items()}
+        self.coupling_iterations = {k: [int(i) for i in v] for k, v in run["coupling_iterations"].items()}
+        self.rejections = list(run["rejections"])
+        self.restarts = int(run["restarts"]) + 1
+        self._wall_before = float(run["wall_time_s"])
+        self._solver_dt = self.last_dt
+        self._checkpoint_step = self.step_index
+        self.disc.set_time(self.time, self.last_dt)
+        self._state_version += 1
+
+    def _dof_keys(self, key: str, function) -> np.ndarray:
+        """(field, component, node coordinates in units of 1e-9 of the domain) of each owned DOF, as integers.
+
+        The same DOF has the same key whatever the mesh partition: found by interpolating a
+        marker, the component index and each coordinate into a scratch function of the space.
+        """
+        group = key.partition("/")[0]
+        cache = self.__dict__.setdefault("_dof_key_cache", {})
+        if group in cache:
+            return cache[group]
+        fields, gdim = self.disc.group_fields(group), self.mesh_data.gdim
+        space = function.ufl_function_space()
+        scratch = self.backend.function(space, "dof_keys")
+        owned = self.backend.petsc_vector(scratch).getLocalSize()
+        scale = 1e-9 * float(np.max(np.ptp(self.mesh_data.points, axis=0)))
+        keys = np.full((owned, 2 + gdim), -1, dtype=np.int64)
+
+        def interpolated(index: int, size: int, value) -> np.ndarray:
+            self.backend.local_array(scratch)[:] = 0.0
+            def values(x):
+                return np.broadcast_to(value(x), (size, x.shape[1])).copy() if size > 1 else value(x)[0].copy()
+            if len(fields) == 1:
+                self.backend.interpolate(scratch, values)
+            else:
+                self.backend.interpolate_component(scratch, index, values)
+            return self.backend.local_array(scratch)[:owned].copy()
+
+        for index, name in enumerate(fields):
+            size = int(np.prod(self.disc.field(name).ufl_shape)) if self.disc.field(name).ufl_shape else 1
+            ones = np.ones((size, 1))
+            mine = interpolated(index, size, lambda x: ones * np.ones(x.shape[1])) != 0.0
+            keys[mine, 0] = index
+            keys[mine, 1] = interpolated(index, size, lambda x: np.arange(size)[:, None] * np.ones(x.shape[1]))[mine]
+            for axis in range(gdim):
+                coordinate = interpolated(index, size, lambda x, axis=axis: ones * x[axis][None, :])
+                keys[mine, 2 + axis] = np.round(coordinate[mine] / scale).astype(np.int64)
+        cache[group] = keys
+        return keys
 
     # -- time loop ------------------------------------------------------------------------
     def run(self, progress: bool = False) -> "Simulation":
         bar = _progress_bar(self, progress)
         snapshot_steps = {int(round((t - self.model.t_start) / self.dt)) for t in self.model.output["times"]}
         try:
-            while self.step_index < self.model.num_steps:
-                self.step()
-                bar.update(1)
-                bar.set_postfix_str(f"t={self.time:.2f}", refresh=False)
-                if self.step_index % self.model.output["series_every"] == 0 or self.step_index in snapshot_steps:
-                    self._notify("record")
-                if self.step_index in snapshot_steps:
-                    self._notify("snapshot")
+            with INTERRUPTS.installed(), INTERRUPTS.mode_of("deferred"):
+                while self.step_index < self.model.num_steps:
+                    self.step()
+                    bar.update(1)
+                    bar.set_postfix_str(f"t={self.time:.2f}", refresh=False)
+                    if self.step_index % self.model.output["series_every"] == 0 or self.step_index in snapshot_steps:
+                        self._notify("record")
+                    if self.step_index in snapshot_steps:
+                        self._notify("snapshot")
+                    self._between_steps()
         except BaseException as exc:  # record why the run stopped, then let the error through
             bar.close()
-            reason = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc).splitlines()[0]
-            if not isinstance(exc, (PrimordiaError, KeyboardInterrupt)):
-                reason = f"{type(exc).__name__}: {reason}"
-            self._finish(f"stopped at t = {self.time:g}: {reason}")
+            with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
+                self._stop(exc)
+            if isinstance(exc, KeyboardInterrupt):
+                signum = getattr(exc, "signum", None) or INTERRUPTS.received or signal.SIGINT
+                raise InterruptedRun(signum, f"{self.status}; continue it with: primordia run --restart "
+                                             f"{self.out_dir}") from None
             raise
         bar.close()
-        self._finish("completed")
+        with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
+            if self._checkpoint_step != self.step_index:
+                self.write_checkpoint()  # a completed run can be extended: --restart with a later t_final
+            self._finish("completed")
         return self
 
-    def step(self) -> None:
-        """Advance every field by one time step ``dt`` (the splitting scheme decides how)."""
-        t_next = self.model.t_start + (self.step_index + 1) * self.dt
+    def _between_steps(self) -> None:
+        """Checkpoint when due, and stop when asked: decided by all ranks together."""
+        every_steps, every_minutes = self.model.checkpoint["every_steps"], self.model.checkpoint["every_minutes"]
+        due_by_time = every_minutes > 0 and clock.perf_counter() - self._last_checkpoint_wall >= 60 * every_minutes
+        asked = INTERRUPTS.received or 0
+        if self.comm.size > 1:
+            due_by_time, asked = self.comm.bcast(due_by_time, root=0), self.comm.allreduce(asked, op=_mpi_max())
+        if asked or due_by_time or (every_steps and self.step_index % every_steps == 0):
+            self.write_checkpoint()
+            if not asked:
+                # solvers may carry state from step to step that no checkpoint holds (a lagged Newton
+                # preconditioner): they start afresh here as they do in a restarted run, which then
+                # repeats this one bit for bit
+                self._create_solvers()
+        if asked:
+            raise InterruptedRun(asked)
+
+    def _stop(self, exc: BaseException) -> None:
+        """The run stops early: keep a checkpoint when the state is whole, and say why in the outputs."""
+        urgent_in_parallel = isinstance(exc, KeyboardInterrupt) and self.comm.size > 1 and INTERRUPTS.count > 1
+        if urgent_in_parallel:  # ranks may be anywhere: no collective is safe, rank 0 only patches the summary
+            self._patch_summary(self._stop_status(exc))
+            return
+        if self._checkpoint_step != self.step_index and (isinstance(exc, (KeyboardInterrupt, PrimordiaError))):
+            self.write_checkpoint()  # every step is whole: a failed one was undone
+        self._finish(self._stop_status(exc))
+
+    def _stop_status(self, exc: BaseException) -> str:
+        if isinstance(exc, KeyboardInterrupt):
+            signum = getattr(exc, "signum", None) or INTERRUPTS.received or signal.SIGINT
+            return f"interrupted at t = {self.time:g} ({signal_name(signum)})"
+        reason = (str(exc).splitlines() or [""])[0]
+        if not isinstance(exc, PrimordiaError):
+            reason = f"{type(exc).__name__}: {reason}"
+        return f"stopped at t = {self.time:g}: {reason}"
+
+    def _patch_summary(self, status: str) -> None:
+        if not self.is_root:
+            return
+        import json
+
+        from primordia.core import io
+
+        path = self.out_dir / "summary.json"
         try:
-            stats = self.scheme.advance(self, self.time, self.dt)
+            summary = json.loads(path.read_text())
+            summary.update(status=status, steps=self.step_index, time=self.time)
+            summary.pop("process", None)
+            io.write_json(path, summary)
+        except (OSError, ValueError, PrimordiaError):
+            pass
+
+    def step(self) -> None:
+        """Advance every field over one step ``dt``, in sub-steps when a try fails (see module docstring)."""
+        t_begin, t_end = self.time, self.model.t_start + (self.step_index + 1) * self.dt
+        done = 0.0
+        while done < 1.0:
+            fraction, dt = self.controller.fraction, self.controller.step
+            t_next = t_end if done + fraction == 1.0 else t_begin + (done + fraction) * (t_end - t_begin)
+            failure = self._substep(t_next, dt)
+            if failure is None:
+                done += fraction
+                self.controller.accepted(done)
+                continue
+            event = {"time": self.time, "dt": dt, "reason": failure}
+            self.rejections.append(event)
+            self._notify("rejection", event)
+            if not self.controller.rejected():
+                where = f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g})"
+                if not self.model.adaptive:
+                    raise SolverError(f"{where}: {failure}")
+                raise SolverError(f"{where}: {failure}; retried down to dt = {dt:g}, and dt may not fall below "
+                                  f"time.dt_min = {self.model.dt_min:g}")
+        self.step_index += 1
+        self.time = t_end
+
+    def _substep(self, t_next: float, dt: float) -> str | None:
+        """Try to advance from ``self.time`` to ``t_next``; None on success, else why the try was undone."""
+        if dt != self._solver_dt:
+            for solver in self.solvers:
+                solver.step_size_changed()
+            self._solver_dt = dt
+        saved = self.disc.copy_state()
+        saved_physics = [physics.state() for physics in self.model.physics_objects]
+        try:
+            stats = self.scheme.advance(self, self.time, dt)
+            failure = self._inadmissible(t_next)
         except SolverError as error:
-            raise SolverError(f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g}): {error}") from None
-        self.disc.set_time(t_next, self.dt)
+            if INTERRUPTS.urgent:  # a signal that came back from inside PETSc as a failed solve
+                self._undo(saved, saved_physics)
+                raise InterruptedRun(INTERRUPTS.received) from None
+            failure = self._name_fields(str(error))
+        except BaseException:
+            self._undo(saved, saved_physics)
+            raise
+        if failure is not None:
+            self._undo(saved, saved_physics)
+            return failure
         nonlinear = {solver.sub.name for solver in self.solvers if not solver.sub.linear}
         for name, solve in stats.items():
             self.iterations.setdefault(name, []).append(solve.linear_iterations)
             if name in nonlinear:
                 self.newton.setdefault(name, []).append((solve.newton_iterations, solve.reason))
-        self.step_index += 1
-        self.time = t_next
-        self._check_finite()
+        self.disc.set_time(t_next, dt)
+        self.time, self.last_dt = t_next, dt
+        self._state_version += 1
+        return None
+
+    def _undo(self, saved: dict, saved_physics: list) -> None:
+        self.disc.restore_state(saved)
+        for physics, state in zip(self.model.physics_objects, saved_physics):
+            physics.restore_state(state)
+        self.disc.set_time(self.time, self._solver_dt)
+
+    def _name_fields(self, failure: str) -> str:
+        """A solver's failure, with the fields its subproblem solves for."""
+        name = failure.partition(":")[0]
+        fields = self._fields_of.get(name)
+        if fields and fields != [name.rpartition(".")[2]]:
+            return f"{name} (fields {', '.join(fields)}):{failure.partition(':')[2]}"
+        return failure
+
+    def _inadmissible(self, t: float) -> str | None:
+        """Why the fields just computed cannot be accepted (non-finite, or negative where promised not), or None."""
+        groups = self.disc.groups()
+        flags = np.zeros(len(groups) + len(self._nonnegative))
+        for i, group in enumerate(groups):
+            flags[i] = not np.all(np.isfinite(self.backend.local_array(self.disc.group_function(group))))
+        for j, (name, _) in enumerate(self._nonnegative):
+            values = self.backend.local_array(self.disc.function_of(name)[0])
+            flags[len(groups) + j] = -float(np.min(values)) if len(values) else -np.inf
+        if self.comm.size > 1:
+            from mpi4py import MPI
+
+            self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        for i, group in enumerate(groups):
+            if flags[i]:
+                return f"field {', '.join(self.disc.group_fields(group))} is not finite at t = {t:g}"
+        for j, (name, owner) in enumerate(self._nonnegative):
+            if -flags[len(groups) + j] < -NEGATIVE_TOLERANCE:
+                return (f"field {name} fell to {-flags[len(groups) + j]:.3g} at t = {t:g}, below 0 where the "
+                        f"scheme of {owner} keeps it >= 0")
+        return None
 
     def advance(self, solvers: list, t0: float, duration: float, inner_steps: int = 1) -> dict:
         """Advance the fields of ``solvers`` from ``t0`` over ``duration`` in ``inner_steps`` steps.
@@ -226,28 +592,45 @@ class Simulation:
         """Outer iterations a scheme needed in this step (e.g. the fixed-point iteration)."""
         self.coupling_iterations.setdefault(scheme, []).append(count)
 
-    def _check_finite(self):
-        for group in self.disc.groups():
-            if not np.all(np.isfinite(self.backend.local_array(self.disc.group_function(group)))):
-                raise SolverError(f"a field of {group} ({', '.join(self.disc.group_fields(group))}) "
-                                  f"is not finite at t = {self.time:g}")
-
+    # -- outputs --------------------------------------------------------------------------
     def _notify(self, moment: str, *args):
-        for output in self.outputs:
+        for output in list(self.outputs):
+            self._call_output(output, moment, *args)
+
+    def _call_output(self, output, moment: str, *args) -> None:
+        """Call one output; one that fails (on any rank) is disabled on all, with a warning, and the run goes on."""
+        failure = None
+        try:
             getattr(output, moment)(self, *args)
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as error:  # noqa: BLE001 - an output must not end the run
+            failure = (str(error).splitlines() or [""])[0] or type(error).__name__
+            if not isinstance(error, PrimordiaError):
+                failure = f"{type(error).__name__}: {failure}"
+        if self.comm.size > 1:
+            failures = self.comm.allgather(failure)
+            failure = next((f for f in failures if f is not None), None)
+        if failure is not None:
+            warn(f"output '{output.name}' failed at t = {self.time:g} ({moment}): {failure}; "
+                 f"it is disabled for the rest of the run")
+            self.outputs.remove(output)
 
     def _finish(self, status: str):
         self.status = status
-        self.wall_time = clock.perf_counter() - self.wall_start
+        self.wall_time = self._wall_time()
         self._notify("finish", status)
+
+    def _wall_time(self) -> float:
+        return self._wall_before + clock.perf_counter() - self.wall_start
 
     # -- what outputs read ------------------------------------------------------------------
     def vertex_values(self) -> dict:
-        """All fields at the MeshData vertices (rank 0; None elsewhere), cached per step."""
-        if self._vertex_cache is None or self._vertex_cache[0] != self.step_index:
+        """All fields at the MeshData vertices (rank 0; None elsewhere), cached per state."""
+        if self._vertex_cache is None or self._vertex_cache[0] != self._state_version:
             values = {name: self.backend.vertex_values(*self.disc.function_of(name))
                       for name in self.disc.field_names()}
-            self._vertex_cache = (self.step_index, values)
+            self._vertex_cache = (self._state_version, values)
         return self._vertex_cache[1]
 
     def field_statistics(self) -> dict[str, dict[str, float]]:
@@ -285,8 +668,12 @@ class Simulation:
         counts.update({f"{scheme}_iterations": float(its[-1]) for scheme, its in self.coupling_iterations.items()})
         return counts
 
+    def step_sizes(self) -> dict[str, float]:
+        """The last sub-step's dt and the number of rejected sub-steps so far."""
+        return {"dt": self.last_dt, "rejections": float(len(self.rejections))}
+
     def summary(self, status: str) -> dict:
-        wall = clock.perf_counter() - self.wall_start
+        wall = self._wall_time()
         field_space = {group: self.disc.group_function(group).ufl_function_space() for group in self.disc.groups()}
         return {
             "status": status,
@@ -298,6 +685,9 @@ class Simulation:
             "steps": self.step_index,
             "time": self.time,
             "dt": self.dt,
+            "rejected_steps": len(self.rejections),
+            "restarts": self.restarts,
+            "checkpoint_step": self._checkpoint_step,
             "wall_time_s": wall,
             "ms_per_step": 1e3 * wall / self.step_index if self.step_index else None,
             "final": self.field_statistics(),
@@ -308,6 +698,18 @@ class Simulation:
                                             if self.coupling_iterations.get("fixed_point") else None),
             "splitting_scheme": self.scheme.name,
         }
+
+
+def _rows(keys: np.ndarray) -> np.ndarray:
+    """Integer key rows as single comparable items (sortable, searchable)."""
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    return keys.view(np.dtype((np.void, keys.dtype.itemsize * keys.shape[1]))).ravel()
+
+
+def _mpi_max():
+    from mpi4py import MPI
+
+    return MPI.MAX
 
 
 class _NoBar:
@@ -329,6 +731,6 @@ def _progress_bar(sim: Simulation, enabled: bool):
 
     from tqdm import tqdm
 
-    return tqdm(total=sim.model.num_steps, unit="step", dynamic_ncols=True, file=sys.stderr,
+    return tqdm(total=sim.model.num_steps, initial=sim.step_index, unit="step", dynamic_ncols=True, file=sys.stderr,
                 mininterval=0.5 if sys.stderr.isatty() else 15.0,
                 bar_format="{l_bar}{bar}| step {n_fmt}/{total_fmt} {postfix} [{elapsed}<{remaining}]")

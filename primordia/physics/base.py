@@ -10,6 +10,14 @@ A module that needs a field owned by another module declares it in
 ``requires`` (e.g. the mechano-chemical coupling requires ``u`` from a
 poroelasticity module) and reads it with ``disc.field(name)``; a missing
 provider is reported by name before anything is assembled.
+
+What a restart needs is declared too: the run checkpoints every field a module
+declares in ``fields()``, with its value at the start of the step and its rate
+(e.g. the solid velocity), by itself; a module that carries anything else from
+step to step returns it from :meth:`Physics.state` and takes it back in
+:meth:`Physics.restore_state`.  A module whose discretisation keeps a field
+non-negative says so in :meth:`Physics.nonnegative_fields`: a step that breaks
+the promise has failed and is retried with a smaller time step.
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+import numpy as np
 import ufl
 from ufl.algorithms import expand_derivatives
 
@@ -170,6 +179,42 @@ class Physics(ABC):
     def diagnostics(self) -> list[Diagnostic]:
         """Derived quantities to record in the run's series (after ``setup``)."""
         return []
+
+    def check_inputs(self, mesh_data, times) -> None:
+        """Refuse, in one line, inputs only the mesh and the time span show wrong (before any assembly).
+
+        By default the module's boundary conditions (option ``boundary``, a list of
+        ``[[physics.NAME.boundary]]`` tables) are built and each formula is evaluated
+        on its boundary's vertices at ``times``: a component of x the mesh lacks, a
+        division by zero or an overflow is a :class:`ConfigError` naming the condition.
+        """
+        if "boundary" not in self.options:
+            return
+        from primordia.physics.boundary_conditions import conditions_from_config
+
+        for condition in conditions_from_config(self.opts["boundary"], mesh_data, mesh_data.gdim):
+            vertices = mesh_data.points[np.unique(mesh_data.boundaries[condition.boundary])]
+            condition.formula.check(vertices, times)
+
+    def nonnegative_fields(self) -> tuple[str, ...]:
+        """Fields this module's discretisation keeps >= 0 (read after ``setup``), e.g. a monotone scheme's density.
+
+        A step that leaves one of them negative has failed: it is rejected and retried
+        with a smaller time step.
+        """
+        return ()
+
+    def state(self) -> dict[str, Any]:
+        """What the next step needs beyond the fields, for checkpoints (numbers, strings, lists, numpy arrays).
+
+        Fields, their start-of-step values and their rates are saved by the run;
+        return here anything else this module carries from one step to the next
+        (a random generator's state, a history kept outside the fields).
+        """
+        return {}
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Take back what :meth:`state` returned (on restart, after ``setup``, or when a step is undone)."""
 
 
 def jacobian_is_constant(jacobian: ufl.Form, disc) -> bool:

@@ -232,6 +232,12 @@ class Chemotaxis(Physics):
                                        "the most negative edge weight relative to the largest (0: an M-matrix)")]
         return diagnostics
 
+    def nonnegative_fields(self):
+        """The chemotactic species: the fitted flux makes their matrix an M-matrix at small strain (module docstring)."""
+        if self.disc.kinematics.metric is not None:
+            return ()
+        return tuple(species.name for species in self.species if self._fitted(species))
+
     def _fitted(self, species: Species) -> bool:
         return species.attractant is not None and self.opts["flux_scheme"] == "exponential_fitting"
 

@@ -1,0 +1,93 @@
+"""Ctrl-C and SIGTERM: a run stops between two steps, says why, and can be continued.
+
+A user presses Ctrl-C; a batch scheduler sends SIGTERM before it kills a job.
+Both mean "stop", and :data:`INTERRUPTS` handles them alike, in one of three modes:
+
+* ``immediate`` (start-up: reading the input, building forms, initial solves): the
+  signal raises :class:`~primordia.core.errors.InterruptedRun` where the program is;
+* ``deferred`` (the time loop): the signal is noted, the run finishes its step,
+  writes a checkpoint and its outputs, and stops; a second signal stops it at once
+  (the step in progress is undone);
+* ``shielded`` (writing the last outputs): signals are counted, never raised, so
+  ``summary.json`` is never left half-updated or saying "running".
+
+A signal that arrives inside a PETSc callback may come back as a PETSc error:
+whoever reports an error asks :attr:`Interrupts.received` first, so an interrupted
+start-up is reported as interrupted, never as a mistake in the input.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+
+from primordia.core.errors import InterruptedRun
+
+HANDLED = (signal.SIGINT, signal.SIGTERM)
+
+
+def signal_name(signum: int | None) -> str:
+    """How a signal is named to the user."""
+    return {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM"}.get(signum, f"signal {signum}")
+
+
+class Interrupts:
+    """The process's SIGINT and SIGTERM handler (see the module docstring)."""
+
+    def __init__(self):
+        self.mode = "immediate"
+        self.received: int | None = None
+        self.count = 0
+        self._installed = 0
+        self._previous: dict[int, object] = {}
+
+    @contextlib.contextmanager
+    def installed(self):
+        """Handle SIGINT and SIGTERM within the block (nested blocks share one installation)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield self  # only the main thread may install handlers: Python's defaults stay
+            return
+        if self._installed == 0:
+            # a job started in the background (``cmd &``) inherits SIGINT ignored: it stays so, as Python leaves it
+            self._previous = {signum: signal.signal(signum, self._handle) for signum in HANDLED
+                              if signal.getsignal(signum) is not signal.SIG_IGN}
+        self._installed += 1
+        try:
+            yield self
+        finally:
+            self._installed -= 1
+            if self._installed == 0:
+                for signum, handler in self._previous.items():
+                    signal.signal(signum, handler)
+
+    @contextlib.contextmanager
+    def mode_of(self, mode: str):
+        """Handle signals in ``mode`` within the block."""
+        previous, self.mode = self.mode, mode
+        try:
+            yield self
+        finally:
+            self.mode = previous
+
+    def reset(self) -> None:
+        """Forget earlier signals (a new run in the same process)."""
+        self.received, self.count = None, 0
+
+    @property
+    def urgent(self) -> bool:
+        """Whether the run must stop now, not at the end of its step (a second signal, or one at start-up)."""
+        return self.received is not None and (self.count > 1 or self.mode == "immediate")
+
+    def _handle(self, signum, frame):
+        self.count += 1
+        if self.received is None:
+            self.received = signum
+        if self.mode == "shielded":
+            return
+        if self.mode == "immediate" or self.count > 1:
+            raise InterruptedRun(signum)
+
+
+#: The one handler of the process.
+INTERRUPTS = Interrupts()
