@@ -515,7 +515,7 @@ def mesh_from_config(table: Mapping, base_dir: str | Path = ".") -> MeshData:
     if not isinstance(table, Mapping):
         raise ConfigError(f"[mesh] must be a table, got {table!r}")
     mesh_type = table.get("type")
-    if mesh_type not in CONFIG_KEYS:
+    if not isinstance(mesh_type, str) or mesh_type not in CONFIG_KEYS:
         raise ConfigError(f"[mesh] type must be one of {', '.join(map(repr, CONFIG_KEYS))}, got {mesh_type!r}")
     _check_config_keys(table, mesh_type)
     if mesh_type == "file":

@@ -481,6 +481,7 @@ class Simulation:
             event = {"time": self.time, "dt": dt, "reason": failure}
             self.rejections.append(event)
             self._notify("rejection", event)
+            self._create_solvers()  # nothing of the failed try (e.g. a lagged preconditioner) may carry over
             if not self.controller.rejected():
                 where = f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g})"
                 if not self.model.adaptive:
