@@ -8,7 +8,9 @@ fails part-way leaves what it wrote readable, with a summary saying it stopped.
 from __future__ import annotations
 
 import json
+import os
 import tomllib
+from pathlib import Path
 
 import matplotlib.image
 import meshio
@@ -167,3 +169,218 @@ def test_a_run_failing_midway_leaves_readable_outputs(primordia_cli, small_confi
         assert tomllib.load(stream)["coupling"]["scheme"] == "fails_in_step_6"
     for picture in ("m_t0000.40.png", "m_t0000.80.png", "final_fields.png"):
         assert matplotlib.image.imread(out / picture).ndim == 3, picture
+
+
+# -- issue 10: every class of bad input, one line and exit 2 ------------------------------------------
+# One real process per class (below); the variants of each class run through the same command's
+# entry point in this process (``primordia.cli.main``), which is what the console script calls.
+
+EX01B = Path(__file__).resolve().parents[2] / "examples" / "ex01b.toml"
+EX01B_COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "output.times=[0.4]",
+                "--set", "output.pictures=false"]
+BOUNDARY = "physics.poroelasticity.boundary"
+
+
+def in_process(capsys, *arguments) -> tuple[int, str]:
+    """``primordia ARGUMENTS`` through the command's entry point: (exit status, stderr)."""
+    from primordia.cli import main
+
+    status = main([str(a) for a in arguments])
+    return status, capsys.readouterr().err
+
+
+def assert_one_line(status: int, stderr: str, *fragments: str) -> None:
+    assert status == 2, stderr
+    lines = stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("primordia: error: "), stderr
+    for fragment in fragments:
+        assert fragment in lines[0], f"{fragment!r} not in {lines[0]!r}"
+
+
+WRONG_TYPES = [
+    (["output.pictures=\"false\""], ["output.pictures must be true or false", "'false'"]),
+    (["output.pictures=1"], ["output.pictures must be true or false"]),
+    (["kinetics.priming_wave=\"false\""], ["kinetics painter2018: option 'priming_wave' must be true or false"]),
+    (["physics.chemotaxis=3"], ["physics.chemotaxis must be a table"]),
+    (["physics.chemotaxis.perturbation=\"0.1\""], ["option 'perturbation' must be a number"]),
+    (["physics.chemotaxis.wavenumber=3"], ["option 'wavenumber' must be a list"]),
+    (["model.physics=3"], ["model.physics must be a non-empty list of names"]),
+    (["model.name=3"], ["model.name must be a string"]),
+    (["output.snapshot_fields=3"], ["output.snapshot_fields must be a list of field names"]),
+    (["output.times=[true]"], ["output.times must be a list of numbers"]),
+    (["coupling.inner_steps=1.5"], ["option 'inner_steps' must be an integer"]),
+    (["coupling.scheme=3"], ["coupling.scheme must be the name of a splitting scheme"]),
+    (["solver.chemotaxis_m=3"], ["solver.chemotaxis_m must be a table"]),
+    (["kinetics.name=3"], ["kinetics.name must be the name of a kinetics"]),
+    (["time.adaptive=\"yes\""], ["time.adaptive must be true or false"]),
+    (["checkpoint.every_steps=-1"], ["checkpoint.every_steps must be an integer >= 0"]),
+]
+
+
+@pytest.mark.parametrize("assignments, fragments", WRONG_TYPES, ids=[a[0] for a, _ in WRONG_TYPES])
+def test_a_value_of_the_wrong_type_anywhere(capsys, small_config, tmp_path, assignments, fragments):
+    arguments = [a for assignment in assignments for a in ("--set", assignment)]
+    assert_one_line(*in_process(capsys, "run", small_config(), "--out", tmp_path / "out", *arguments), *fragments)
+
+
+@pytest.mark.parametrize("section", ["physics", "coupling", "checkpoint", "time"])
+def test_a_number_where_a_table_is_expected(capsys, small_config, section):
+    text = "\n".join(line for line in small_config.text.splitlines() if line != f"[{section}]")
+    body = text.split("\n[time]")[0] if section == "time" else text
+    config = small_config(f"{section} = 3\n" + body + ("\n" if section == "time" else ""), name=f"{section}.toml")
+    assert_one_line(*in_process(capsys, "run", config), section)
+
+
+FORMULAS = [
+    ('["0", "1/0"]', "", ["boundary condition 'traction' on 'top'", "division by zero"]),
+    ('["0", "x[2]"]', "", ["boundary condition 'traction' on 'top'", "x[2]", "does not exist in 2D"]),
+    ('["0", "exp(1000)"]', "", ["'traction' on 'top'", "overflow"]),
+    ('["0", "exp(10 * t)"]', "", ["'traction' on 'top'", "t = 71.875", "overflow"]),
+    ('["0", "s0"]', ', constants={s0="abc"}', ["constant 's0' must be a number"]),
+    ('["0", "t"]', ", constants={t=1.0}", ["constant 't' would shadow t, the time"]),
+    ('["0", "x[0]"]', ", constants={x=1.0}", ["constant 'x' would shadow x"]),
+    ('["0", "1"]', ", constants=3", ["constants must be a table"]),
+    ('["0", "1/(x[1] - 20)"]', "", ["'traction' on 'top'", "x = (0, 20)", "division by zero"]),
+]
+
+
+@pytest.mark.parametrize("value, extra, fragments", FORMULAS, ids=[f[0] + f[1] for f in FORMULAS])
+def test_a_boundary_formula_that_cannot_be_evaluated_is_refused_when_read(capsys, tmp_path, value, extra,
+                                                                           fragments):
+    condition = f'[{{boundary="top", type="traction", value={value}{extra}}}]'
+    status, stderr = in_process(capsys, "run", EX01B, *EX01B_COARSE, "--set", f"{BOUNDARY}={condition}",
+                                "--set", "time.t_final=100.0", "--set", "time.dt=0.5",
+                                "--set", "output.times=[100.0]", "--dry-run")
+    assert_one_line(status, stderr, *fragments)
+
+
+def test_a_boundary_formula_through_the_real_command(primordia_cli, tmp_path):
+    condition = '[{boundary="bottom", type="displacement", value=["0", "1/x[1]"]}]'
+    result = primordia_cli("run", EX01B, *EX01B_COARSE, "--set", f"{BOUNDARY}={condition}", "--out",
+                           tmp_path / "out")
+    assert_one_line_error(result, "boundary condition 'displacement' on 'bottom'", "division by zero")
+    assert not (tmp_path / "out").exists()  # refused when read: nothing was set up
+
+
+def _binary(path):
+    path.write_bytes(bytes(range(256)) * 4)
+    return path
+
+
+def _latin1(path):
+    path.write_bytes("[model]\nname = 'sm\xe4ll'\n".encode("latin-1"))
+    return path
+
+
+def _folder(path):
+    path.mkdir()
+    return path
+
+
+def _fifo(path):
+    os.mkfifo(path)
+    return path
+
+
+@pytest.mark.parametrize("make, fragments", [
+    (_binary, ["is not UTF-8 text", "binary"]), (_latin1, ["is not UTF-8 text"]),
+    (_folder, ["is a folder"]), (_fifo, ["is not a regular file"]),
+    (lambda path: Path("/dev/zero"), ["/dev/zero", "not a regular file"]),
+    (lambda path: Path("/proc/1/mem"), ["cannot read config file"]),
+], ids=["binary", "latin-1", "folder", "fifo", "dev-zero", "unreadable"])
+def test_a_config_that_is_no_text_file(capsys, tmp_path, make, fragments):
+    assert_one_line(*in_process(capsys, "run", make(tmp_path / "config.toml")), *fragments)
+
+
+def test_a_binary_config_through_the_real_command(primordia_cli, tmp_path):
+    assert_one_line_error(primordia_cli("run", _binary(tmp_path / "x.toml")), "is not UTF-8 text")
+
+
+@pytest.mark.parametrize("out, fragments", [
+    ("FILE", ["is a file, not a directory"]), ("/dev/null", ["/dev/null is a file"]),
+    ("FILE/sub", ["lies inside", "which is a file"]), ("/proc/primordia-out", ["cannot"]), ("", ["--out needs"]),
+], ids=["a-file", "dev-null", "under-a-file", "not-writable", "empty"])
+def test_an_output_directory_that_cannot_be_one(capsys, small_config, tmp_path, out, fragments):
+    (tmp_path / "file").write_text("a file")
+    out = out.replace("FILE", str(tmp_path / "file"))
+    assert_one_line(*in_process(capsys, "run", small_config(), "--out", out), *fragments)
+
+
+def test_an_output_file_through_the_real_command(primordia_cli, small_config, tmp_path):
+    (tmp_path / "file").write_text("a file")
+    assert_one_line_error(primordia_cli("run", small_config(), "--out", tmp_path / "file"), "is a file")
+
+
+@pytest.mark.parametrize("assignments, fragments", [
+    (["mesh.cells=[100000,100000]"], ["20,000,000,000 cells needs at least", "available: use fewer cells"]),
+    (["mesh.cells=[4611686018427387904,2]"], ["cells needs at least"]),
+    (['mesh.type="box"', "mesh.upper=[1.0,1.0,1.0]", "mesh.cells=[3000,3000,3000]"], ["memory"]),
+    (["time.dt=1e-9"], ["time.dt = 1e-09 gives", "steps", "dimensionless"]),
+    (["time.t_final=1e300", "time.dt=1e290"], ["steps"]),
+], ids=["mesh-1e10", "mesh-2^63", "box-3000^3", "dt-1e-9", "t-final-1e300"])
+def test_sizes_that_cannot_run_are_refused_before_allocating(capsys, small_config, assignments, fragments):
+    arguments = [a for assignment in assignments for a in ("--set", assignment)]
+    assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", *arguments), *fragments)
+
+
+def test_a_mesh_too_big_through_the_real_command(primordia_cli, small_config):
+    result = primordia_cli("run", small_config(), "--set", "mesh.cells=[100000,100000]", timeout=60)
+    assert_one_line_error(result, "needs at least", "memory")
+
+
+@pytest.mark.parametrize("arguments, fragments", [
+    (["--backend", ""], ["--backend needs a name"]),
+    (["--backend", " "], ["--backend needs a name"]),
+    (["--set", 'model.backend=""'], ["model.backend must name a backend"]),
+    (["--set", 'model.physics=["chemotaxis", "chemotaxis"]'], ["model.physics lists 'chemotaxis' twice"]),
+    (["--set", 'model.physics=[""]'], ["model.physics must be a non-empty list of names"]),
+], ids=["empty-backend", "blank-backend", "empty-backend-in-config", "duplicated-physics", "empty-physics"])
+def test_names_that_name_nothing(capsys, small_config, arguments, fragments):
+    assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", *arguments), *fragments)
+
+
+def test_an_empty_backend_name_through_the_real_command(primordia_cli, small_config):
+    assert_one_line_error(primordia_cli("run", small_config(), "--backend", ""), "--backend needs a name")
+
+
+@pytest.mark.parametrize("assignments, fragments", [
+    (["mesh.upper=[1e300,1e300]"], ["mesh corners", "1e+300", "rescale the domain"]),
+    (["mesh.lower=[-1e308,0.0]", "mesh.upper=[1e308,4.0]"], ["mesh corners", "rescale"]),
+    (["mesh.upper=[1e-300,1e-300]"], ["mesh corners", "spans only"]),
+    (["mesh.upper=[1e200,1e-200]"], ["mesh corners", "coordinates reach"]),
+], ids=["1e300", "1e308-span", "1e-300", "1e200-by-1e-200"])
+def test_absurd_mesh_coordinates_are_named_as_the_mesh_s_fault(capsys, small_config, assignments, fragments):
+    arguments = [a for assignment in assignments for a in ("--set", assignment)]
+    assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", *arguments), *fragments)
+
+
+def _mesh_file(tmp_path, points, triangles) -> Path:
+    path = tmp_path / "mesh.msh"
+    meshio.write(path, meshio.Mesh(np.asarray(points, float), [("triangle", np.asarray(triangles))]),
+                 file_format="gmsh22", binary=False)
+    return path
+
+
+SQUARE = [[0, 0], [1, 0], [0, 1], [1, 1]]
+
+
+@pytest.mark.parametrize("points, triangles, fragments", [
+    ([[0, 0], [1, 0], [0, np.nan], [1, 1]], [[0, 1, 3], [0, 3, 2]], ["not finite"]),
+    (SQUARE, [[0, 1, 3], [0, 3, 2], [0, 1, 3]], ["overlapping cells", "duplicated or folded"]),
+    (SQUARE + [[0.25, 0.25]], [[0, 1, 3], [0, 3, 2], [0, 1, 4]], ["overlapping cells"]),
+    ([[x * 1e300 for x in p] for p in SQUARE], [[0, 1, 3], [0, 3, 2]], ["coordinates reach 1e+300"]),
+], ids=["nan-coordinates", "duplicated-cell", "folded-cell", "coordinates-1e300"])
+def test_a_mesh_file_at_fault_is_named(capsys, small_config, tmp_path, points, triangles, fragments):
+    path = _mesh_file(tmp_path, points, triangles)
+    capsys.readouterr()  # meshio's own chatter while writing the file
+    text = small_config.text.replace('type = "rectangle"\nupper = [4.0, 4.0]\ncells = [8, 8]',
+                                     f'type = "file"\npath = "{path}"')
+    assert_one_line(*in_process(capsys, "run", small_config(text), "--dry-run"), "mesh file", *fragments)
+
+
+def test_a_blow_up_names_the_time(primordia_cli, small_config, tmp_path):
+    result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                           "--set", "physics.chemotaxis.flux_scheme=galerkin", "--set", "parameters.alpha=1e8",
+                           "--set", "time.adaptive=false")
+    line = assert_one_line_error(result, "t = 0 -> 0.2")
+    assert "chemotaxis.m" in line

@@ -1,0 +1,41 @@
+"""Bad input under ``mpirun -n 2`` (issue 10): one line from primordia, exit status 2, and no rank left waiting.
+
+Each class is decided on rank 0 and shared, or decided alike on every rank, so
+both ranks leave together; a hang is a timeout and fails the test.  mpirun's own
+banner about a non-zero exit status is not primordia's output and is left out.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+import run_control as rc
+
+pytestmark = pytest.mark.mpi
+
+
+def _assert_one_line_on_every_rank(result, *fragments):
+    assert result.returncode == 2, result.stderr[-2000:]
+    lines = rc.primordia_lines(result.stderr)
+    assert len(lines) == 1 and lines[0].startswith("primordia: error: "), result.stderr[-2000:]
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("case", ["out-is-a-file", "boundary-formula", "binary-config", "failed-solve"])
+def test_bad_input_under_two_ranks(case, small_config, tmp_path):
+    (tmp_path / "a_file").write_text("not a directory")
+    (tmp_path / "binary.toml").write_bytes(bytes(range(256)))
+    arguments, fragments = {
+        "out-is-a-file": ([small_config(), "--out", tmp_path / "a_file"], ["is a file"]),
+        "boundary-formula": ([rc.EXAMPLES / "ex01b.toml", "--set", "mesh.cells=[4,4]", "--set",
+                              'physics.poroelasticity.boundary=[{boundary="top", type="traction", value=["0", "x[2]"]}]'],
+                             ["'traction' on 'top'", "x[2]"]),
+        "binary-config": ([tmp_path / "binary.toml"], ["not UTF-8"]),
+        "failed-solve": ([small_config(), "--set", "solver.chemotaxis_m.ksp_max_it=1", "--set", "time.dt_min=0.1"],
+                         ["chemotaxis.m", "linear solver diverged", "time.dt_min = 0.1"]),
+    }[case]
+    if "--out" not in arguments:
+        arguments += ["--out", tmp_path / "out"]
+    result = rc.run("run", *arguments, "--no-progress", ranks=2, timeout=180)
+    _assert_one_line_on_every_rank(result, *fragments)

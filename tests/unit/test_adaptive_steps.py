@@ -1,0 +1,123 @@
+"""Adaptive time steps (issue 10): a failed step is undone, retried smaller, and dt grows back.
+
+The step controller on its own, then through the real ``primordia`` command: a
+failure injected by a throwaway splitting scheme, a negative cell density where
+the exponentially fitted scheme promises none, a run that cannot go on (one
+line naming the fields, the time and the reason), and a growth run pushed past
+its Newton radius.  ``series.nc`` records dt and every rejection; output times
+are hit exactly.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+import xarray as xr
+
+from primordia.core.timestepping import StepController
+from test_cli_bad_input import assert_one_line_error
+
+EX02A = Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml"
+
+
+def test_the_controller_halves_on_failure_and_grows_back_in_aligned_steps():
+    controller = StepController(dt=0.2, dt_min=0.2 / 8)
+    assert controller.fraction == 1.0 and controller.step == 0.2
+    assert controller.rejected() and controller.step == 0.1
+    assert controller.rejected() and controller.step == 0.05
+    done = 0.0
+    sizes = []
+    while done < 1.0:  # sub-steps of a quarter, then of a half once two in a row went well and they line up
+        sizes.append(controller.fraction)
+        done += controller.fraction
+        controller.accepted(done)
+    assert sizes == [0.25, 0.25, 0.5] and controller.level == 1
+    controller.accepted(1.0)
+    assert controller.level == 0  # two in a row at a half: whole steps again
+    assert controller.rejected() and controller.rejected() and controller.rejected()
+    assert controller.step == 0.2 / 8 and not controller.rejected()  # dt_min reached
+    assert not StepController(dt=0.2, dt_min=0.01, adaptive=False).rejected()
+
+
+#: A third-party splitting scheme that fails whenever it is asked for a whole step 3 (t = 0.4 -> 0.6),
+#: and, asked for the first half of step 4, leaves a negative cell density behind.
+FLAKY_SCHEME = """\
+from primordia.core.errors import SolverError
+from primordia.core.plugins import hookimpl
+from primordia.coupling.splitting import Sequential
+
+
+class Flaky(Sequential):
+    name = "flaky"
+
+    def advance(self, sim, t0, dt):
+        stats = super().advance(sim, t0, dt)
+        if sim.step_index == 2 and dt == sim.dt:
+            raise SolverError("chemotaxis.m: the linear solver diverged (injected in step 3)")
+        if sim.step_index == 3 and dt == sim.dt:
+            sim.backend.local_array(sim.disc.function_of("m")[0])[0] = -0.5
+        if sim.step_index == 6:
+            raise SolverError("chemotaxis.m: the linear solver diverged (injected for good in step 7)")
+        return stats
+
+
+@hookimpl
+def primordia_splitting_schemes():
+    return [Flaky]
+"""
+
+
+def test_an_injected_failure_is_retried_smaller_and_recorded(primordia_cli, small_config, plugin_distribution,
+                                                             tmp_path):
+    env = plugin_distribution("primordia-flaky", "0.1", {"flaky": FLAKY_SCHEME}, {"flaky": "flaky"})
+    out = tmp_path / "out"
+    result = primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set", "coupling.scheme=flaky",
+                           "--set", "output.series_every=1", "--set", "output.times=[0.6, 1.2]",
+                           "--set", "time.t_final=2.0", "--set", "time.dt_min=0.05", env=env)
+    line = assert_one_line_error(result, "step 7 (t = 1.2 -> 1.25)", "injected for good in step 7",
+                                 "retried down to dt = 0.05", "time.dt_min = 0.05")
+    assert "chemotaxis.m" in line
+
+    with xr.open_dataset(out / "series.nc") as series:
+        times = series["time"].values
+        grid = [0.0 + k * 0.2 for k in range(7)]  # t_start + k dt, as the run computes its step ends
+        np.testing.assert_array_equal(times, grid)
+        dt = list(series["dt"].values)
+        assert dt[2] == 0.2 and dt[3] == 0.1 and dt[4] == 0.1 and dt[5] == 0.2  # halved, then grown back
+        np.testing.assert_array_equal(series["rejection_time"].values[:2], [grid[2], grid[3]])
+        np.testing.assert_array_equal(series["rejection_dt"].values, [0.2, 0.2, 0.2, 0.1, 0.05])
+        reasons = [str(r) for r in series["rejection_reason"].values]
+        assert "injected in step 3" in reasons[0]
+        assert reasons[1].startswith("field m fell to -0.5 at t = 0.8, below 0 where the scheme of chemotaxis"), reasons
+        assert series["rejections"].values[-1] == 2.0
+    with meshio.xdmf.TimeSeriesReader(out / "fields.xdmf") as reader:
+        reader.read_points_cells()
+        written = [reader.read_data(k)[0] for k in range(reader.num_steps)]
+    assert written == [grid[3], grid[6]]  # output times on the grid of dt, exactly
+
+
+def test_a_growth_run_pushed_past_its_newton_radius_takes_smaller_steps(primordia_cli, tmp_path):
+    """Example 2a with dt = 40 and five Newton iterations allowed: Newton needs steps of 1.25 at first."""
+    out = tmp_path / "out"
+    result = primordia_cli("run", EX02A, "--set", "mesh.cells=[4,4]", "--set", "time.dt=40.0",
+                           "--set", "time.t_final=80.0", "--set", "output.times=[80.0]", "--set", "output.pictures=false",
+                           "--set", "output.series_every=1", "--set", "solver.poroelastic_growth.snes_max_it=5",
+                           "--out", out, "--no-progress")
+    assert result.returncode == 0, result.stderr
+    assert "5 rejected and retried" in result.stdout
+    with xr.open_dataset(out / "series.nc") as series:
+        np.testing.assert_array_equal(series["time"].values, [0.0, 40.0, 80.0])
+        np.testing.assert_array_equal(series["rejection_dt"].values, [40.0, 20.0, 10.0, 5.0, 2.5])
+        assert all("poroelastic_growth (fields u, psi, p): Newton did not converge" in str(reason)
+                   for reason in series["rejection_reason"].values)
+        assert series["dt"].values[-1] > series["dt"].values[1] >= 1.25  # grown back
+
+
+def test_without_adaptive_steps_a_failure_stops_the_run_at_once(primordia_cli, small_config, tmp_path):
+    result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                           "--set", "time.adaptive=false", "--set", "solver.chemotaxis_m.ksp_max_it=1")
+    line = assert_one_line_error(result, "step 1 (t = 0 -> 0.2)", "chemotaxis.m", "linear solver diverged")
+    assert "retried" not in line
