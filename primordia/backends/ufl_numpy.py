@@ -24,19 +24,21 @@ outer axis.  Axes of size 1 broadcast; shape and free-index axes have full size.
 
 Arguments, block by block
 -------------------------
-An integrand is linear in each argument.  It is evaluated for one (test block,
-trial block) pair at a time, a block being one scalar component of an argument's
-space (:class:`ArgumentBlock`: one per component of a vector field, one per
-field of a mixed space), and the ``test`` and ``trial`` axes run over the
-block's *directions*, its value and its reference derivatives ``d/dX_r`` (those
-the integrand uses), not over its basis functions.  The integrand's value on a
-pair is thus the coefficient of (test direction a) x (trial direction b), and
-the pair's element tensors are ``sum_{a,b,q} value[a,b,q,e] w[e,q] T[i,a,q] S[j,b,q]``
-with the reference tables T, S of the two blocks: on cells, one matrix product
-with a matrix the same for every cell, as in FFCx's argument factorisation.  A
-node that vanishes on a pair (a component of a mixed argument other than the
-block's) evaluates to ``None`` and prunes what depends on it, so a mixed space
-costs what its coupled blocks cost, and never a dense, mostly zero, array.
+An integrand is linear in each argument.  It is evaluated for one (test part,
+trial part) pair at a time, a part being a *block* of an argument's space, one
+scalar component (:class:`ArgumentBlock`: one per component of a vector field,
+one per field of a mixed space), in one derivative order the integrand uses it
+with; the ``test`` and ``trial`` axes run over the part's *directions*, its
+value or its reference derivatives ``d/dX_r``, not over its basis functions.
+The integrand's value on a pair is thus the coefficient of (test direction a) x
+(trial direction b), and a block pair's element tensors are
+``sum_{a,b,q} value[a,b,q,e] w[e,q] T[i,a,q] S[j,b,q]`` over its parts, with the
+reference tables T, S of the parts: on cells, one matrix product with a matrix
+the same for every cell, as in FFCx's argument factorisation.  A node that
+vanishes on a pair (a component of a mixed argument other than the block's, a
+derivative order other than the part's) evaluates to ``None`` and prunes what
+depends on it, so a mixed space costs what its coupled blocks cost, and never a
+dense, mostly zero, array.
 
 Quadrature
 ----------
@@ -439,11 +441,11 @@ def _analysis(integrand) -> _Analysis:
 
 
 class _Evaluator:
-    """Recursive evaluation of one integrand on one chunk, block pair by block pair.
+    """Recursive evaluation of one integrand on one chunk, pair of argument parts by pair.
 
-    A memoised node's value is shared by every block pair when the node depends
-    on no argument, and by every pair with the same test (trial) block when it
-    depends on the test (trial) function only.
+    A memoised node's value is shared by every pair when the node depends on no
+    argument, and by every pair with the same test (trial) part when it depends
+    on the test (trial) function only.
     """
 
     def __init__(self, context: QuadratureContext, integrand: ufl.core.expr.Expr):

@@ -471,7 +471,8 @@ def test_reproduces_scikit_fem_assembly(skfem_setup):
 
 def test_dense_element_tensors_assemble_to_the_matrix(skfem_setup):
     """integrate_integrand places every block pair's tensors at their local DOFs: summed over the
-    cells' DOFs, they give the backend's matrix."""
+    cells' DOFs, they give the backend's matrix; evaluate_integrand's values at the points, weighted
+    and summed, give the same tensors."""
     s = skfem_setup
     form = FORMS["P2-P1-P1 growth tangent"](s)
     space = s.spaces["P2-P1-P1"]
@@ -479,6 +480,9 @@ def test_dense_element_tensors_assemble_to_the_matrix(skfem_setup):
     backend, mesh = s.backend, s.mesh
     context = skfem_backend._Chunk(mesh, backend._rule(mesh, plan), slice(0, s.data.num_cells), None)
     tensors = integrate_integrand(plan.integrand, context, context.weights)
+    at_points = evaluate_integrand(plan.integrand, context)                  # (test, trial, cell, point)
+    np.testing.assert_allclose(np.einsum("ijeq,eq->eij", at_points, context.weights), tensors,
+                               rtol=1e-12, atol=1e-12 * np.abs(tensors).max())
     rows = np.broadcast_to(space.cell_dofs[:, :, None], tensors.shape)
     cols = np.broadcast_to(space.cell_dofs[:, None, :], tensors.shape)
     dense = scipy.sparse.coo_matrix((tensors.ravel(), (rows.ravel(), cols.ravel())), shape=(space.num_dofs,) * 2)
