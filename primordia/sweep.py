@@ -204,7 +204,8 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     directory.mkdir(parents=True, exist_ok=True)
     for stale in (RECORD_FILE, METRICS_FILE):
         (directory / stale).unlink(missing_ok=True)
-    command = [sys.executable, "-m", "primordia.cli", "run", str(config), "--out", str(directory), "--no-progress"]
+    command = [sys.executable, "-m", "primordia.cli", "run", str(config), "--out", str(directory), "--no-progress",
+               "--overwrite"]  # a retried run replaces the failed one in its directory
     for assignment in overrides:
         command += ["--set", assignment]
     environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
