@@ -194,6 +194,8 @@ def _interrupted(interrupted: KeyboardInterrupt) -> int:
     detail = str(interrupted) or f"interrupted ({signal_name(signum)}) during start-up, before the first step"
     if is_root_process():
         print(f"primordia: {detail}", file=sys.stderr)
+    for handled in (signal.SIGINT, signal.SIGTERM):  # everything is written: a late second signal changes nothing
+        signal.signal(handled, signal.SIG_IGN)
     return 128 + signum
 
 

@@ -248,9 +248,12 @@ class Model:
         return sim
 
     def differences(self, resolved: dict, allowed=CHANGEABLE_ON_RESTART) -> list[str]:
-        """Dotted keys where ``resolved`` (another run's resolved config) differs from this model's, except ``allowed``."""
+        """Dotted keys where ``resolved`` (another run's resolved config) differs from this model's, except ``allowed``.
+
+        A key ``resolved`` lacks is an option added since it was written, at its default: not a difference.
+        """
         return [key for key in _differences(self.resolved_config(), resolved)
-                if not any(key == a or key.startswith(a + ".") for a in allowed)]
+                if not any(key == a or key.startswith(a + ".") for a in allowed) and _has(resolved, key)]
 
 
 def _without_none(value):
@@ -268,6 +271,14 @@ def _differences(a, b, prefix: str = "") -> list[str]:
         return [key for name in dict.fromkeys([*a, *b])
                 for key in _differences(a.get(name), b.get(name), f"{prefix}{name}.")]
     return [] if a == b else [prefix.rstrip(".")]
+
+
+def _has(table: dict, dotted: str) -> bool:
+    for part in dotted.split("."):
+        if not isinstance(table, dict) or part not in table:
+            return False
+        table = table[part]
+    return True
 
 
 def _as_list(value, where: str) -> list[str]:

@@ -59,7 +59,8 @@ class Interrupts:
             self._installed -= 1
             if self._installed == 0:
                 for signum, handler in self._previous.items():
-                    signal.signal(signum, handler)
+                    if signal.getsignal(signum) == self._handle:  # unless someone chose another handler since
+                        signal.signal(signum, handler)
 
     @contextlib.contextmanager
     def mode_of(self, mode: str):

@@ -26,7 +26,7 @@ MPI_ENV = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
 #: Coarse versions of the seed's examples 1a, 1b and 2a: a few seconds each, every step checkpointed.
 COARSE = {
     "ex01a": ["--set", "mesh.cells=[8,8]", "--set", "time.t_final=2.0", "--set", "output.times=[1.0,2.0]"],
-    "ex01b": ["--set", "mesh.cells=[6,6]", "--set", "time.t_final=2.0", "--set", "output.times=[1.0,2.0]"],
+    "ex01b": ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=1.6", "--set", "output.times=[0.8,1.6]"],
     "ex02a": ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=1.2", "--set", "output.times=[0.6,1.2]"],
 }
 

@@ -1,0 +1,159 @@
+"""Checkpoint and restart through the real ``primordia`` command (issue 10).
+
+A coarse seed example runs once uninterrupted; the same run is killed with a
+real SIGKILL (its whole process group) at a random moment after a random step,
+then continued with ``primordia run --restart OUT_DIR``.  It must end with the
+same fields, start-of-step values and rates (velocities) as the uninterrupted
+run, bit for bit, and the same series, on both backends and under
+``mpirun -n 2``.
+"""
+
+from __future__ import annotations
+
+import random
+import signal
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import run_control as rc
+
+CASES = [pytest.param(example, backend, ranks, id=f"{example}-{backend}-np{ranks}",
+                      marks=[pytest.mark.mpi] if ranks > 1 else [])
+         for example in ("ex01a", "ex01b", "ex02a") for backend, ranks in (("fenicsx", 1), ("skfem", 1),
+                                                                            ("fenicsx", 2))]
+
+
+@pytest.mark.parametrize("example, backend, ranks", CASES)
+def test_a_run_killed_at_a_random_step_and_restarted_ends_bit_for_bit_as_the_uninterrupted_one(
+        example, backend, ranks, tmp_path, plugin_distribution):
+    arguments = [rc.EXAMPLES / f"{example}.toml", *rc.COARSE[example], "--backend", backend,
+                 "--set", "checkpoint.every_steps=2", "--set", "output.series_every=1", "--set", "output.pictures=false",
+                 "--no-progress"]
+    steps = {"ex01a": 10, "ex01b": 8, "ex02a": 6}[example]
+    chance = random.Random()
+    killed_after = 2 * chance.randrange(1, steps // 2 - 1)
+    env = plugin_distribution("primordia-hold-still", "0.1", {"hold_still": rc.HOLDING_OUTPUT},
+                              {"hold_still": "hold_still"})
+    hold = {**env, "PRIMORDIA_TEST_HOLD_AT": str(killed_after + 3)}
+
+    reference = rc.run("run", *arguments, "--out", tmp_path / "reference", ranks=ranks)
+    assert reference.returncode == 0, reference.stderr[-3000:]
+
+    killed = tmp_path / "killed"
+    process = rc.start("run", *arguments, "--out", killed, ranks=ranks, env=hold)
+    rc.wait_for_checkpoint(process, killed, killed_after)
+    time.sleep(chance.uniform(0.0, 0.3))  # anywhere in the next steps: a solve, a write, the outputs
+    rc.kill_group(process)
+    process.communicate(timeout=60)
+    assert rc.summary(killed)["status"] == "running"  # what a killed process leaves
+    assert rc.checkpointed_step(killed) < steps
+
+    restarted = rc.run("run", "--restart", killed, "--no-progress", ranks=ranks, env=env)
+    assert restarted.returncode == 0, restarted.stderr[-3000:]
+    after = rc.summary(killed)
+    assert after["status"] == "completed" and after["restarts"] == 1 and after["steps"] == steps
+
+    expected, got = rc.final_state(tmp_path / "reference"), rc.final_state(killed)
+    assert sorted(got) == sorted(expected)
+    assert any(key.endswith("/rate") for key in got) == (example != "ex01a")  # velocities are state too
+    # in serial bit for bit; under MPI the mesh partition (PT-SCOTCH's) differs from run to run, and with it
+    # the order of every parallel sum: equal to round-off, 1e-12 of each field's size
+    tolerance = 0.0 if ranks == 1 else 1e-12
+    for key, values in expected.items():
+        difference = np.max(np.abs(got[key] - values), initial=0.0)
+        assert difference <= tolerance * max(1.0, np.max(np.abs(values), initial=0.0)), (key, difference)
+    with xr.open_dataset(tmp_path / "reference" / "series.nc") as one, xr.open_dataset(killed / "series.nc") as two:
+        np.testing.assert_array_equal(two["time"].values, one["time"].values)
+        for name in ("m_integral", "m_min", "m_max", "dt"):
+            np.testing.assert_allclose(two[name].values, one[name].values, rtol=tolerance, atol=0)
+
+
+def test_sigterm_stops_between_steps_with_a_checkpoint_and_the_run_continues(small_config, tmp_path):
+    out = tmp_path / "out"
+    arguments = [small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[16,16]", "--no-progress"]
+    process = rc.start("run", *arguments, "--out", out)
+    rc.wait_for_steps(process, out, 10)
+    rc.kill_group(process, signal.SIGTERM)
+    status, stderr = rc.finish(process)
+    assert status == 128 + signal.SIGTERM, stderr
+    lines = stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("primordia: interrupted at t = "), stderr
+    assert "(SIGTERM)" in lines[0] and f"--restart {out}" in lines[0]
+    stopped = rc.summary(out)
+    assert stopped["status"].startswith("interrupted at t = ") and "SIGTERM" in stopped["status"]
+    assert rc.checkpointed_step(out) == stopped["steps"] > 0
+    with xr.open_dataset(out / "series.nc") as series:
+        assert series["time"].values[-1] <= stopped["time"]  # the summary never lags the data
+
+    later = repr(stopped["time"] + 2.0)
+    again = rc.run("run", "--restart", out, "--no-progress", "--set", f"time.t_final={later}",
+                   "--set", f"output.times=[{later}]")
+    assert again.returncode == 0, again.stderr
+    assert rc.summary(out)["status"] == "completed" and rc.summary(out)["restarts"] == 1
+
+
+def test_a_second_ctrl_c_stops_at_once_and_the_summary_says_so(small_config, tmp_path):
+    out = tmp_path / "out"
+    process = rc.start("run", small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[24,24]",
+                       "--no-progress", "--out", out)
+    rc.wait_for_steps(process, out, 10)
+    process.send_signal(signal.SIGINT)
+    process.send_signal(signal.SIGINT)
+    status, stderr = rc.finish(process)
+    assert status == 128 + signal.SIGINT, stderr
+    assert len(stderr.splitlines()) == 1 and "interrupted" in stderr and "Traceback" not in stderr
+    assert rc.summary(out)["status"].startswith("interrupted at t = ")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_signal_during_start_up_is_an_interruption_not_an_input_error(signum, tmp_path):
+    out = tmp_path / "out"
+    process = rc.start("run", rc.EXAMPLES / "ex02a.toml", *rc.COARSE["ex02a"], "--no-progress", "--out", out)
+    time.sleep(1.0)  # importing, reading, or building forms
+    process.send_signal(signum)
+    status, stderr = rc.finish(process)
+    assert status == 128 + signum, stderr
+    lines = stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("primordia: interrupted"), stderr
+    assert "error" not in lines[0]
+
+
+def test_a_folder_holding_a_run_is_refused_unless_overwritten_or_restarted(primordia_cli, small_config, tmp_path):
+    out = tmp_path / "out"
+    assert primordia_cli("run", small_config(), "--out", out, "--no-progress").returncode == 0
+    (out / "m_t0001.00.png").write_bytes(b"an old picture")
+    (out / "notes.txt").write_text("the user's own file")
+
+    again = primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set", "time.t_final=0.6")
+    assert again.returncode == 2 and len(again.stderr.splitlines()) == 1, again.stderr
+    assert "already holds a run that ended: completed" in again.stderr and "--overwrite" in again.stderr
+
+    replaced = primordia_cli("run", small_config(), "--out", out, "--no-progress", "--overwrite",
+                             "--set", "time.t_final=0.6")
+    assert replaced.returncode == 0, replaced.stderr
+    assert rc.summary(out)["steps"] == 3
+    assert not (out / "m_t0001.00.png").exists() and (out / "notes.txt").read_text() == "the user's own file"
+
+    longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.0")
+    assert longer.returncode == 0, longer.stderr
+    assert rc.summary(out)["steps"] == 5 and rc.summary(out)["restarts"] == 1
+
+
+def test_a_killed_run_is_named_killed_and_a_restart_refuses_another_model(primordia_cli, small_config, tmp_path):
+    out = tmp_path / "out"
+    process = rc.start("run", small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[16,16]",
+                       "--set", "checkpoint.every_steps=5", "--no-progress", "--out", out)
+    rc.wait_for_checkpoint(process, out, 5)
+    rc.kill_group(process)
+    process.communicate(timeout=60)
+
+    again = primordia_cli("run", small_config(), "--out", out, "--no-progress")
+    assert again.returncode == 2 and "was killed without a word" in again.stderr, again.stderr
+    other = primordia_cli("run", "--restart", out, "--no-progress", "--set", "parameters.D_m=0.05")
+    assert other.returncode == 2 and len(other.stderr.splitlines()) == 1, other.stderr
+    assert "parameters.D_m differs from the checkpointed run" in other.stderr
+    empty = primordia_cli("run", "--restart", tmp_path / "nothing", "--no-progress")
+    assert empty.returncode == 2 and "holds no checkpoint" in empty.stderr, empty.stderr
