@@ -430,9 +430,16 @@ _ANALYSES: OrderedDict[int, _Analysis] = OrderedDict()
 _CACHED_ANALYSES = 256
 
 
-def _analysis(integrand) -> _Analysis:
+def _analysis(integrand, stale: bool = False) -> _Analysis:
+    """The analysis of ``integrand``, cached; ``stale``: the cached one missed a node, analyse again.
+
+    Node ids go stale because UFL rewires trees in place: comparing two equal
+    expressions (``nonrecursive_expr_equals``) makes one share the other's operands
+    ("eager DAGification"), so a node analysed earlier may since have been replaced
+    by an equal twin with another id.
+    """
     hit = _ANALYSES.get(id(integrand))
-    if hit is None or hit.root is not integrand:
+    if stale or hit is None or hit.root is not integrand:
         hit = _ANALYSES[id(integrand)] = _Analysis(integrand)
         if len(_ANALYSES) > _CACHED_ANALYSES:
             _ANALYSES.popitem(last=False)
@@ -502,9 +509,18 @@ class _Evaluator:
                     yield test_block, trial_block, contributions
 
     # -- memoised evaluation -----------------------------------------------------------------
+    def _mask(self, o) -> int:
+        """Which arguments ``o`` depends on (bit 0 test, bit 1 trial)."""
+        mask = self._masks.get(id(o))
+        if mask is None:  # UFL rewired the tree since it was analysed (see _analysis): analyse it again
+            analysis = _analysis(self.integrand, stale=True)
+            self._masks, self._memoised = analysis.masks, analysis.memoised
+            mask = self._masks[id(o)]
+        return mask
+
     def _value(self, o) -> np.ndarray | None:
         """The value of ``o`` on the current block pair; ``None`` where it vanishes on it."""
-        mask = self._masks[id(o)]  # the memo key: the node, and the current part of each argument it depends on
+        mask = self._mask(o)  # the memo key: the node, and the current part of each argument it depends on
         key = id(o) if not mask else (id(o), self._pair[0] if mask & 1 else -1, self._pair[1] if mask & 2 else -1)
         hit = self._memo.get(key, _MISSING)
         if hit is _MISSING:
@@ -546,7 +562,7 @@ class _Evaluator:
         """Values of a product's factors, ``None`` when one vanishes; factors depending on
         arguments come first, so that a vanishing one spares evaluating the others."""
         a, b = operands
-        if self._masks[id(b)] > self._masks[id(a)]:
+        if self._mask(b) > self._mask(a):
             second = self._value(b)
             first = None if second is None else self._value(a)
         else:
@@ -614,7 +630,7 @@ class _Evaluator:
     # -- tensor algebra in index notation ----------------------------------------------------
     def indexed(self, o):
         expression, multiindex = o.ufl_operands
-        if self._masks[id(expression)] and self._other_component(expression, multiindex):
+        if self._mask(expression) and self._other_component(expression, multiindex):
             return None
         array = self._value(expression)
         if array is None:
@@ -662,7 +678,7 @@ class _Evaluator:
 
     def list_tensor(self, o):
         rows = _rows_of(o)
-        if rows is not None and not self._masks[id(rows[0])]:  # a field of a mixed function: a view
+        if rows is not None and not self._mask(rows[0]):  # a field of a mixed function: a view
             return self._value(rows[0])[:, :, rows[1]]
         parts = [self._value(op) for op in o.ufl_operands]
         if all(part is None for part in parts):

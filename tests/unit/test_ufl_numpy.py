@@ -560,3 +560,22 @@ def test_fallback_quadrature_without_basix_is_exact(monkeypatch, cellname, degre
     # integral of x^degree over the reference simplex: degree! / (degree + tdim)!
     exact = math.factorial(degree) / math.factorial(degree + tdim)
     assert np.isclose(weights @ points[:, 0] ** degree, exact, rtol=1e-13)
+
+
+def test_an_integrand_rewired_by_ufl_after_its_analysis_still_assembles():
+    """UFL shares operands between equal expressions when it compares them (eager DAGification in
+    ``nonrecursive_expr_equals``): a tree analysed once may later hold an equal twin of a node, with
+    another id.  The evaluator must notice and analyse it again, not fail or mix up values."""
+    backend = SkfemBackend()
+    mesh = backend.create_mesh(rectangle((0.0, 0.0), (1.0, 1.0), (3, 3)))
+    space = backend.function_space(mesh, ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1))
+    x = ufl.SpatialCoordinate(mesh.ufl_domain())
+    v = ufl.TestFunction(space)
+    form = ufl.sin(ufl.pi * x[1]) * v * backend.measure("dx", mesh, metadata={"quadrature_degree": 4})
+    first = backend.assemble_vector(form).array.copy()
+    (plan,) = backend._form_plans(form)
+    twin = ufl.sin(ufl.pi * x[1])  # an equal expression built anew: other node objects
+    rewired = [node for node in ufl.corealg.traversal.unique_pre_traversal(plan.integrand)
+               if isinstance(node, ufl.classes.Sin)]
+    assert rewired and rewired[0] == twin  # UFL's comparison makes one share the other's operands
+    assert backend.assemble_vector(form).array == pytest.approx(first, rel=1e-14)
