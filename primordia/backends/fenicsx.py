@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 import ufl
 
-from primordia.core.backend import Backend, BoundaryCondition, DofLayout
+from primordia.core.backend import Backend, BoundaryCondition, DofLayout, index_set, sub_elements
 from primordia.core.mesh import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
@@ -309,3 +309,30 @@ class FenicsxBackend(Backend):
 
     def num_dofs(self, space) -> int:
         return space.dofmap.index_map.size_global * space.dofmap.index_map_bs
+
+    # -- field splits ---------------------------------------------------------------------
+    def field_index_sets(self, space):
+        index_map, bs = space.dofmap.index_map, space.dofmap.index_map_bs
+        start, owned = index_map.local_range[0] * bs, index_map.size_local * bs
+        fields = sub_elements(space.ufl_element())
+        if len(fields) == 1:
+            components = np.tile(np.arange(bs), index_map.size_local)
+            return [index_set(self.comm, start + np.arange(owned), components, bs)]
+        return [index_set(self.comm, *self._owned_field_dofs(space.sub(i), owned, start),
+                          value_size=int(np.prod(element.value_shape())))
+                for i, element in enumerate(fields)]
+
+    @staticmethod
+    def _owned_field_dofs(sub_space, owned: int, start: int) -> tuple[np.ndarray, np.ndarray]:
+        """Global indices of the owned DOFs of one field of a mixed space, and the component of each."""
+        dofs, components = [], []
+        size = sub_space.num_sub_spaces
+        for component, part in enumerate([sub_space.sub(c) for c in range(size)] if size else [sub_space]):
+            local = np.asarray(part.collapse()[1])
+            local = local[local < owned]
+            dofs.append(start + local)
+            components.append(np.full(len(local), component))
+        return np.concatenate(dofs), np.concatenate(components)
+
+    def set_dirichlet(self, vector, bcs, x0=None, scale: float = 1.0) -> None:
+        fem_petsc.set_bc(vector, [bc.handle for bc in bcs], x0, scale)

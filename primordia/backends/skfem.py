@@ -48,7 +48,7 @@ from primordia.backends.ufl_numpy import (
     reference_quadrature,
     unsupported,
 )
-from primordia.core.backend import Backend, BoundaryCondition, DofLayout
+from primordia.core.backend import Backend, BoundaryCondition, DofLayout, index_set, sub_elements
 from primordia.core.errors import MeshError, PrimordiaError
 from primordia.core.mesh import MeshData
 
@@ -967,6 +967,23 @@ class SkfemBackend(Backend):
 
     def num_dofs(self, space) -> int:
         return space.num_dofs
+
+    # -- field splits ---------------------------------------------------------------------
+    def field_index_sets(self, space):
+        fields = sub_elements(space.ufl_element())
+        index_sets = []
+        for index in range(len(fields)):
+            components, _ = space.sub_space(index if len(fields) > 1 else None)
+            dofs = np.flatnonzero(np.isin(space.dof_component, components))
+            index_sets.append(index_set(self.comm, dofs, space.dof_component[dofs] - components.start,
+                                        len(components)))
+        return index_sets
+
+    def set_dirichlet(self, vector, bcs, x0=None, scale: float = 1.0) -> None:
+        values = vector.getArray()
+        for bc in bcs:
+            dofs = bc.handle.dofs
+            values[dofs] = scale * (bc.handle.values - (x0.getArray(readonly=True)[dofs] if x0 is not None else 0.0))
 
 
 __all__ = ["SkfemBackend", "SkfemMesh", "SkfemFunctionSpace", "SkfemFunction", "SkfemConstant", "UnsupportedUFL"]

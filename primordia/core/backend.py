@@ -201,6 +201,27 @@ class Backend(ABC):
     def num_dofs(self, space) -> int:
         """Global number of DOFs of ``space`` (all components)."""
 
+    # -- field splits ---------------------------------------------------------------------
+    @abstractmethod
+    def field_index_sets(self, space) -> list:
+        """One PETSc ``IS`` per field of ``space``: the global indices of the DOFs this rank owns.
+
+        For a mixed space, one index set per sub-element, in sub-element order (the fields of
+        a group: e.g. u, psi, p); for any other space, one index set of all its owned DOFs.
+        Indices are sorted, in the numbering of ``petsc_vector`` (so PETSc's ``fieldsplit``
+        can take them as its splits).  A vector field whose components sit together node by
+        node gets its value size as the block size of its index set (what AMG for
+        elasticity reads).  Collective: every rank calls it.
+        """
+
+    @abstractmethod
+    def set_dirichlet(self, vector, bcs: Sequence[BoundaryCondition], x0=None, scale: float = 1.0) -> None:
+        """At the DOFs each condition fixes, ``vector = scale * (g - x0)`` (``scale * g`` without ``x0``).
+
+        dolfinx's ``set_bc``: with the lifting of :meth:`assemble_residual`, what an algebraic
+        residual (a matrix times a vector) needs to follow the Dirichlet convention.
+        """
+
     # -- helpers every backend gets for free ----------------------------------------------
     def lumped_dx(self, mesh) -> ufl.Measure:
         """``dx`` with vertex quadrature: the lumped mass matrix for P1 fields."""
@@ -208,3 +229,33 @@ class Backend(ABC):
 
     def is_root(self) -> bool:
         return self.comm.rank == 0
+
+
+def sub_elements(element) -> list:
+    """The fields of a space's element: the sub-elements of a mixed element, else the element itself."""
+    if isinstance(element, ufl.MixedElement) and not isinstance(element, (ufl.VectorElement, ufl.TensorElement)):
+        return list(element.sub_elements())
+    return [element]
+
+
+def index_set(comm, dofs: np.ndarray, components: np.ndarray | None = None, value_size: int = 1):
+    """A sorted PETSc ``IS`` of the global indices ``dofs`` on the backend's ``comm``.
+
+    Its block size is ``value_size`` when, on every rank, the sorted DOFs run through the
+    components 0, 1, ..., value_size - 1 over and over (``components``: the component of
+    each DOF; ``None`` for a scalar field): both backends number a node's components
+    together, so each run is one node.
+    """
+    from petsc4py import PETSc
+
+    order = np.argsort(dofs, kind="stable")
+    dofs = np.asarray(dofs, dtype=PETSc.IntType)[order]
+    result = PETSc.IS().createGeneral(dofs, comm=PETSc.COMM_SELF if comm.size == 1 else comm)
+    if value_size > 1 and components is not None:
+        components = np.asarray(components)[order]
+        interleaved = (len(dofs) % value_size == 0 and np.array_equal(
+            components.reshape(-1, value_size), np.broadcast_to(np.arange(value_size), (len(dofs) // value_size,
+                                                                                        value_size))))
+        if comm.allreduce(int(not interleaved)) == 0:
+            result.setBlockSize(value_size)
+    return result
