@@ -130,17 +130,29 @@ class Discretisation:
 
     def test(self, name: str):
         """The test function of a field's balance law."""
-        group = self._group(name)
-        key = (group.name, "test")
-        if key not in self._splits:
-            test = ufl.TestFunction(group.space)
-            self._splits[key] = (test,) if len(group.fields) == 1 else ufl.split(test)
-        index = group.index(name)
-        return self._splits[key][0 if index is None else index]
+        return self._argument(name, "test", ufl.TestFunction)
 
     def unknown(self, name: str):
         """The backend function solved for when ``name``'s balance law is solved."""
         return self._group(name).current
+
+    def unknown_fields(self, name: str) -> tuple[str, ...]:
+        """The fields solved together with ``name`` (its group), in the order of the unknown's sub-spaces."""
+        return tuple(self._group(name).fields)
+
+    def trial(self, name: str):
+        """The trial function of a field in its group's space (for bilinear forms such as preconditioners)."""
+        return self._argument(name, "trial", ufl.TrialFunction)
+
+    def _argument(self, name: str, kind: str, make):
+        """The test or trial function of the group holding ``name``, split into its fields, at ``name``."""
+        group = self._group(name)
+        key = (group.name, kind)
+        if key not in self._splits:
+            argument = make(group.space)
+            self._splits[key] = (argument,) if len(group.fields) == 1 else ufl.split(argument)
+        index = group.index(name)
+        return self._splits[key][0 if index is None else index]
 
     def function_of(self, name: str) -> tuple[object, int | None]:
         """(backend function, component index or None) holding a field, for output."""

@@ -33,10 +33,14 @@ from primordia.physics.base import AlgebraicOperator
 def bernoulli(x: np.ndarray) -> np.ndarray:
     """B(x) = x / (exp(x) - 1), with B(0) = 1, accurate near 0 and for large |x|."""
     x = np.asarray(x, dtype=float)
-    small = np.abs(x) < 1e-6
-    safe = np.where(small, 1.0, x)
-    with np.errstate(over="ignore"):  # x >> 1: expm1 overflows and B(x) -> 0, its limit
-        return np.where(small, 1.0 - 0.5 * x + x * x / 12.0, safe / np.expm1(safe))
+    flat = x.reshape(-1)
+    small = np.abs(flat) < 1e-6
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # x >> 1: expm1 overflows, B(x) -> 0
+        result = flat / np.expm1(flat)
+    if small.any():
+        near = flat[small]
+        result[small] = 1.0 - 0.5 * near + near * near / 12.0
+    return result.reshape(x.shape) if x.ndim else result[0]
 
 
 class ExponentiallyFittedFlux(AlgebraicOperator):
@@ -64,6 +68,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._A = stiffness
         self._prepare_edges(stiffness)
         self._prepare_gather(backend.petsc_vector(disc.previous(species)))
+        self._prepare_pairs()
         if self.negative_weights and not self._moving:
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
                           "the exponentially fitted flux no longer guarantees a non-negative density",
@@ -90,6 +95,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         largest = comm.allreduce(float(weights.max(initial=0.0)), op=_max_op())
         self.most_negative_weight = -comm.allreduce(float(-weights.min(initial=0.0)), op=_max_op()) / largest
         self._scaled_weights = weights * self.diffusivity  # w_ij D
+        if hasattr(self, "_off"):
+            self._off_weights = self._scaled_weights[self._off]
 
     def _prepare_gather(self, template):
         """A scatter bringing the values at every column of the local rows to this rank.
@@ -104,6 +111,25 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         # the gathered position of the row DOF of each entry (its row's diagonal entry's column)
         self._entry_row = self._entry_column[self._diag_positions][self._row]
 
+    def _prepare_pairs(self):
+        """The edge of each off-diagonal entry, so that the costly functions are evaluated once per edge.
+
+        An edge {i, j} appears as the entries (i, j) and (j, i), whose Peclet numbers are
+        opposite: both B(Pe_ij) and B(-Pe_ij) follow from B at the edge's Peclet number by
+        B(-x) = B(x) + x.  Gathered positions are ordered like global indices.
+        """
+        self._off = np.flatnonzero(~self._diagonal)
+        self._off_row = self._row[self._off]
+        self._off_weights = self._scaled_weights[self._off]
+        i, j = self._entry_row[self._off], self._entry_column[self._off]
+        size = max(len(self._gathered.getArray(readonly=True)), 1)
+        low, high = np.minimum(i, j), np.maximum(i, j)
+        edges, self._edge_of = np.unique(low.astype(np.int64) * size + high, return_inverse=True)
+        self._edge_low, self._edge_high = edges // size, edges % size
+        forward = i < j  # entry (i, j) runs from the edge's low end to its high end
+        self._forward, self._backward = forward.astype(float), (~forward).astype(float)
+        self._values = np.zeros(len(self._columns))
+
     def _gather(self, name: str) -> np.ndarray:
         vector = self.disc.backend.petsc_vector(self.disc.previous(name))
         self._scatter.scatter(vector, self._gathered, addv=PETSc.InsertMode.INSERT,
@@ -115,13 +141,17 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self.disc.backend.assemble_matrix(self._stiffness_form, A=self._stiffness)
             self._set_weights(self._stiffness.getValuesCSR()[2])
         c, a = self._gather(self.species), self._gather(self.attractant)
-        i, j = self._entry_row, self._entry_column  # gathered positions of each entry's row and column DOFs
-        chi = self.sensitivity(0.5 * (c[i] + c[j]))  # at the edge midpoint, as quadrature would
-        peclet = chi * (a[j] - a[i]) / self.diffusivity
-        values = -self._scaled_weights * bernoulli(peclet)  # A_ij; zero at the diagonal positions (weight 0)
-        row_sums = np.bincount(self._row, weights=self._scaled_weights * bernoulli(-peclet),
-                               minlength=len(self._indptr) - 1)
-        values[self._diag_positions] = row_sums
+        low, high = self._edge_low, self._edge_high
+        chi = self.sensitivity(0.5 * (c[low] + c[high]))  # at the edge midpoint, as quadrature would
+        peclet = chi * (a[high] - a[low]) / self.diffusivity  # from the low end to the high end
+        fitted = bernoulli(peclet)
+        peclet, fitted = peclet[self._edge_of], fitted[self._edge_of]
+        toward = fitted + self._backward * peclet  # B(Pe_ij) of each off-diagonal entry (i, j)
+        away = fitted + self._forward * peclet  # B(-Pe_ij) = B(Pe_ij) + Pe_ij
+        values = self._values
+        values[self._off] = -self._off_weights * toward  # A_ij
+        values[self._diag_positions] = np.bincount(self._off_row, weights=self._off_weights * away,
+                                                   minlength=len(self._indptr) - 1)  # A_ii = sum_j w_ij D B(-Pe_ij)
         self._A.setValuesCSR(self._indptr, self._columns, values)
         self._A.assemble()
 

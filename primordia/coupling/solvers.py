@@ -36,8 +36,12 @@ from dataclasses import dataclass
 import numpy as np
 from petsc4py import PETSc
 
-from primordia.core.errors import SolverError
+from primordia.core.backend import sub_elements
+from primordia.core.errors import ConfigError, SolverError
+from primordia.coupling.affine import AffineResidual
 from primordia.coupling.edge_flux import apply_operator
+from primordia.coupling.solver_options import (
+    SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -78,37 +82,33 @@ _GIVEN_OUTSIDE = frozenset(PETSc.Options().getAll())
 _WRITTEN: dict[str, set[str]] = {}
 
 
-def set_default_options(prefix: str, defaults: dict, overrides: dict | None = None) -> None:
-    """Write this solver's options under ``prefix``: defaults, then overrides; options given outside win.
+def write_options(prefix: str, options: dict) -> None:
+    """Write a solver's options under ``prefix``; options given outside win.
 
     PETSc's options database is process-wide: what an earlier solver of the same prefix
     wrote (another model run in the same Python process) is removed first, so one run's
     ``[solver]`` table never leaks into the next.  The options stay in the database for
     the life of the solver (PETSc reads some, e.g. MUMPS's, only when it factorises).
     """
-    options = PETSc.Options()
+    database = PETSc.Options()
     for name in _WRITTEN.pop(prefix, ()):
-        options.delValue(name)
+        database.delValue(name)
     written = _WRITTEN.setdefault(prefix, set())
-    for key, value in {**defaults, **(overrides or {})}.items():
+    for key, value in options.items():
         name = prefix + key
         if name in _GIVEN_OUTSIDE:
             continue
-        options[name] = _option_text(value)
+        database[name] = option_text(value)
         written.add(name)
 
 
-def _parallel_safe(defaults: dict, comm) -> dict:
-    """LU needs MUMPS on more than one rank; PETSc's own LU is faster in serial."""
-    if defaults.get("pc_type") == "lu" and "pc_factor_mat_solver_type" not in defaults:
-        return {**defaults, "pc_factor_mat_solver_type": "mumps" if comm.size > 1 else "petsc"}
-    return defaults
-
-
-def _option_text(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
+def solver_options(defaults: dict, overrides: dict | None, where: str, parallel: bool) -> tuple[dict, list[str]]:
+    """The options of one solver (defaults < config table, see :mod:`~primordia.coupling.solver_options`) and
+    the keys the user gave (checked once PETSc has read them)."""
+    user = flatten(overrides or {}, where)
+    options = parallel_safe(combine(flatten(defaults, f"the defaults of {where}"), user), parallel)
+    check_types(options, where)
+    return options, list(user)
 
 
 def _reason_names(enum) -> dict[int, str]:
@@ -117,6 +117,80 @@ def _reason_names(enum) -> dict[int, str]:
 
 SNES_REASONS = _reason_names(PETSc.SNES.ConvergedReason)
 KSP_REASONS = _reason_names(PETSc.KSP.ConvergedReason)
+
+
+def field_splits(backend, subproblem, splits, pc, where: str) -> list:
+    """Hand a fieldsplit preconditioner its splits: the index sets of the named fields of the unknown.
+
+    ``splits`` (the ``splits`` option) lists the fields of each split; by default each
+    field is a split.  A split that is the subproblem's ``rigid_body`` field (a
+    displacement) gets its rigid-body motions as near-nullspace, composed on its index
+    set, which is where PETSc's fieldsplit hands them to AMG.  Returns the PETSc objects
+    to keep alive.
+    """
+    space = subproblem.unknown.ufl_function_space()
+    index_sets = backend.field_index_sets(space)
+    names = tuple(subproblem.fields) or tuple(str(i) for i in range(len(index_sets)))
+    by_name = dict(zip(names, index_sets))
+    splits = splits or tuple((name,) for name in names)
+    listed = [name for split in splits for name in split]
+    for name in listed:
+        if name not in by_name:
+            raise ConfigError(f"{where}.splits: '{name}' is not a field of {subproblem.name} "
+                              f"(fields: {', '.join(names)})")
+    if sorted(listed) != sorted(names):
+        raise ConfigError(f"{where}.splits must hold every field of {subproblem.name} once "
+                          f"({', '.join(names)}), got {[list(split) for split in splits]}")
+    pairs, keep = [], []
+    for split in splits:
+        if len(split) == 1:
+            index_set = by_name[split[0]]
+        else:
+            indices = np.sort(np.concatenate([by_name[name].getIndices() for name in split]))
+            index_set = PETSc.IS().createGeneral(indices.astype(PETSc.IntType), comm=by_name[split[0]].getComm())
+        if split == (subproblem.rigid_body,):
+            near_nullspace = rigid_body_modes(backend, subproblem.unknown, names.index(split[0]), index_set)
+            index_set.compose("nearnullspace", near_nullspace)
+            keep.append(near_nullspace)
+        pairs.append(("_".join(split), index_set))
+        keep.append(index_set)
+    pc.setFieldSplitIS(*pairs)
+    return keep
+
+
+def rigid_body_modes(backend, unknown, index: int, index_set) -> PETSc.NullSpace:
+    """The rigid-body motions of the displacement field ``index`` of ``unknown``, on its index set (orthonormal).
+
+    Translations along each axis and rotations (-y, x) in 2D, and about each axis in 3D:
+    the near-nullspace that lets AMG coarsen elasticity (without it, the coarse spaces
+    miss the rotations and the iteration count grows with the mesh).
+    """
+    scratch = backend.function(unknown.ufl_function_space(), "rigid_body_mode")
+    dimension = sub_elements(unknown.ufl_function_space().ufl_element())[index].value_shape()[0]
+    axes = np.eye(dimension)
+    motions = [lambda x, a=a: np.outer(a, np.ones(x.shape[1])) for a in axes]
+    for i, j in ((0, 1), (1, 2), (2, 0))[: 1 if dimension == 2 else 3]:
+        motions.append(lambda x, i=i, j=j: _rotation(x, i, j, dimension))
+    vectors = []
+    for motion in motions:
+        backend.local_array(scratch)[:] = 0.0
+        backend.interpolate_component(scratch, index, motion)
+        whole = backend.petsc_vector(scratch)
+        part = whole.getSubVector(index_set)
+        vector = part.copy()
+        whole.restoreSubVector(index_set, part)
+        for other in vectors:  # modified Gram-Schmidt
+            vector.axpy(-vector.dot(other), other)
+        vector.scale(1.0 / vector.norm())
+        vectors.append(vector)
+    return PETSc.NullSpace().create(vectors=vectors, comm=vectors[0].getComm())
+
+
+def _rotation(x: np.ndarray, i: int, j: int, dimension: int) -> np.ndarray:
+    """The rotation in the (x_i, x_j) plane: component i is -x_j, component j is x_i."""
+    values = np.zeros((dimension, x.shape[1]))
+    values[i], values[j] = -x[j], x[i]
+    return values
 
 
 def SubproblemSolver(backend, subproblem, overrides: dict | None = None):
@@ -132,17 +206,35 @@ class _Solver:
 
     def __init__(self, backend, subproblem, overrides: dict | None = None):
         self.backend, self.sub = backend, subproblem
-        set_default_options(subproblem.prefix,
-                            _parallel_safe({**self.defaults, **subproblem.petsc_options}, backend.comm), overrides)
+        self.where = f"solver.{subproblem.prefix[:-1]}"
+        options, self._user_keys = solver_options({**self.defaults, **subproblem.petsc_options}, overrides,
+                                                  self.where, backend.comm.size > 1)
+        self._splits = options.pop(SPLITS, None)
+        self.options = options
+        write_options(subproblem.prefix, options)
+        self._unchecked = bool(self._user_keys)  # the user's options are checked once PETSc has read them
         self._jacobian = None  # assembled UFL Jacobian
         self._stale = False  # a constant Jacobian to assemble again (dt changed)
         self._combined = None  # UFL Jacobian + algebraic operator
-        self._preconditioner = None  # assembled preconditioning form, when the subproblem has one
+        self._stabilisation = None  # the assembled ``Subproblem.preconditioner`` form
+        self._preconditioner = None  # tangent + stabilisation
         self._residual = None
 
     def step_size_changed(self) -> None:
         """dt changed (an adaptive time step): a constant Jacobian holds 1/dt, so the next solve assembles it again."""
         self._stale = True
+
+    def _configure(self, pc) -> None:
+        """Before PETSc reads the options: name the fields of a fieldsplit preconditioner (index sets)."""
+        if str(self.options.get("pc_type")) == "fieldsplit":
+            pc.setType("fieldsplit")
+            self._split_objects = field_splits(self.backend, self.sub, self._splits, pc, self.where)
+
+    def _check_options_used(self) -> None:
+        """After the first solve, every option the user gave has been read by PETSc, or it is a mistake."""
+        if self._unchecked:
+            self._unchecked = False
+            check_used(self.sub.prefix, self._user_keys, self.where)
 
     def _assemble_jacobian(self):
         """The tangent (with the algebraic operator added) and whether it changed."""
@@ -163,12 +255,37 @@ class _Solver:
         return self._combined, True
 
     def _assemble_preconditioner(self, tangent):
-        """The preconditioning matrix: the tangent itself, or the subproblem's own form."""
-        if self.sub.preconditioner is None:
-            return tangent
-        self._preconditioner = self.backend.assemble_matrix(self.sub.preconditioner, self.sub.bcs,
-                                                            A=self._preconditioner)
+        """The preconditioning matrix: the tangent, plus the subproblem's stabilisation form when it has one.
+
+        The stabilisation (e.g. the terms that make a block a sparse Schur complement
+        approximation) is assembled once when it reads no field, and added to the tangent.
+        """
+        form = self.sub.preconditioner
+        if form is None or str(self.options.get("pc_type")) != "fieldsplit":  # a whole-matrix preconditioner
+            return tangent                                                   # works on the tangent itself
+        if self._stabilisation is None or form.coefficients() or self._stale:
+            self._stabilisation = self.backend.assemble_matrix(form, self.sub.bcs, A=self._stabilisation,
+                                                               diagonal=0.0)
+        if self._preconditioner is None:
+            self._preconditioner = tangent.duplicate(copy=True)
+        else:
+            tangent.copy(self._preconditioner, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self._preconditioner.axpy(1.0, self._stabilisation, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         return self._preconditioner
+
+    def _switch_to_mumps(self, ksp) -> bool:
+        """An unpivoted LU met a zero pivot (a saddle point): use MUMPS from now on; False if that is not the case."""
+        pc = ksp.getPC()
+        if pc.getType() != "lu" or pc.getFactorSolverType() == "mumps":
+            return False
+        warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=4)
+        operators = ksp.getOperators()
+        PETSc.Options()[self.sub.prefix + "pc_factor_mat_solver_type"] = "mumps"
+        _WRITTEN.setdefault(self.sub.prefix, set()).add(self.sub.prefix + "pc_factor_mat_solver_type")
+        ksp.reset()
+        ksp.setFromOptions()
+        ksp.setOperators(*operators)
+        return True
 
     def _assemble_residual(self, x, b=None):
         sub = self.sub
@@ -180,30 +297,54 @@ class _Solver:
 
 
 class LinearSolver(_Solver):
-    """One exact Newton step, x <- x - J^{-1} F(x), for an affine residual (a KSP solve)."""
+    """One exact Newton step, x <- x - J^{-1} F(x), for an affine residual (a KSP solve).
+
+    The residual is evaluated as matrices times fields where the form allows it
+    (:class:`~primordia.coupling.affine.AffineResidual`): constant matrices are assembled
+    once, what is left is assembled at every solve.  A diagonal system with the default
+    options (``preonly`` + ``jacobi``) is solved by a division, without a matrix.
+    """
 
     def __init__(self, backend, subproblem, overrides: dict | None = None):
         super().__init__(backend, subproblem, overrides)
         self.ksp = PETSc.KSP().create(backend.comm)
         self.ksp.setOptionsPrefix(subproblem.prefix)
+        self._configure(self.ksp.getPC())
         self.ksp.setFromOptions()
         self._increment = None
+        self._affine = AffineResidual(backend, subproblem)
+        self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
+                           and self.options.get("pc_type") == "jacobi")
+        self._operators = None  # what the KSP was last given
+
+    def step_size_changed(self) -> None:
+        super().step_size_changed()
+        self._affine.invalidate()
 
     def solve(self) -> SolveStats:
         sub, backend = self.sub, self.backend
         x = backend.petsc_vector(sub.unknown)
         if sub.operator is not None:
             sub.operator.update()
-        b = self._residual = self._assemble_residual(x)
+        if self._affine.available:
+            b = self._residual = self._affine.residual(x, self._residual)
+            if sub.operator is not None:
+                apply_operator(sub.operator, x, b)
+        else:
+            b = self._residual = self._assemble_residual(x)
         if not np.isfinite(b.norm()):
             raise SolverError(f"{sub.name}: the residual is not finite")
-        A, changed = self._assemble_jacobian()
-        if changed or self._increment is None:
-            self.ksp.setOperators(A, self._assemble_preconditioner(A))
         if self._increment is None:
-            self._increment = A.createVecRight()
-        self._solve_linear(b)
-        reason = self.ksp.getConvergedReason()
+            self._increment = b.duplicate()
+        if self._affine.available and self._solve_diagonal(b):
+            iterations, reason = 1, PETSc.KSP.ConvergedReason.CONVERGED_ITS
+        else:
+            A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
+            if changed or self._operators is not A:
+                self.ksp.setOperators(A, self._assemble_preconditioner(A))
+                self._operators = A
+            self._solve_linear(b)
+            iterations, reason = max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason()
         if reason < 0:
             raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {KSP_REASONS.get(reason, reason)}); "
                               f"try other options under -{sub.prefix}")
@@ -211,8 +352,37 @@ class LinearSolver(_Solver):
         backend.update_ghosts(sub.unknown)
         if not np.isfinite(x.norm()):
             raise SolverError(f"{sub.name}: the solution is not finite")
-        return SolveStats(newton_iterations=1, linear_iterations=max(self.ksp.getIterationNumber(), 1),
-                          reason=reason)
+        return SolveStats(newton_iterations=1, linear_iterations=iterations, reason=reason)
+
+    def _solve_diagonal(self, b) -> bool:
+        """A diagonal system under the default options: the increment by a division; False otherwise."""
+        if not self._pointwise:
+            return False
+        jacobian = self._affine.jacobian
+        jacobian.refresh()
+        if jacobian.diagonal is None:
+            self._pointwise = False
+            return False
+        self._increment.pointwiseDivide(b, jacobian.diagonal)
+        return True
+
+    def _affine_tangent(self):
+        """The tangent from the split residual's Jacobian (assembled only when stale), plus the operator."""
+        jacobian = self._affine.jacobian
+        changed = jacobian.refresh() or self._stale
+        self._stale = False
+        if self.sub.operator is None:
+            return jacobian.as_matrix(), changed
+        operator = self.sub.operator.matrix()
+        if self._combined is None:
+            self._combined = operator.duplicate(copy=True)
+        else:
+            operator.copy(self._combined, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        if jacobian.diagonal is not None:  # a lumped Jacobian: add its diagonal, no sparse sum
+            self._combined.setDiagonal(jacobian.diagonal, addv=PETSc.InsertMode.ADD_VALUES)
+        else:
+            self._combined.axpy(1.0, jacobian.as_matrix(), structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        return self._combined, True
 
     def _solve_linear(self, b):
         """KSP solve; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
@@ -223,22 +393,12 @@ class LinearSolver(_Solver):
             failed, raised = True, error
         else:
             raised = None
-        pc = self.ksp.getPC()
-        if not failed:
-            return
-        if pc.getType() != "lu" or pc.getFactorSolverType() == "mumps":
-            if raised is None:
-                return  # a failed preconditioner set-up: reported by the caller from the KSP reason
+        if failed and self._switch_to_mumps(self.ksp):
+            self.ksp.solve(b, self._increment)
+        elif raised is not None:
             raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}); "
                               f"try other options under -{self.sub.prefix}") from None
-        warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=3)
-        operators = self.ksp.getOperators()
-        PETSc.Options()[self.sub.prefix + "pc_factor_mat_solver_type"] = "mumps"
-        _WRITTEN.setdefault(self.sub.prefix, set()).add(self.sub.prefix + "pc_factor_mat_solver_type")
-        self.ksp.reset()
-        self.ksp.setFromOptions()
-        self.ksp.setOperators(*operators)
-        self.ksp.solve(b, self._increment)
+        self._check_options_used()
 
 
 class NewtonSolver(_Solver):
@@ -257,8 +417,9 @@ class NewtonSolver(_Solver):
         self._F = state.duplicate()
         self.snes.setFunction(self._function, self._F)
         self._tangent_matrices = None
-        self.snes.setFromOptions()
         self.ksp = self.snes.getKSP()
+        self._configure(self.ksp.getPC())
+        self.snes.setFromOptions()
         self.history: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
 
     # -- SNES callbacks ----------------------------------------------------------------------
@@ -275,9 +436,8 @@ class NewtonSolver(_Solver):
 
     def _tangent(self, snes, x, J, P) -> None:
         self._load(x)
-        self._assemble_jacobian()  # into the matrices handed to SNES (same objects)
-        if self.sub.preconditioner is not None:
-            self._assemble_preconditioner(None)
+        tangent, _ = self._assemble_jacobian()  # into the matrices handed to SNES (same objects)
+        self._assemble_preconditioner(tangent)
 
     def _attach_tangent(self) -> None:
         """Create the tangent (and preconditioning) matrices once, at the initial state."""
@@ -295,12 +455,13 @@ class NewtonSolver(_Solver):
         if self._tangent_matrices is None:
             self._attach_tangent()
         state.copy(self._x)
-        self.snes.setConvergenceHistory(length=self.snes.getTolerances()[3] + 1, reset=True)
-        try:
-            self.snes.solve(None, self._x)
-        except PETSc.Error as error:
-            raise SolverError(f"{sub.name}: the nonlinear solve failed (PETSc error {error.ierr}); "
-                              f"try other options under -{sub.prefix}") from None
+        self._run_snes()
+        if (self.snes.getConvergedReason() == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
+                and self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
+                and self._switch_to_mumps(self.ksp)):
+            state.copy(self._x)
+            self._run_snes()
+        self._check_options_used()
         self.history = tuple(np.array(h) for h in self.snes.getConvergenceHistory())
         reason = self.snes.getConvergedReason()
         if reason < 0:
@@ -311,6 +472,14 @@ class NewtonSolver(_Solver):
             raise SolverError(f"{sub.name}: the solution is not finite")
         return SolveStats(newton_iterations=self.snes.getIterationNumber(),
                           linear_iterations=self.snes.getLinearSolveIterations(), reason=reason)
+
+    def _run_snes(self) -> None:
+        self.snes.setConvergenceHistory(length=self.snes.getTolerances()[3] + 1, reset=True)
+        try:
+            self.snes.solve(None, self._x)
+        except PETSc.Error as error:
+            raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}); "
+                              f"try other options under -{self.sub.prefix}") from None
 
     def _failure(self, reason: int) -> str:
         """One line: which solve, why SNES stopped, how far it got, where to change options."""

@@ -29,6 +29,7 @@ import ufl
 from primordia.core.config import merge_options
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
+from primordia.coupling.solver_options import check_tables
 from primordia.coupling.solvers import accumulate
 from primordia.physics.base import Subproblem
 
@@ -58,6 +59,12 @@ class SplittingScheme(ABC):
         self.flows = [[sim.solver_for(sub) for sub in module.subproblems()] for module in self.physics]
         self.flows = [flow for flow in self.flows if flow]
         sim.solvers = [solver for flow in self.flows for solver in flow]
+        self.check_solver_tables(sim)
+
+    def check_solver_tables(self, sim) -> None:
+        """Every ``[solver.NAME]`` table of the config names a subproblem of this run (or one line, exit 2)."""
+        initial = [sub.prefix for module in self.physics for sub in module.initial_subproblems()]
+        check_tables(sim.model.solver, [solver.sub.prefix for solver in sim.solvers] + initial)
 
     @abstractmethod
     def advance(self, sim, t0: float, dt: float) -> dict:
@@ -130,6 +137,19 @@ class FixedPoint(SplittingScheme):
         return stats
 
 
+#: The monolithic Newton system's solver, overridable in ``[solver.monolithic]``: a direct solve with PETSc's
+#: LU and a nested-dissection ordering (MUMPS on more than one rank, and whenever the unpivoted LU meets a
+#: zero pivot, as in a saddle point).  ``pc_type = "fieldsplit"`` splits it by field (the fields' names).
+MONOLITHIC_DEFAULTS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+
+
+def _monolithic_defaults(subproblems) -> dict:
+    """:data:`MONOLITHIC_DEFAULTS`, with MUMPS when a module's own system needs it (a saddle point)."""
+    if any(sub.petsc_options.get("pc_factor_mat_solver_type") == "mumps" for sub in subproblems):
+        return {**MONOLITHIC_DEFAULTS, "pc_factor_mat_solver_type": "mumps"}
+    return dict(MONOLITHIC_DEFAULTS)
+
+
 class Monolithic(SplittingScheme):
     """All fields in one mixed function, all residuals in one Newton solve."""
 
@@ -146,12 +166,16 @@ class Monolithic(SplittingScheme):
                               "(use physics.chemotaxis.flux_scheme = \"galerkin\")")
         unknown = subproblems[0].unknown
         residual = sum((sub.residual for sub in subproblems[1:]), subproblems[0].residual)
+        stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]
         combined = Subproblem(
             name="monolithic", unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
-            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False,
-            petsc_options={"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"})
+            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False, petsc_options=_monolithic_defaults(subproblems),
+            fields=sim.disc.unknown_fields(sim.disc.field_names()[0]),
+            rigid_body=next((sub.rigid_body for sub in subproblems if sub.rigid_body), None),
+            preconditioner=sum(stabilisations[1:], stabilisations[0]) if stabilisations else None)
         self.flows = [[sim.solver_for(combined)]]
         sim.solvers = self.flows[0]
+        self.check_solver_tables(sim)
 
     def advance(self, sim, t0, dt):
         return sim.advance(self.flows[0], t0, dt, 1)

@@ -58,9 +58,12 @@ class Subproblem:
     ``constant_jacobian`` marks a Jacobian that does not change between time
     steps (assembled and factorised once).  ``operator`` is an optional
     algebraic term (see :class:`AlgebraicOperator`) added to both.
-    ``preconditioner`` is an optional bilinear form assembled into the
-    preconditioning matrix instead of the Jacobian (e.g. a sparse Schur
-    complement approximation).  ``continuation`` = (constant, steps) asks for the
+    ``preconditioner`` is an optional bilinear form added to the Jacobian in
+    the preconditioning matrix (e.g. the stabilisation that makes a block a
+    sparse Schur complement approximation).  ``fields`` names the fields of a
+    mixed ``unknown`` in order (the splits of a fieldsplit preconditioner), and
+    ``rigid_body`` the displacement among them whose rigid-body motions are the
+    near-nullspace of its block (for AMG).  ``continuation`` = (constant, steps) asks for the
     solve to be done in ``steps`` stages with the UFL ``constant`` set to
     1/steps, 2/steps, ..., 1 (load continuation: each stage starts from the last).
     ``petsc_options`` are defaults for the options prefix ``prefix``.
@@ -77,6 +80,8 @@ class Subproblem:
     constant_jacobian: bool = False
     operator: "AlgebraicOperator | None" = None
     preconditioner: ufl.Form | None = None
+    fields: tuple[str, ...] = ()
+    rigid_body: str | None = None
     continuation: tuple[Any, int] | None = None
     petsc_options: dict[str, Any] = field(default_factory=dict)
     failure_hint: str | None = None

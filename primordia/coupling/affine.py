@@ -1,0 +1,189 @@
+"""A linear subproblem as matrices times fields: a step that costs little more than its solve.
+
+The residual of a linear subproblem (one exact Newton step solves it) is affine in
+its unknown x, and often in other fields it reads too.  Split it once, from its UFL
+form:
+
+    F(x) = sum_c B_c c + R,      B_c = dF/dc for every field c whose derivative reads no field,
+
+where c runs over x itself (B_x = J, a constant Jacobian), its value at the start of the
+step, a solid velocity, another species that enters linearly, and R (what is left, e.g. a
+reaction nonlinear in another field or a time-dependent load) is assembled at every solve,
+or never when nothing is left.  Each B_c is assembled once, and again only when a UFL
+constant it reads changes value (dt in an adaptive run); a diagonal one (lumped, vertex
+quadrature) is kept as a vector and applied pointwise.  A Jacobian that reads fields but is
+diagonal (a lumped reaction) is assembled as a vector, never as a matrix: the solve is then a
+division.  The physics is still stated once, in UFL: these are its own derivatives.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from petsc4py import PETSc
+from ufl.algorithms import expand_derivatives
+
+
+def _constants_state(form) -> tuple:
+    """The values of the UFL constants a form reads (to see whether an assembled matrix is stale)."""
+    return tuple(np.array(constant.value, dtype=float).tobytes() for constant in form.constants())
+
+
+def structurally_diagonal(form) -> bool:
+    """A bilinear form on one P1 scalar space, integrated at the vertices only (lumped): its matrix is diagonal."""
+    test, trial = form.arguments()
+    space = test.ufl_function_space()
+    element = space.ufl_element()
+    if trial.ufl_function_space() != space or element.value_shape() != () or element.degree() != 1:
+        return False
+    return bool(form.integrals()) and all(
+        integral.integral_type() == "cell" and integral.metadata().get("quadrature_rule") == "vertex"
+        for integral in form.integrals())
+
+
+class _Matrix:
+    """An assembled bilinear form, kept while the constants it reads keep their values.
+
+    A lumped form (see :func:`structurally_diagonal`) without Dirichlet conditions is assembled
+    as the vector of its diagonal only; any other form as a matrix, whose diagonal is also kept
+    when the assembled matrix turns out diagonal.
+    """
+
+    def __init__(self, backend, form, bcs=()):
+        self.backend, self.form, self.bcs = backend, form, bcs
+        self.reads_fields = bool(expand_derivatives(form).coefficients())
+        self.vector_only = structurally_diagonal(form) and not bcs
+        self.matrix = None  # PETSc Mat (built from the diagonal when only that is assembled)
+        self.diagonal = None  # PETSc Vec of the diagonal, when the matrix is diagonal
+        self._diagonal_matrix = None  # whether an assembled matrix is diagonal (checked once)
+        self._state = None
+        self._ones = None
+
+    def invalidate(self) -> None:
+        """Assemble at the next refresh, whatever the constants say."""
+        self._state = None
+
+    def refresh(self) -> bool:
+        """Assemble again if needed; whether anything changed."""
+        state = _constants_state(self.form)
+        if not self.reads_fields and state == self._state:
+            return False
+        self._state = state
+        if self.vector_only:
+            self.diagonal = self.backend.assemble_vector(self._row_sums(), b=self.diagonal)
+            return True
+        self.matrix = self.backend.assemble_matrix(self.form, self.bcs, A=self.matrix)
+        if self._diagonal_matrix is None:
+            self._diagonal_matrix = self._is_diagonal(self.matrix)
+        if self._diagonal_matrix:
+            self.diagonal = self.matrix.getDiagonal(self.diagonal)
+        return True
+
+    def as_matrix(self):
+        """The matrix (for a Krylov solve); built from the diagonal when only that is assembled."""
+        if self.vector_only:
+            if self.matrix is None:
+                sizes = self.diagonal.getSizes()
+                self.matrix = PETSc.Mat().createAIJ((sizes, sizes), nnz=1, comm=self.diagonal.getComm())
+            self.matrix.setDiagonal(self.diagonal)
+            self.matrix.assemble()
+        return self.matrix
+
+    def _row_sums(self):
+        """The form applied to a field equal to 1: its row sums, i.e. the diagonal of a diagonal matrix."""
+        if self._ones is None:
+            space = self.form.arguments()[1].ufl_function_space()
+            unit = self.backend.function(space, "unit")
+            self.backend.interpolate(unit, 1.0)
+            self._ones = ufl.action(self.form, unit)
+        return self._ones
+
+    def _is_diagonal(self, matrix) -> bool:
+        if matrix.getOwnershipRange() != matrix.getOwnershipRangeColumn():
+            return False
+        indptr, indices, values = matrix.getValuesCSR()
+        start = matrix.getOwnershipRange()[0]
+        row = np.repeat(np.arange(len(indptr) - 1) + start, np.diff(indptr))
+        return self.backend.comm.allreduce(int(np.count_nonzero(values[indices != row]))) == 0
+
+    def apply_add(self, x, y, scratch) -> None:
+        """y += B x."""
+        if self.diagonal is not None:
+            scratch.pointwiseMult(self.diagonal, x)
+            y.axpy(1.0, scratch)
+        else:
+            self.matrix.multAdd(x, y, y)
+
+
+class AffineResidual:
+    """F(x) = sum_c B_c c + R for a linear subproblem (see the module docstring).
+
+    ``available`` is False when the split would not pay (nothing but x enters linearly
+    with a constant matrix) or cannot be used (Dirichlet conditions on an unknown whose
+    Jacobian reads fields): the solver then assembles the residual as a whole.
+    """
+
+    def __init__(self, backend, subproblem):
+        self.backend, self.sub = backend, subproblem
+        residual, unknown = subproblem.residual, subproblem.unknown
+        self.parts: list[tuple[object, _Matrix]] = []
+        constant_fields = []
+        for coefficient in residual.coefficients():
+            derivative = expand_derivatives(ufl.derivative(
+                residual, coefficient, ufl.TrialFunction(coefficient.ufl_function_space())))
+            if derivative.empty() or derivative.coefficients():
+                continue
+            constant_fields.append(coefficient)
+            if coefficient is not unknown:
+                self.parts.append((coefficient, _Matrix(backend, derivative)))
+        self.constant_jacobian = unknown in constant_fields
+        remainder = ufl.replace(residual, {c: ufl.zero(*c.ufl_shape) for c in constant_fields})
+        self.remainder = remainder if remainder.integrals() else None
+        self.available = (bool(self.parts) or self.constant_jacobian) and (self.constant_jacobian or not subproblem.bcs)
+        self.jacobian = _Matrix(backend, subproblem.jacobian, subproblem.bcs)
+        # the Jacobian without Dirichlet rows, for F(x) = J x + ... (only with conditions)
+        self.full_jacobian = _Matrix(backend, subproblem.jacobian) if subproblem.bcs else self.jacobian
+        self._scratch = self._shifted = None
+
+    def invalidate(self) -> None:
+        """Assemble every matrix again at the next solve (dt changed, say)."""
+        for _, part in self.parts:
+            part.invalidate()
+        self.jacobian.invalidate()
+        self.full_jacobian.invalidate()
+
+    def residual(self, x, b):
+        """b = F(x) with the backend's Dirichlet convention (lifted, x - g on fixed rows); returns b."""
+        backend, sub = self.backend, self.sub
+        for _, part in self.parts:
+            part.refresh()
+        if self.remainder is not None:
+            b = backend.assemble_vector(self.remainder, b=b)
+        elif b is None:
+            b = x.duplicate()
+            b.zeroEntries()
+        else:
+            b.zeroEntries()
+        if self._scratch is None:
+            self._scratch = x.duplicate()
+        for coefficient, part in self.parts:
+            part.apply_add(backend.petsc_vector(coefficient), b, self._scratch)
+        if self.constant_jacobian:
+            self.full_jacobian.refresh()
+            shifted = x
+            if sub.bcs:  # F(x~) with x~ = x but for the prescribed values (the lifting of the Newton residual)
+                if self._shifted is None:
+                    self._shifted = x.duplicate()
+                x.copy(self._shifted)
+                backend.set_dirichlet(self._shifted, sub.bcs)
+                shifted = self._shifted
+            self.full_jacobian.apply_add(shifted, b, self._scratch)
+            if sub.bcs:
+                backend.set_dirichlet(b, sub.bcs, x0=x, scale=-1.0)
+        return b
+
+
+def diagonal_solve(residual, diagonal, increment) -> None:
+    """increment = residual / diagonal (a diagonal system: no Krylov method, no preconditioner)."""
+    increment.pointwiseDivide(residual, diagonal)
+

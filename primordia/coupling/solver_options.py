@@ -1,0 +1,225 @@
+"""PETSc options of a subproblem: nested tables, who overrides whom, one-line errors.
+
+A config's ``[solver.NAME]`` table holds PETSc options of the subproblem whose
+options prefix is ``NAME_`` (``chemotaxis_m``, ``poroelastic_growth``, ``monolithic``),
+written without the prefix, and, as Firedrake's ``solver_parameters``, nested
+tables stand for option prefixes::
+
+    [solver.poroelastic_growth]
+    ksp_type = "gmres"
+    pc_type = "fieldsplit"
+    splits = [["u"], ["psi", "p"]]                       # not a PETSc option: see below
+    fieldsplit_u = { ksp_type = "preonly", pc_type = "gamg" }
+    fieldsplit_psi_p = { ksp_type = "preonly", pc_type = "hypre" }
+
+is ``-poroelastic_growth_fieldsplit_u_pc_type gamg`` and so on.  ``splits`` says
+which fields (by name, as the physics module declares them) form each split of a
+``fieldsplit`` preconditioner; a split is named by its fields joined with ``_``
+(``psi_p``), which is the prefix of its options.  Without ``splits`` every field
+is a split of its own.
+
+Who wins, from weakest to strongest: the solver layer's defaults, the physics
+module's (``Subproblem.petsc_options``), the config's table, options given
+outside (``PETSC_OPTIONS``, the command line of petsc4py).  A user table that
+changes ``pc_type`` (at any level: ``fieldsplit_u = { pc_type = "hypre" }``)
+drops the defaults that only made sense for the preconditioner it replaces: the
+defaults' options of that level other than ``ksp_*`` and ``snes_*`` (the factor
+package, the splits and their sub-solvers, AMG settings), and, at the top level,
+a ``ksp_type = "preonly"`` that only made sense with a direct solve.
+
+Mistakes are one line (:class:`~primordia.core.errors.ConfigError`, exit status
+2): an unknown KSP, PC, SNES or factor-package type when the solver is made; an
+option PETSc never read (misspelt, or meaningless for the chosen solver) after
+the first solve; a table naming no subproblem of the run, when the run is set up.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import difflib
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from petsc4py import PETSc
+
+from primordia.core.errors import ConfigError
+
+#: Not a PETSc option: the fields of each split of a fieldsplit preconditioner (lists of field names).
+SPLITS = "splits"
+
+#: Option families that describe the Krylov method or Newton, not the preconditioner: kept when pc_type changes.
+_KEPT_ACROSS_PC = ("ksp_", "snes_")
+
+#: Direct solves: ``ksp_type = "preonly"`` made sense only with one of these.
+DIRECT = ("lu", "cholesky")
+
+
+def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
+    """Flat options from a (nested) table: ``{"fieldsplit_u": {"pc_type": "gamg"}}`` -> ``fieldsplit_u_pc_type``."""
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{where} must be a table of PETSc options, got {table!r}")
+    flat: dict[str, Any] = {}
+    for key, value in table.items():
+        name = prefix + str(key).lstrip("-")
+        if isinstance(value, Mapping):
+            flat.update(flatten(value, where, name + ("" if name.endswith("_") else "_")))
+        elif name == SPLITS:
+            flat[name] = _splits(value, f"{where}.{name}")
+        elif isinstance(value, (list, tuple, dict)):
+            raise ConfigError(f"{where}.{name} must be a number, a string or true/false, got {value!r}")
+        else:
+            flat[name] = value
+    return flat
+
+
+def _splits(value, where: str) -> tuple[tuple[str, ...], ...]:
+    if (not isinstance(value, (list, tuple)) or not value
+            or not all(isinstance(s, (list, tuple)) and s and all(isinstance(f, str) for f in s) for s in value)):
+        raise ConfigError(f"{where} must be a list of lists of field names, e.g. [[\"u\"], [\"psi\", \"p\"]], "
+                          f"got {value!r}")
+    return tuple(tuple(split) for split in value)
+
+
+def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, Any]:
+    """``defaults`` overridden by ``user``; a changed ``pc_type`` drops the defaults of the old preconditioner."""
+    kept = dict(defaults)
+    for key, value in user.items():
+        if not key.endswith("pc_type") or str(defaults.get(key, value)) == str(value):
+            continue
+        level = key[: -len("pc_type")]
+        for name in list(kept):
+            rest = name[len(level):]
+            if name.startswith(level) and name != key and not rest.startswith(_KEPT_ACROSS_PC):
+                del kept[name]
+        if (level == "" and str(defaults.get("pc_type")) in DIRECT and "ksp_type" not in user
+                and kept.get("ksp_type") == "preonly"):
+            del kept["ksp_type"]
+    return {**kept, **user}
+
+
+def parallel_safe(options: Mapping[str, Any], parallel: bool) -> dict[str, Any]:
+    """A direct solve without a factor package gets PETSc's own (serial) or MUMPS (more than one rank).
+
+    Block-Jacobi and additive-Schwarz sub-solves (``sub_``) are serial on every rank: PETSc's own.
+    """
+    safe = dict(options)
+    for key, value in options.items():
+        level = key[: -len("pc_type")]
+        if key.endswith("pc_type") and str(value) in DIRECT and level + "pc_factor_mat_solver_type" not in options:
+            serial = not parallel or "sub_" in level
+            safe[level + "pc_factor_mat_solver_type"] = "petsc" if serial else "mumps"
+    return safe
+
+
+def option_text(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+# -- validation -------------------------------------------------------------------------------
+def _known_types(kind) -> list[str]:
+    names = [getattr(kind.Type, name) for name in dir(kind.Type) if name.isupper()]
+    return sorted({name for name in names if isinstance(name, str)})
+
+
+def _try_type(kind, value: str) -> bool:
+    obj = kind().create(PETSc.COMM_SELF)
+    try:
+        obj.setType(value)
+        return True
+    except PETSc.Error:
+        return False
+    finally:
+        obj.destroy()
+
+
+def _factor_package_available(package: str) -> bool:
+    """Whether PETSc can factorise with ``package`` here (a 1 x 1 factorisation)."""
+    matrix = PETSc.Mat().createAIJ((1, 1), nnz=1, comm=PETSc.COMM_SELF)
+    matrix.setValue(0, 0, 1.0)
+    matrix.assemble()
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    ksp.setOperators(matrix)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    try:
+        ksp.getPC().setFactorSolverType(package)
+        ksp.setUp()
+        return True
+    except PETSc.Error:
+        return False
+    finally:
+        ksp.destroy()
+        matrix.destroy()
+
+
+_KINDS = {"ksp_type": ("KSP", PETSc.KSP), "pc_type": ("PC", PETSc.PC), "snes_type": ("SNES", PETSc.SNES)}
+_checked: dict[tuple[str, str], bool] = {}
+
+
+def check_types(options: Mapping[str, Any], where: str) -> None:
+    """Every KSP, PC, SNES type and factor package in ``options`` exists here, or one line naming it."""
+    for key, value in options.items():
+        value = option_text(value)
+        for suffix, (label, kind) in _KINDS.items():
+            if key.endswith(suffix) and _ends_level(key, suffix):
+                if not _checked.setdefault((suffix, value), _try_type(kind, value)):
+                    raise ConfigError(f"{where}: unknown {label} type '{value}' in {key}"
+                                      f"{_suggestion(value, _known_types(kind))}")
+        if key.endswith("pc_factor_mat_solver_type"):
+            if not _checked.setdefault(("package", value), _factor_package_available(value)):
+                raise ConfigError(f"{where}: factor package '{value}' in {key} is not available in this PETSc "
+                                  f"(e.g. mumps, petsc, superlu, umfpack)")
+
+
+def _ends_level(key: str, suffix: str) -> bool:
+    """``key`` is ``LEVEL + suffix`` with LEVEL empty or ending in ``_`` (not e.g. ``pc_hypre_type``)."""
+    level = key[: -len(suffix)]
+    return level == "" or level.endswith("_")
+
+
+def _suggestion(value: str, known: Iterable[str]) -> str:
+    close = difflib.get_close_matches(value, list(known), n=3)
+    return f" (did you mean {', '.join(close)}?)" if close else ""
+
+
+_library = None
+
+
+def _petsc_library():
+    """libpetsc through the petsc4py extension (PetscOptionsUsed is not wrapped by petsc4py 3.18)."""
+    global _library
+    if _library is None:
+        _library = ctypes.CDLL(PETSc.__file__)
+        _library.PetscOptionsUsed.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int)]
+    return _library
+
+
+def unused(prefix: str, keys: Iterable[str]) -> list[str]:
+    """Those of the options ``prefix + key`` that PETSc never read."""
+    library, names = _petsc_library(), []
+    for key in keys:
+        flag = ctypes.c_int(0)
+        library.PetscOptionsUsed(None, (prefix + key).encode(), ctypes.byref(flag))
+        if not flag.value:
+            names.append(key)
+    return names
+
+
+def check_used(prefix: str, keys: Iterable[str], where: str) -> None:
+    """After a first solve: an option the user gave that PETSc did not read is one line naming it."""
+    keys = [key for key in keys if key != SPLITS]
+    missing = unused(prefix, keys)
+    if missing:
+        raise ConfigError(f"{where}: PETSc did not use option '{missing[0]}' (-{prefix}{missing[0]}): unknown, "
+                          f"or not read by the chosen solver")
+
+
+def check_tables(tables: Mapping[str, Any], prefixes: Iterable[str]) -> None:
+    """Every ``[solver.NAME]`` table names a subproblem of the run, or one line naming it and the known ones."""
+    known = sorted({prefix.rstrip("_") for prefix in prefixes})
+    for name in tables:
+        if name not in known:
+            raise ConfigError(f"unknown solver table [solver.{name}]: no subproblem of this run has options "
+                              f"prefix {name}_{_suggestion(name, known)} (known: {', '.join(known)})")

@@ -1,0 +1,157 @@
+"""Solver settings: nested ``[solver.NAME]`` tables, who overrides whom, and one clear line for a mistake."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from petsc4py import PETSc
+
+from primordia.core.errors import ConfigError
+from primordia.coupling.solver_options import (
+    check_tables, check_types, check_used, combine, flatten, option_text, parallel_safe)
+from primordia.coupling.solvers import write_options
+
+
+# -- nested tables -----------------------------------------------------------------------------
+def test_nested_tables_are_option_prefixes_as_in_firedrake():
+    table = {"ksp_type": "gmres", "pc_type": "fieldsplit", "splits": [["u"], ["psi", "p"]],
+             "fieldsplit_u": {"ksp_type": "preonly", "pc_type": "gamg", "mg_levels": {"ksp_max_it": 2}},
+             "-snes_monitor": True}
+    assert flatten(table, "solver.x") == {
+        "ksp_type": "gmres", "pc_type": "fieldsplit", "splits": (("u",), ("psi", "p")),
+        "fieldsplit_u_ksp_type": "preonly", "fieldsplit_u_pc_type": "gamg", "fieldsplit_u_mg_levels_ksp_max_it": 2,
+        "snes_monitor": True}
+    assert option_text(True) == "true" and option_text(1e-2) == "0.01"
+
+
+@pytest.mark.parametrize("table, fragment", [
+    ({"ksp_rtol": [1e-2]}, "solver.x.ksp_rtol must be a number, a string or true/false"),
+    ({"splits": ["u", "p"]}, "solver.x.splits must be a list of lists of field names"),
+    (3, "solver.x must be a table"),
+])
+def test_a_malformed_table_is_one_line(table, fragment):
+    with pytest.raises(ConfigError, match=fragment.replace(".", r"\.")):
+        flatten(table, "solver.x")
+
+
+# -- who wins ------------------------------------------------------------------------------------
+DEFAULTS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps", "mat_mumps_icntl_14": 80,
+            "snes_rtol": 1e-7, "ksp_rtol": 1e-8}
+
+
+def test_user_options_override_the_defaults():
+    assert combine(DEFAULTS, {"ksp_rtol": 1e-3}) == {**DEFAULTS, "ksp_rtol": 1e-3}
+    assert combine(DEFAULTS, {"pc_type": "lu"}) == DEFAULTS  # the same preconditioner keeps its settings
+
+
+def test_a_new_pc_type_drops_what_only_made_sense_for_the_old_one():
+    combined = combine(DEFAULTS, {"pc_type": "gamg"})
+    assert combined == {"pc_type": "gamg", "snes_rtol": 1e-7, "ksp_rtol": 1e-8}  # no factor package, no preonly
+    assert combine(DEFAULTS, {"pc_type": "gamg", "ksp_type": "preonly"})["ksp_type"] == "preonly"  # unless asked
+
+
+def test_a_new_pc_type_of_one_split_drops_that_split_s_settings_only():
+    defaults = flatten({"pc_type": "fieldsplit", "splits": [["u"], ["p"]],
+                        "fieldsplit_u": {"ksp_type": "preonly", "pc_type": "gamg", "pc_gamg_threshold": 0.02},
+                        "fieldsplit_p": {"ksp_type": "preonly", "pc_type": "hypre"}}, "defaults")
+    combined = combine(defaults, flatten({"fieldsplit_u": {"pc_type": "hypre"}}, "solver.x"))
+    assert combined == {"pc_type": "fieldsplit", "splits": (("u",), ("p",)), "fieldsplit_u_ksp_type": "preonly",
+                        "fieldsplit_u_pc_type": "hypre", "fieldsplit_p_ksp_type": "preonly",
+                        "fieldsplit_p_pc_type": "hypre"}
+    assert "splits" not in combine(defaults, {"pc_type": "lu"})  # a whole-matrix preconditioner: no splits
+
+
+def test_a_direct_solve_gets_a_package_that_works_on_the_ranks_it_has():
+    options = {"pc_type": "lu", "fieldsplit_u_pc_type": "lu", "sub_pc_type": "lu"}
+    assert parallel_safe(options, parallel=False)["pc_factor_mat_solver_type"] == "petsc"
+    parallel = parallel_safe(options, parallel=True)
+    assert parallel["pc_factor_mat_solver_type"] == parallel["fieldsplit_u_pc_factor_mat_solver_type"] == "mumps"
+    assert parallel["sub_pc_factor_mat_solver_type"] == "petsc"  # block Jacobi blocks are serial
+    assert parallel_safe({"pc_type": "lu", "pc_factor_mat_solver_type": "superlu"}, True)[
+        "pc_factor_mat_solver_type"] == "superlu"
+
+
+# -- mistakes ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("options, fragment", [
+    ({"pc_type": "gamgg"}, "unknown PC type 'gamgg' in pc_type (did you mean gamg"),
+    ({"ksp_type": "gmress"}, "unknown KSP type 'gmress' in ksp_type (did you mean gmres"),
+    ({"fieldsplit_u_pc_type": "amg"}, "unknown PC type 'amg' in fieldsplit_u_pc_type"),
+    ({"snes_type": "newton"}, "unknown SNES type 'newton'"),
+    ({"pc_factor_mat_solver_type": "pardiso"}, "factor package 'pardiso' in pc_factor_mat_solver_type"),
+])
+def test_unknown_types_are_named(options, fragment):
+    with pytest.raises(ConfigError) as error:
+        check_types(options, "solver.x")
+    assert str(error.value).startswith("solver.x: ") and fragment in str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def test_known_types_pass():
+    check_types({"ksp_type": "gmres", "pc_type": "hypre", "fieldsplit_u_pc_type": "gamg", "snes_type": "newtonls",
+                 "pc_factor_mat_solver_type": "mumps", "pc_hypre_type": "boomeramg"}, "solver.x")
+
+
+def test_an_option_petsc_never_read_is_named():
+    write_options("options_test_", {"ksp_type": "cg", "ksp_rtoll": 1e-3})
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    ksp.setOptionsPrefix("options_test_")
+    ksp.setFromOptions()
+    check_used("options_test_", ["ksp_type"], "solver.options_test")
+    with pytest.raises(ConfigError, match="solver.options_test: PETSc did not use option 'ksp_rtoll'"):
+        check_used("options_test_", ["ksp_type", "ksp_rtoll"], "solver.options_test")
+    ksp.destroy()
+
+
+def test_a_table_naming_no_subproblem_is_named_with_the_known_ones():
+    check_tables({"chemotaxis_m": {}}, ["chemotaxis_m_", "chemotaxis_f_"])
+    with pytest.raises(ConfigError, match=r"unknown solver table \[solver.chemotaxis_n\].*did you mean chemotaxis_m"
+                                          r".*known: chemotaxis_f, chemotaxis_m"):
+        check_tables({"chemotaxis_n": {}}, ["chemotaxis_m_", "chemotaxis_f_"])
+
+
+# -- through the real command: one line, exit status 2 ---------------------------------------------
+def run(capsys, config, out, *assignments) -> tuple[int, str]:
+    from primordia.cli import main
+
+    arguments = ["run", str(config), "--out", str(out), "--no-progress"] + [a for s in assignments for a in ("--set", s)]
+    status = main(arguments)
+    return status, capsys.readouterr().err
+
+
+BAD_SOLVER_SETTINGS = [
+    (['solver.chemotaxis_m.pc_type="ilu0"'], ["solver.chemotaxis_m", "unknown PC type 'ilu0'"]),
+    (['solver.chemotaxis_f.ksp_type="cgg"'], ["solver.chemotaxis_f", "unknown KSP type 'cgg'", "did you mean cg"]),
+    (["solver.chemotaxis_m.ksp_rtoll=1e-6"], ["solver.chemotaxis_m", "PETSc did not use option 'ksp_rtoll'",
+                                             "-chemotaxis_m_ksp_rtoll"]),
+    (['solver.chemotaxis_mm.ksp_type="cg"'], ["unknown solver table [solver.chemotaxis_mm]", "chemotaxis_m"]),
+    (['solver.chemotaxis_f.pc_factor_mat_solver_type="pardiso"'], ["factor package 'pardiso'"]),
+]
+
+
+@pytest.mark.parametrize("assignments, fragments", BAD_SOLVER_SETTINGS, ids=[a[0] for a, _ in BAD_SOLVER_SETTINGS])
+def test_bad_solver_settings_are_one_line_and_status_2(capsys, small_config, tmp_path, assignments, fragments):
+    status, stderr = run(capsys, small_config(), tmp_path / "out", *assignments)
+    assert status == 2, stderr
+    lines = stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("primordia: error: "), stderr
+    for fragment in fragments:
+        assert fragment in lines[0], f"{fragment!r} not in {lines[0]!r}"
+
+
+def test_good_nested_settings_run_and_reach_petsc(capsys, small_config, tmp_path):
+    config = small_config(small_config.text + """
+[solver.chemotaxis_m]
+ksp_type = "gmres"
+pc_type = "hypre"
+ksp_rtol = 1e-10
+
+[solver.chemotaxis_f]
+pc_type = "gamg"
+mg_levels = { ksp_type = "chebyshev", ksp_max_it = 2 }
+""")
+    status, stderr = run(capsys, config, tmp_path / "out")
+    assert status == 0, stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    assert summary["mean_linear_iterations"]["chemotaxis.f"] > 1  # GMRES + AMG, not the default direct solve
