@@ -69,6 +69,10 @@ from primordia.physics.kinetics.base import Species
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
 ACCUMULATIONS = ("material", "conservative")
 PERTURBATION_SHAPES = ("random", "cosine")
+#: ``solve``: one linear solve per species (IMEX, Gauss-Seidel), or all species in one Newton system.
+SOLVES = ("split", "coupled")
+#: ``preconditioner`` of the coupled system: a direct solve, or the seed's block Jacobi (section 5.2).
+COUPLED_PRECONDITIONERS = ("block_jacobi", "lu")
 
 
 # -- the terms of seed eqs. (2.3a)-(2.3d) / (4.17a)-(4.17d), each a UFL integrand ---------------
@@ -121,7 +125,8 @@ class Chemotaxis(Physics):
     name = "chemotaxis"
     needs_kinetics = True
     options = {"flux_scheme": "exponential_fitting", "perturbation": 0.01, "seed": 1,
-               "perturbation_shape": "random", "wavenumber": [0.0, 0.0], "accumulation": "material"}
+               "perturbation_shape": "random", "wavenumber": [0.0, 0.0], "accumulation": "material",
+               "solve": "split", "preconditioner": "block_jacobi"}
 
     def validate_options(self):
         if self.opts["flux_scheme"] not in FLUX_SCHEMES:
@@ -138,6 +143,13 @@ class Chemotaxis(Physics):
         if self.opts["perturbation_shape"] not in PERTURBATION_SHAPES:
             raise ConfigError(f"physics.chemotaxis.perturbation_shape must be one of "
                               f"{', '.join(PERTURBATION_SHAPES)}, got {self.opts['perturbation_shape']!r}")
+        for key, allowed in (("solve", SOLVES), ("preconditioner", COUPLED_PRECONDITIONERS)):
+            if self.opts[key] not in allowed:
+                raise ConfigError(f"physics.chemotaxis.{key} must be one of {', '.join(allowed)}, "
+                                  f"got {self.opts[key]!r}")
+        if self.opts["solve"] == "coupled" and self.opts["flux_scheme"] == "exponential_fitting":
+            raise ConfigError("physics.chemotaxis.solve = \"coupled\" needs flux_scheme = \"galerkin\" "
+                              "(the exponentially fitted flux acts on the species as separate fields)")
         wavenumber = self.opts["wavenumber"]
         if (not isinstance(wavenumber, list) or not 1 <= len(wavenumber) <= 3
                 or not all(isinstance(k, (int, float)) and not isinstance(k, bool) for k in wavenumber)):
@@ -150,7 +162,8 @@ class Chemotaxis(Physics):
         return self.kinetics.species
 
     def fields(self):
-        return [FieldSpec(s.name, degree=1, description=s.description) for s in self.species]
+        group = self.name if self.opts["solve"] == "coupled" else None  # coupled: one mixed function
+        return [FieldSpec(s.name, degree=1, description=s.description, group=group) for s in self.species]
 
     def sensitivity(self, species: Species, density, ops):
         """chi(c): the chemotactic flux of ``species`` is chi(c) c grad a (seed eq. (2.3a)), from the kinetics."""
@@ -245,6 +258,8 @@ class Chemotaxis(Physics):
         from primordia.coupling.edge_flux import ExponentiallyFittedFlux
 
         reactions = self._reactions()
+        if self.opts["solve"] == "coupled":
+            return [self._coupled(reactions)]
         problems = []
         for species in self.species:
             unknown = self.disc.unknown(species.name)
@@ -266,6 +281,33 @@ class Chemotaxis(Physics):
                 operator=operator, petsc_options=_solver_defaults(species),
             ))
         return problems
+
+
+    def _coupled(self, reactions) -> Subproblem:
+        """All species in one Newton system: the reactions implicit in every species (seed section 5.1)."""
+        first = self.species[0].name
+        unknown = self.disc.unknown(first)
+        residual = sum((self.species_residual(species, reactions) for species in self.species[1:]),
+                       self.species_residual(self.species[0], reactions))
+        return Subproblem(name=self.name, unknown=unknown, residual=residual,
+                          jacobian=ufl.derivative(residual, unknown), linear=False,
+                          fields=self.disc.unknown_fields(first),
+                          petsc_options=_coupled_defaults(self.opts["preconditioner"], self.species))
+
+
+def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict:
+    """The coupled species' solver: a direct solve, or the seed's block Jacobi (section 5.2).
+
+    Block Jacobi: GMRES preconditioned additively by each species' diagonal block,
+    AMG (BoomerAMG) on the transported ones (m, f, b) and Jacobi on the immobile
+    ones (e, whose block is a lumped, diagonal matrix).
+    """
+    if preconditioner == "lu":
+        return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+    blocks = {f"fieldsplit_{s.name}": {"ksp_type": "preonly", "pc_type": "jacobi" if s.diffusivity is None else "hypre"}
+              for s in species}
+    return {"ksp_type": "gmres", "ksp_rtol": 1e-8, "ksp_atol": 1e-14, "pc_type": "fieldsplit",
+            "pc_fieldsplit_type": "additive", **blocks}
 
 
 def _solver_defaults(species: Species) -> dict:

@@ -118,6 +118,20 @@ def incompressibility(J, J_g, phi, dx):
     return -(J - J_g) * phi * dx
 
 
+def fixed_stress_stabilisation(beta_s, beta_f, mu, psi, psi_test, p, p_test, dx):
+    """-(beta_s / mu) psi psi* + beta_f p p*: the seed's stabilisation (section 5.2, beta_s = 1, beta_f = 0.1).
+
+    Added to the (psi, p) block of the tangent in the preconditioning matrix, it makes that
+    block a sparse approximation of the block's Schur complement (a fixed-stress type splitting,
+    Borregales et al. 2018) on which AMG acts.  The psi term carries the sign and the 1/mu scale
+    of this formulation: with the constraint written -(J - J_g) psi* the tangent is a symmetric
+    saddle point, whose Schur complement in psi is about -M/mu (M the mass matrix); the seed's
+    +beta_s psi psi* made GMRES stall here (example 2a at 43 x 43: no convergence in 500 iterations
+    where -psi psi*/mu takes 28).
+    """
+    return (-beta_s / mu * psi * psi_test + beta_f * p * p_test) * dx
+
+
 def _parameters(*names):
     return tuple(p for p in POROELASTICITY if p.name in names)
 
@@ -133,7 +147,7 @@ class PoroelasticGrowth(Physics):
     needs_growth_law = True
     finite_strain = True
     options = {"shear_modulus": 4.0, "quadrature_degree": 3, "initial_equilibrium": True, "initial_load_steps": 4,
-               "boundary": []}
+               "boundary": [], "preconditioner": "auto", "stabilisation": [1.0, 0.1]}
 
     def __init__(self, params, kinetics=None, growth_law=None, **options):
         super().__init__(params, kinetics=kinetics, growth_law=growth_law, **options)
@@ -150,6 +164,14 @@ class PoroelasticGrowth(Physics):
         if not isinstance(self.opts["initial_equilibrium"], bool):
             raise ConfigError(f"physics.poroelastic_growth.initial_equilibrium must be true or false, "
                               f"got {self.opts['initial_equilibrium']!r}")
+        if self.opts["preconditioner"] not in PRECONDITIONERS:
+            raise ConfigError(f"physics.poroelastic_growth.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
+                              f"got {self.opts['preconditioner']!r}")
+        beta = self.opts["stabilisation"]
+        if (not isinstance(beta, list) or len(beta) != 2
+                or not all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in beta)):
+            raise ConfigError(f"physics.poroelastic_growth.stabilisation must be [beta_s, beta_f] (seed section 5.2: "
+                              f"[1.0, 0.1]), got {beta!r}")
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
@@ -234,7 +256,16 @@ class PoroelasticGrowth(Physics):
         unknown = disc.unknown("u")
         return [Subproblem(name=self.name, unknown=unknown, residual=residual,
                            jacobian=ufl.derivative(residual, unknown), bcs=self._dirichlet(), linear=False,
-                           petsc_options=_solver_defaults(), failure_hint=self._failure_hint())]
+                           **self._solver(), failure_hint=self._failure_hint())]
+
+    def _solver(self) -> dict:
+        """Solver defaults, the fields of the unknown and the preconditioning form (seed section 5.2)."""
+        disc = self.disc
+        beta_s, beta_f = self.opts["stabilisation"]
+        stabilisation = fixed_stress_stabilisation(beta_s, beta_f, self.opts["shear_modulus"], disc.trial("psi"),
+                                                   disc.test("psi"), disc.trial("p"), disc.test("p"), self.dx)
+        return {"petsc_options": _solver_defaults(self.opts["preconditioner"], disc.gdim), "fields": disc.unknown_fields("u"),
+                "rigid_body": "u", "preconditioner": stabilisation}
 
     def _failure_hint(self) -> str | None:
         """Why a solve may have no solution: a tissue held on all sides cannot change its volume."""
@@ -260,7 +291,7 @@ class PoroelasticGrowth(Physics):
         return [Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
                            jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
                            continuation=(self.ramp, self.opts["initial_load_steps"]),
-                           petsc_options=_solver_defaults(), failure_hint=self._failure_hint())]
+                           **self._solver(), failure_hint=self._failure_hint())]
 
     def before_step(self, t, dt):
         for condition in self.conditions:
@@ -276,16 +307,40 @@ class PoroelasticGrowth(Physics):
                            "residual of the constraint J_e = 1 (seed eq. (4.12c))")]
 
 
-def _solver_defaults() -> dict:
-    """GMRES on each Newton step, preconditioned by a MUMPS LU factorisation that is reused.
+#: The seed's block preconditioner (section 5.2): GMRES, lower Schur factorisation u | (psi, p), AMG (GAMG,
+#: with the rigid-body near-nullspace) on u, AMG on the (psi, p) block of the tangent plus the
+#: stabilisation (the Schur complement approximation), and the seed's inexact Newton (rtol 1e-2, atol 1e-12).
+SCHUR_FIELDSPLIT = {
+    "ksp_type": "gmres", "ksp_rtol": 1e-2, "ksp_atol": 1e-12, "ksp_max_it": 500, "ksp_gmres_restart": 100,
+    "ksp_pc_side": "right",
+    "pc_type": "fieldsplit", "splits": [["u"], ["psi", "p"]],
+    "pc_fieldsplit_type": "schur", "pc_fieldsplit_schur_fact_type": "lower",
+    "pc_fieldsplit_schur_precondition": "a11",
+    "fieldsplit_u": {"ksp_type": "preonly", "pc_type": "gamg"},
+    "fieldsplit_psi_p": {"ksp_type": "preonly", "pc_type": "hypre"},
+}
 
-    The seed's 2D runs factorise every tangent (MUMPS).  Here the factorisation is
+#: GMRES preconditioned by a MUMPS LU factorisation reused over Newton iterations and steps.
+REUSED_LU = {
+    "ksp_type": "gmres", "ksp_rtol": 1e-8, "ksp_atol": 1e-14, "ksp_max_it": 300, "ksp_gmres_restart": 100,
+    "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
+    "snes_lag_preconditioner": 10, "snes_lag_preconditioner_persists": True,
+}
+
+
+#: Values of option ``preconditioner``: "auto" is "lu" in 2D and "schur" in 3D.
+PRECONDITIONERS = ("auto", "lu", "schur")
+
+
+def _solver_defaults(preconditioner: str, gdim: int) -> dict:
+    """The solver of the growth system: a reused direct factorisation, or the seed's block preconditioner.
+
+    ``lu``: GMRES on each Newton step, preconditioned by a MUMPS LU factorisation
     kept for up to 10 Newton iterations, across time steps (the tangent changes
-    slowly as the tissue grows): GMRES on the exact tangent converges in a few
-    iterations with it, so Newton keeps its quadratic rate at a fraction of the
-    cost (seed example 2a at 86 x 86 squares: 2.6 instead of 8.6 s per step).
-    The saddle point (the zero psi block) rules out PETSc's unpivoted LU.
+    slowly as the tissue grows).  The saddle point (the zero psi block) rules out
+    PETSc's unpivoted LU.  ``schur``: :data:`SCHUR_FIELDSPLIT`, whose cost grows
+    linearly with the unknowns, where a factorisation's grows faster (in 3D, much).
     """
-    return {"ksp_type": "gmres", "ksp_rtol": 1e-8, "ksp_atol": 1e-14, "ksp_max_it": 300,
-            "ksp_gmres_restart": 100, "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
-            "snes_lag_preconditioner": 10, "snes_lag_preconditioner_persists": True}
+    if preconditioner == "auto":
+        preconditioner = "lu" if gdim == 2 else "schur"
+    return dict(REUSED_LU if preconditioner == "lu" else SCHUR_FIELDSPLIT)

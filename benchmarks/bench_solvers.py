@@ -1,0 +1,187 @@
+"""Solver study: how the cost of each system grows with the mesh, per preconditioner (issue 9).
+
+For each system and size it prints, per preconditioner (a named set of config overrides):
+
+* mean Krylov iterations per Newton step of the system studied (for linear systems: per solve),
+* Newton iterations per time step (nonlinear systems),
+* ms per time step (mean over the timed steps, after warm-up steps: JIT, first factorisations), in
+  CPU time of the process by default (``--clock cpu``: on a machine others are using, wall time
+  measures them too; the largest over the ranks under MPI) or in wall time (``--clock wall``),
+* peak memory of the run (its own process) and bytes per unknown (peak / all unknowns of the run),
+* the ratio of ms/step to the direct solver's at the same size (the first preconditioner listed).
+
+Systems (``--systems``):
+
+* ``growth2d``: the (u, psi, p) Newton system of example 2a (``examples/ex02a.toml``, fixed-point coupling);
+* ``growth3d``: the same system in example 4 (``examples/ex04_small.toml`` stretched to larger boxes);
+* ``biot``: the (u, p) system of example 1b (linear Biot, ``examples/ex01b.toml``);
+* ``cells``: the cell-density solve of example 1a (``examples/ex01a.toml``, exponentially fitted);
+* ``chemotaxis``: the four species of example 1a solved as one Newton system (``solve = "coupled"``).
+
+Each (system, preconditioner, size) runs in a child process (``--one``), so its peak memory is its own;
+``--ranks 2`` runs the children under ``mpirun -n 2``.
+
+    .venv/bin/python benchmarks/bench_solvers.py --systems growth2d --sizes 43 86 171 --steps 3
+    .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 40 --steps 2
+    .venv/bin/python benchmarks/bench_solvers.py --systems biot cells --sizes 43 86 171 342
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: What each system runs: the example, how a size maps to mesh cells, the subproblem studied, preconditioners.
+SYSTEMS = {
+    "growth2d": {
+        "example": "ex02a", "cells": lambda n: f"[{n},{n}]", "subproblem": "poroelastic_growth",
+        "preconditioners": {
+            "lu_fresh": ['physics.poroelastic_growth.preconditioner="lu"',
+                         "solver.poroelastic_growth.snes_lag_preconditioner=1",
+                         "solver.poroelastic_growth.snes_lag_preconditioner_persists=false"],
+            "lu_reused": ['physics.poroelastic_growth.preconditioner="lu"'],
+            "schur": ['physics.poroelastic_growth.preconditioner="schur"'],
+        },
+    },
+    "growth3d": {
+        "example": "ex04_small", "cells": lambda n: f"[{n},{n},{max(2, n // 10)}]",
+        "subproblem": "poroelastic_growth",
+        "preconditioners": {
+            "lu_reused": ['physics.poroelastic_growth.preconditioner="lu"'],
+            "schur": ['physics.poroelastic_growth.preconditioner="schur"'],
+        },
+    },
+    "biot": {
+        "example": "ex01b", "cells": lambda n: f"[{n},{n}]", "subproblem": "poroelasticity",
+        "preconditioners": {
+            "lu": ['physics.poroelasticity.preconditioner="lu"'],
+            "fixed_stress": ['physics.poroelasticity.preconditioner="fixed_stress"'],
+        },
+    },
+    "cells": {
+        "example": "ex01a", "cells": lambda n: f"[{n},{n}]", "subproblem": "chemotaxis.m",
+        "preconditioners": {
+            "lu": ["solver.chemotaxis_m.ksp_type=\"preonly\"", "solver.chemotaxis_m.pc_type=\"lu\""],
+            "bjacobi_ilu": ["solver.chemotaxis_m.pc_type=\"bjacobi\""],
+            "gamg": ["solver.chemotaxis_m.pc_type=\"gamg\""],
+        },
+    },
+    "chemotaxis": {
+        "example": "ex01a", "cells": lambda n: f"[{n},{n}]", "subproblem": "chemotaxis",
+        "preconditioners": {
+            "lu": ['physics.chemotaxis.solve="coupled"', 'physics.chemotaxis.flux_scheme="galerkin"',
+                   'physics.chemotaxis.preconditioner="lu"'],
+            "block_jacobi": ['physics.chemotaxis.solve="coupled"', 'physics.chemotaxis.flux_scheme="galerkin"',
+                             'physics.chemotaxis.preconditioner="block_jacobi"'],
+        },
+    },
+}
+
+
+def one(system: str, preconditioner: str, size: int, steps: int, warmup: int, extra: list[str],
+        clock: str = "cpu") -> dict:
+    """Time one run in this process (rank 0 returns the figures)."""
+    from primordia.coupling.orchestrator import Simulation
+    from primordia.model import Model
+
+    spec = SYSTEMS[system]
+    overrides = [f"mesh.cells={spec['cells'](size)}", "output.pictures=false", "output.series_every=100000",
+                 "time.t_final=1e6", *spec["preconditioners"][preconditioner], *extra]
+    model = Model.from_file(ROOT / f"examples/{spec['example']}.toml", overrides)
+    sim = Simulation(model, backend="fenicsx", out_dir=f"/tmp/primordia-bench-solvers/{system}-{preconditioner}-{size}")
+    sim.setup()
+    for _ in range(warmup):
+        sim.step()
+    name = spec["subproblem"]
+    linear_before = sum(sim.iterations.get(name, []))
+    newton_before = sum(n for n, _ in sim.newton.get(name, []))
+    start, start_cpu = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        sim.step()
+    elapsed = time.process_time() - start_cpu if clock == "cpu" else time.perf_counter() - start
+    linear = sum(sim.iterations.get(name, [])) - linear_before
+    newton = sum(n for n, _ in sim.newton.get(name, [])) - newton_before
+    nonlinear = name in sim.newton
+    solves = newton if nonlinear else len(sim.iterations.get(name, [])[-steps:])
+    unknowns = sum(sim.backend.num_dofs(sim.disc.group_function(g).ufl_function_space()) for g in sim.disc.groups())
+    peak = sim.comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+    return {"system": system, "preconditioner": preconditioner, "size": size, "ranks": sim.comm.size,
+            "ms_per_step": 1e3 * sim.comm.allreduce(elapsed, op=_max()) / steps,
+            "krylov_per_newton": linear / max(solves, 1), "newton_per_step": newton / steps if nonlinear else None,
+            "unknowns": unknowns, "peak_bytes": peak, "bytes_per_unknown": peak / unknowns}
+
+
+def _max():
+    from mpi4py import MPI
+
+    return MPI.MAX
+
+
+def child(system, preconditioner, size, args) -> dict | None:
+    command = [sys.executable, __file__, "--one", system, preconditioner, str(size), "--steps", str(args.steps),
+               "--warmup", str(args.warmup), "--clock", args.clock, *sum((["--set", s] for s in args.set), [])]
+    if args.ranks > 1:
+        command = ["mpirun", "-n", str(args.ranks), *command]
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    done = subprocess.run(command, capture_output=True, text=True, env=env)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+    if done.returncode != 0 or not lines:
+        reason = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        print(f"  {system} {preconditioner} {size}: failed ({reason[:160]})", flush=True)
+        return None
+    return json.loads(lines[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--systems", nargs="+", default=["growth2d"], choices=sorted(SYSTEMS))
+    parser.add_argument("--sizes", type=int, nargs="+", default=[43, 86, 171])
+    parser.add_argument("--preconditioners", nargs="+", default=None, help="default: every one of the system")
+    parser.add_argument("--steps", type=int, default=3)
+    parser.add_argument("--warmup", type=int, default=2)
+    parser.add_argument("--ranks", type=int, default=1)
+    parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu")
+    parser.add_argument("--set", action="append", default=[], help="an extra config override for every run")
+    parser.add_argument("--one", nargs=3, metavar=("SYSTEM", "PRECONDITIONER", "SIZE"), help=argparse.SUPPRESS)
+    parser.add_argument("--json", help="also append every row to this file (JSON lines)")
+    args = parser.parse_args()
+    if args.one:
+        row = one(args.one[0], args.one[1], int(args.one[2]), args.steps, args.warmup, args.set, args.clock)
+        from mpi4py import MPI
+
+        if MPI.COMM_WORLD.rank == 0:
+            print(json.dumps(row), flush=True)
+        return
+    header = (f"{'system':>10} {'preconditioner':>14} {'size':>5} {'ranks':>5} {'unknowns':>9} {'Krylov/Newton':>13} "
+              f"{'Newton/step':>11} {'ms/step':>9} {'peak MB':>8} {'B/unknown':>9} {'/direct':>7}")
+    print(header, flush=True)
+    for system in args.systems:
+        names = args.preconditioners or list(SYSTEMS[system]["preconditioners"])
+        for size in args.sizes:
+            direct = None
+            for name in names:
+                row = child(system, name, size, args)
+                if row is None:
+                    continue
+                direct = direct or row["ms_per_step"]
+                newton = f"{row['newton_per_step']:.1f}" if row["newton_per_step"] is not None else "-"
+                print(f"{system:>10} {name:>14} {size:>5} {row['ranks']:>5} {row['unknowns']:>9} "
+                      f"{row['krylov_per_newton']:>13.1f} {newton:>11} {row['ms_per_step']:>9.0f} "
+                      f"{row['peak_bytes'] / 2**20:>8.0f} {row['bytes_per_unknown']:>9.0f} "
+                      f"{row['ms_per_step'] / direct:>7.2f}", flush=True)
+                if args.json:
+                    with open(args.json, "a") as stream:
+                        stream.write(json.dumps({**row, "ratio_to_direct": row["ms_per_step"] / direct}) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""Each of the seed's preconditioners (section 5.2) converges on a small case to the direct solver's answer.
+
+Every system is run twice on a coarse example, once with a direct solve and once with the
+preconditioner under test, on both backends where the system runs on both; the fields must agree
+to the solvers' tolerances and the preconditioned run must really iterate (its Krylov counts are
+read back).  Also: the splits are named by the physics' fields, and a wrong one is one line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from primordia.core.errors import ConfigError
+from primordia.coupling.orchestrator import Simulation
+from primordia.model import Model
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+BACKENDS = ("fenicsx", "skfem")
+QUIET = ["output.pictures=false", "output.series_every=1"]
+
+
+def run(example: str, backend: str, tmp_path, steps: int, *overrides) -> Simulation:
+    model = Model.from_file(EXAMPLES / f"{example}.toml", [*QUIET, *overrides])
+    out = tmp_path / f"{example}-{backend}-{abs(hash(overrides))}"
+    sim = Simulation(model, backend=backend, out_dir=out).setup()
+    for _ in range(steps):
+        sim.step()
+    return sim
+
+
+def assert_same_fields(direct: Simulation, iterative: Simulation, tolerance: float) -> None:
+    reference, values = direct.vertex_values(), iterative.vertex_values()
+    for name, expected in reference.items():
+        scale = np.abs(expected).max()
+        assert scale > 0, name
+        difference = np.abs(values[name] - expected).max() / scale
+        assert difference < tolerance, f"{name}: {difference:.1e} from the direct solve"
+
+
+def krylov_iterations(sim: Simulation, subproblem: str) -> list[int]:
+    return sim.iterations[subproblem]
+
+
+# -- finite-strain growth: GMRES + lower Schur factorisation, AMG blocks, the seed's inexact Newton ----------
+GROWTH = ["mesh.cells=[8,8]", "time.t_final=0.6", "output.times=[0.6]", 'coupling.scheme="sequential"',
+          "solver.poroelastic_growth.snes_rtol=1e-10", "solver.poroelastic_growth.snes_atol=1e-12"]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_growth_schur_fieldsplit_reaches_the_direct_solution(backend, tmp_path):
+    direct = run("ex02a", backend, tmp_path, 2, *GROWTH, 'physics.poroelastic_growth.preconditioner="lu"')
+    schur = run("ex02a", backend, tmp_path, 2, *GROWTH, 'physics.poroelastic_growth.preconditioner="schur"')
+    assert_same_fields(direct, schur, 1e-6)
+    newton = sum(iterations for iterations, _ in schur.newton["poroelastic_growth"])
+    assert sum(krylov_iterations(schur, "poroelastic_growth")) > 3 * newton  # it iterates: not a direct solve
+    pc = schur.solvers[-1].ksp.getPC()
+    assert pc.getType() == "fieldsplit"
+    assert [ksp.getOptionsPrefix() for ksp in pc.getFieldSplitSubKSP()] == [
+        "poroelastic_growth_fieldsplit_u_", "poroelastic_growth_fieldsplit_psi_p_"]
+    u_block = pc.getFieldSplitSubKSP()[0]
+    assert u_block.getPC().getType() == "gamg"
+    assert u_block.getOperators()[1].getNearNullSpace().getVecs(), "the rigid-body modes reached AMG"
+
+
+def test_growth_schur_fieldsplit_in_3d(tmp_path):
+    three_d = ["mesh.cells=[4,4,2]", "time.t_final=1.0", "output.times=[1.0]", 'coupling.scheme="sequential"',
+               "solver.poroelastic_growth.snes_rtol=1e-10", "solver.poroelastic_growth.snes_atol=1e-12"]
+    direct = run("ex04_small", "fenicsx", tmp_path, 2, *three_d, 'physics.poroelastic_growth.preconditioner="lu"')
+    schur = run("ex04_small", "fenicsx", tmp_path, 2, *three_d, 'physics.poroelastic_growth.preconditioner="schur"')
+    assert_same_fields(direct, schur, 1e-6)
+
+
+# -- linear Biot: the fixed-stress Schur fieldsplit instead of LU --------------------------------------------
+BIOT = ["mesh.cells=[8,8]", "time.t_final=0.6", "output.times=[0.6]"]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_biot_fixed_stress_reaches_the_direct_solution(backend, tmp_path):
+    direct = run("ex01b", backend, tmp_path, 3, *BIOT)
+    fixed_stress = run("ex01b", backend, tmp_path, 3, *BIOT, 'physics.poroelasticity.preconditioner="fixed_stress"')
+    assert_same_fields(direct, fixed_stress, 1e-7)
+    assert min(krylov_iterations(fixed_stress, "poroelasticity")) > 2
+
+
+# -- chemotaxis as one Newton system: the seed's block Jacobi (AMG on m, f, b; Jacobi on e) --------------------
+COUPLED = ["mesh.cells=[8,8]", "time.t_final=0.6", "output.times=[0.6]", 'physics.chemotaxis.flux_scheme="galerkin"',
+           'physics.chemotaxis.solve="coupled"']
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_chemotaxis_block_jacobi_reaches_the_direct_solution(backend, tmp_path):
+    direct = run("ex01a", backend, tmp_path, 3, *COUPLED, 'physics.chemotaxis.preconditioner="lu"')
+    block_jacobi = run("ex01a", backend, tmp_path, 3, *COUPLED, 'physics.chemotaxis.preconditioner="block_jacobi"')
+    assert_same_fields(direct, block_jacobi, 1e-8)
+    pc = block_jacobi.solvers[0].ksp.getPC()
+    assert [sub.getPC().getType() for sub in pc.getFieldSplitSubKSP()] == ["hypre", "jacobi", "hypre", "hypre"]
+
+
+# -- the monolithic scheme: a configurable default, not MUMPS; a fieldsplit of the same system -----------------
+def test_monolithic_takes_its_solver_from_defaults_and_the_config(tmp_path):
+    mono = ["mesh.cells=[8,8]", "time.t_final=0.6", "output.times=[0.6]", 'physics.chemotaxis.flux_scheme="galerkin"',
+            'coupling.scheme="monolithic"', "solver.monolithic.snes_rtol=1e-10", "solver.monolithic.snes_atol=1e-12"]
+    direct = run("ex01b", "fenicsx", tmp_path, 2, *mono)
+    assert direct.solvers[0].ksp.getPC().getFactorSolverType() == "petsc"  # PETSc's LU in serial, not MUMPS
+    split = run("ex01b", "fenicsx", tmp_path, 2, *mono, 'solver.monolithic.ksp_type="gmres"',
+                'solver.monolithic.pc_type="fieldsplit"', 'solver.monolithic.pc_fieldsplit_type="multiplicative"',
+                'solver.monolithic.splits=[["m", "e", "f", "b"], ["u", "p"]]', "solver.monolithic.ksp_rtol=1e-10",
+                'solver.monolithic.fieldsplit_m_e_f_b.pc_type="lu"', 'solver.monolithic.fieldsplit_u_p.pc_type="lu"')
+    assert_same_fields(direct, split, 1e-8)
+
+
+def test_splits_name_fields_of_the_subproblem(tmp_path):
+    with pytest.raises(ConfigError, match=r"solver.poroelastic_growth.splits: 'q' is not a field of "
+                                          r"poroelastic_growth \(fields: u, psi, p\)"):
+        run("ex02a", "fenicsx", tmp_path, 0, *GROWTH, 'physics.poroelastic_growth.preconditioner="schur"',
+            'solver.poroelastic_growth.splits=[["u"], ["q", "p"]]')
