@@ -1,0 +1,61 @@
+"""The solver layer under MPI: field index sets on two ranks, and the 3D growth example with the seed's
+block preconditioner on 1, 2 and 3 ranks giving the same answer (to the solvers' tolerance), whatever
+the partition."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+       "PYTHONPATH": str(ROOT / "tests" / "unit")}
+
+
+def mpirun(ranks: int, *command: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    full = ["mpirun", "--oversubscribe", "-n", str(ranks), *command] if ranks > 1 else list(command)
+    done = subprocess.run(full, env=ENV, capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done
+
+
+@pytest.mark.mpi
+def test_field_index_sets_on_two_ranks():
+    script = ("from test_field_splits import check_field_index_sets, BACKENDS\n"
+              "for gdim in (2, 3):\n"
+              "    check_field_index_sets(BACKENDS['fenicsx'](), gdim)\n"
+              "from mpi4py import MPI\n"
+              "print('ranks', MPI.COMM_WORLD.size)\n")
+    done = mpirun(2, sys.executable, "-c", script)
+    assert done.stdout.count("ranks 2") == 2
+
+
+# example 4 at 4 x 4 x 2 boxes, two steps, the Schur fieldsplit (the 3D default) with tight Newton tolerances
+EX04 = ["run", str(ROOT / "examples/ex04_small.toml"), "--set", "mesh.cells=[4,4,2]", "--set", "time.t_final=1.0",
+        "--set", "output.times=[1.0]", "--set", "output.pictures=false", "--set", "coupling.tolerance=1e-10",
+        "--set", "solver.poroelastic_growth.snes_rtol=1e-11", "--set", "solver.poroelastic_growth.snes_atol=1e-12",
+        "--no-progress"]
+
+
+def _run_ex04(tmp_path, ranks: int) -> dict:
+    out = tmp_path / f"np{ranks}"
+    mpirun(ranks, sys.executable, "-m", "primordia.cli", *EX04, "--out", str(out))
+    return json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.mpi
+def test_3d_growth_with_the_block_preconditioner_does_not_depend_on_the_ranks(tmp_path):
+    runs = {ranks: _run_ex04(tmp_path, ranks) for ranks in (1, 2, 3)}
+    serial = runs[1]
+    assert serial["mean_linear_iterations"]["poroelastic_growth"] > 3 * serial["mean_newton_iterations"][
+        "poroelastic_growth"], "the fieldsplit iterates (it is not a direct solve)"
+    for ranks in (2, 3):
+        parallel = runs[ranks]
+        assert parallel["mpi_ranks"] == ranks and parallel["steps"] == serial["steps"] == 2
+        for name, stats in serial["final"].items():
+            for key in ("integral", "min", "max"):
+                assert parallel["final"][name][key] == pytest.approx(stats[key], rel=1e-7, abs=1e-10), \
+                    (ranks, name, key)
