@@ -59,6 +59,7 @@ class FenicsxBackend(Backend):
         self._vertex_maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._p1_spaces: dict[tuple, object] = {}
         self._components: dict[tuple, tuple] = {}
+        self._petsc_comms: dict[int, object] = {}  # mesh -> the PETSc communicator of its objects
         _silence_jit_logging()
 
     # -- mesh, spaces, fields -----------------------------------------------------------
@@ -93,7 +94,9 @@ class FenicsxBackend(Backend):
         return fem.FunctionSpace(mesh, element)
 
     def function(self, space, name: str):
-        return fem.Function(space, name=name)
+        function = fem.Function(space, name=name)
+        self._petsc_comms.setdefault(id(space.mesh), function.vector.getComm())
+        return function
 
     def constant(self, mesh, value):
         return fem.Constant(mesh, PETSc.ScalarType(value) if np.isscalar(value) else np.asarray(value, float))
@@ -302,6 +305,14 @@ class FenicsxBackend(Backend):
         for indices, vals in gathered:
             result[indices] = vals
         return result[:, 0] if bs == 1 else result
+
+    def collect_garbage(self, mesh) -> None:
+        super().collect_garbage(mesh)
+        # dolfinx's objects live on the mesh's duplicate of the communicator; PETSc keys its
+        # garbage by its own communicator of that duplicate, which only its objects give
+        comm = self._petsc_comms.get(id(mesh))
+        if comm is not None:
+            PETSc.garbage_cleanup(comm)
 
     # -- sizes --------------------------------------------------------------------------
     def num_cells(self, mesh) -> int:

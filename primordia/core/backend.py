@@ -230,6 +230,16 @@ class Backend(ABC):
     def is_root(self) -> bool:
         return self.comm.rank == 0
 
+    def collect_garbage(self, mesh) -> None:
+        """Destroy PETSc objects dropped on the run's communicators (collective).
+
+        petsc4py (3.18) defers destroying objects of a parallel communicator until
+        ``garbage_cleanup``: without it, every vector dropped in a time step stays allocated.
+        """
+        from petsc4py import PETSc
+
+        PETSc.garbage_cleanup(self.comm)
+
 
 def sub_elements(element) -> list:
     """The fields of a space's element: the sub-elements of a mixed element, else the element itself."""

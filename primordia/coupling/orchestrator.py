@@ -490,6 +490,18 @@ class Simulation:
                                   f"time.dt_min = {self.model.dt_min:g}")
         self.step_index += 1
         self.time = t_end
+        self._collect_petsc_garbage()
+
+    def _collect_petsc_garbage(self) -> None:
+        """Destroy the PETSc objects dropped during the step (collective: every rank steps).
+
+        petsc4py (3.18) defers destroying objects of a parallel communicator to
+        ``garbage_cleanup`` (freeing them when Python drops them could deadlock), so a
+        vector copied and dropped inside a step would otherwise stay allocated (example
+        2a at 86 x 86 squares grew to 15 GB over 2,600 steps, through the fixed-point
+        iteration's copies, now kept).
+        """
+        self.backend.collect_garbage(self.disc.mesh)
 
     def _substep(self, t_next: float, dt: float) -> str | None:
         """Try to advance from ``self.time`` to ``t_next``; None on success, else why the try was undone."""

@@ -121,13 +121,17 @@ class FixedPoint(SplittingScheme):
     def advance(self, sim, t0, dt):
         groups = sim.disc.groups()
         vectors = {g: sim.backend.petsc_vector(sim.disc.group_function(g)) for g in groups}
+        # work vectors made once: PETSc objects dropped inside a step are only freed by a garbage collection
+        if getattr(self, "_work", None) is None or set(self._work) != set(groups):
+            self._work = {g: (vector.duplicate(), vector.duplicate()) for g, vector in vectors.items()}
         stats = {}
         with sim.substep(groups, t0 + dt, dt):
             for iteration in range(1, self.opts["max_iterations"] + 1):
-                before = {g: vector.copy() for g, vector in vectors.items()}
+                for g, vector in vectors.items():
+                    vector.copy(self._work[g][0])
                 for solver in sim.solvers:
                     accumulate(stats, solver.sub.name, solver.solve())
-                change = max(_relative_change(before[g], vectors[g]) for g in groups)
+                change = max(_relative_change(*self._work[g], vectors[g]) for g in groups)
                 if change < self.opts["tolerance"]:
                     break
             else:
@@ -181,10 +185,10 @@ class Monolithic(SplittingScheme):
         return sim.advance(self.flows[0], t0, dt, 1)
 
 
-def _relative_change(old, new) -> float:
-    difference = new.copy()
-    difference.axpy(-1.0, old)
-    return difference.norm() / max(new.norm(), 1e-300)
+def _relative_change(old, work, new) -> float:
+    """|new - old| / |new|, with ``work`` to hold the difference."""
+    work.waxpy(-1.0, old, new)
+    return work.norm() / max(new.norm(), 1e-300)
 
 
 @hookimpl
