@@ -21,9 +21,14 @@ Systems (``--systems``):
 Each (system, preconditioner, size) runs in a child process (``--one``), so its peak memory is its own;
 ``--ranks 2`` runs the children under ``mpirun -n 2``.
 
+``--share ex01a ex01b`` prints instead, per example, backend and size, the cost of a step against the
+time its linear solves take in the same run (Krylov iterations, preconditioner set-ups,
+factorisations, diagonal divisions: ``linear_solve_seconds`` of each solver), and their ratio.
+
     .venv/bin/python benchmarks/bench_solvers.py --systems growth2d --sizes 43 86 171 --steps 3
     .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 40 --steps 2
     .venv/bin/python benchmarks/bench_solvers.py --systems biot cells --sizes 43 86 171 342
+    .venv/bin/python benchmarks/bench_solvers.py --share ex01a ex01b --sizes 171 --backends fenicsx skfem --steps 40
 """
 
 from __future__ import annotations
@@ -73,6 +78,7 @@ SYSTEMS = {
             "lu": ["solver.chemotaxis_m.ksp_type=\"preonly\"", "solver.chemotaxis_m.pc_type=\"lu\""],
             "bjacobi_ilu": ["solver.chemotaxis_m.pc_type=\"bjacobi\""],
             "gamg": ["solver.chemotaxis_m.pc_type=\"gamg\""],
+            "hypre": ["solver.chemotaxis_m.pc_type=\"hypre\""],
         },
     },
     "chemotaxis": {
@@ -120,6 +126,28 @@ def one(system: str, preconditioner: str, size: int, steps: int, warmup: int, ex
             "unknowns": unknowns, "peak_bytes": peak, "bytes_per_unknown": peak / unknowns}
 
 
+def share(example: str, backend: str, size: int, steps: int, warmup: int, extra: list[str], clock: str) -> dict:
+    """ms/step and ms of linear solves per step of one example in this process."""
+    from primordia.coupling.orchestrator import Simulation
+    from primordia.model import Model
+
+    overrides = [f"mesh.cells=[{size},{size}]", "output.pictures=false", "output.series_every=100000",
+                 "time.t_final=1e6", *extra]
+    model = Model.from_file(ROOT / f"examples/{example}.toml", overrides)
+    sim = Simulation(model, backend=backend, out_dir=f"/tmp/primordia-bench-share/{example}-{backend}-{size}")
+    sim.setup()
+    for _ in range(warmup):
+        sim.step()
+    solving = sum(solver.linear_solve_seconds for solver in sim.solvers)
+    start, start_cpu = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        sim.step()
+    elapsed = time.process_time() - start_cpu if clock == "cpu" else time.perf_counter() - start
+    solving = sum(solver.linear_solve_seconds for solver in sim.solvers) - solving
+    return {"example": example, "backend": backend, "size": size, "ms_per_step": 1e3 * elapsed / steps,
+            "solve_ms_per_step": 1e3 * solving / steps, "ratio": elapsed / solving}
+
+
 def _max():
     from mpi4py import MPI
 
@@ -141,6 +169,27 @@ def child(system, preconditioner, size, args) -> dict | None:
     return json.loads(lines[-1])
 
 
+def share_table(args) -> None:
+    print(f"{'example':>8} {'backend':>8} {'size':>5} {'ms/step':>9} {'solves ms':>10} {'step/solves':>11}", flush=True)
+    for example in args.share:
+        for size in args.sizes:
+            for backend in args.backends:
+                command = [sys.executable, __file__, "--share-one", example, backend, str(size), "--steps",
+                           str(args.steps), "--warmup", str(args.warmup), "--clock", args.clock,
+                           *sum((["--set", s] for s in args.set), [])]
+                done = subprocess.run(command, capture_output=True, text=True)
+                lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+                if done.returncode != 0 or not lines:
+                    print(f"  {example} {backend} {size}: failed ({(done.stderr.strip().splitlines() or ['?'])[-1]})")
+                    continue
+                row = json.loads(lines[-1])
+                print(f"{example:>8} {backend:>8} {size:>5} {row['ms_per_step']:>9.1f} {row['solve_ms_per_step']:>10.1f} "
+                      f"{row['ratio']:>11.2f}", flush=True)
+                if args.json:
+                    with open(args.json, "a") as stream:
+                        stream.write(json.dumps(row) + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--systems", nargs="+", default=["growth2d"], choices=sorted(SYSTEMS))
@@ -153,7 +202,17 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], help="an extra config override for every run")
     parser.add_argument("--one", nargs=3, metavar=("SYSTEM", "PRECONDITIONER", "SIZE"), help=argparse.SUPPRESS)
     parser.add_argument("--json", help="also append every row to this file (JSON lines)")
+    parser.add_argument("--share", nargs="+", metavar="EXAMPLE", help="step cost against linear solves instead")
+    parser.add_argument("--backends", nargs="+", default=["fenicsx"], help="backends of --share")
+    parser.add_argument("--share-one", nargs=3, metavar=("EXAMPLE", "BACKEND", "SIZE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.share_one:
+        example, backend, size = args.share_one
+        print(json.dumps(share(example, backend, int(size), args.steps, args.warmup, args.set, args.clock)), flush=True)
+        return
+    if args.share:
+        share_table(args)
+        return
     if args.one:
         row = one(args.one[0], args.one[1], int(args.one[2]), args.steps, args.warmup, args.set, args.clock)
         from mpi4py import MPI

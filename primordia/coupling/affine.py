@@ -24,9 +24,9 @@ from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
 
-def _constants_state(form) -> tuple:
-    """The values of the UFL constants a form reads (to see whether an assembled matrix is stale)."""
-    return tuple(np.array(constant.value, dtype=float).tobytes() for constant in form.constants())
+def _constants_state(constants) -> tuple:
+    """The values of UFL constants (to see whether a matrix assembled with them is stale)."""
+    return tuple(np.array(constant.value, dtype=float).tobytes() for constant in constants)
 
 
 def structurally_diagonal(form) -> bool:
@@ -51,7 +51,9 @@ class _Matrix:
 
     def __init__(self, backend, form, bcs=()):
         self.backend, self.form, self.bcs = backend, form, bcs
-        self.reads_fields = bool(expand_derivatives(form).coefficients())
+        expanded = expand_derivatives(form)  # before expansion a derivative still lists what it differentiates
+        self.reads_fields = bool(expanded.coefficients())
+        self._constants = expanded.constants()
         self.vector_only = structurally_diagonal(form) and not bcs
         self.matrix = None  # PETSc Mat (built from the diagonal when only that is assembled)
         self.diagonal = None  # PETSc Vec of the diagonal, when the matrix is diagonal
@@ -65,7 +67,7 @@ class _Matrix:
 
     def refresh(self) -> bool:
         """Assemble again if needed; whether anything changed."""
-        state = _constants_state(self.form)
+        state = _constants_state(self._constants)
         if not self.reads_fields and state == self._state:
             return False
         self._state = state

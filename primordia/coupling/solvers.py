@@ -30,6 +30,7 @@ rows), so the Newton update lands exactly on the prescribed values.
 
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -219,6 +220,9 @@ class _Solver:
         self._stabilisation = None  # the assembled ``Subproblem.preconditioner`` form
         self._preconditioner = None  # tangent + stabilisation
         self._residual = None
+        #: CPU seconds spent in the linear algebra of the solves (Krylov iterations, preconditioner set-up,
+        #: factorisations, diagonal divisions), not in assembly: what a step cannot do without.
+        self.linear_solve_seconds = 0.0
 
     def step_size_changed(self) -> None:
         """dt changed (an adaptive time step): a constant Jacobian holds 1/dt, so the next solve assembles it again."""
@@ -363,7 +367,9 @@ class LinearSolver(_Solver):
         if jacobian.diagonal is None:
             self._pointwise = False
             return False
+        start = time.process_time()
         self._increment.pointwiseDivide(b, jacobian.diagonal)
+        self.linear_solve_seconds += time.process_time() - start
         return True
 
     def _affine_tangent(self):
@@ -386,6 +392,14 @@ class LinearSolver(_Solver):
 
     def _solve_linear(self, b):
         """KSP solve; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
+        start = time.process_time()
+        try:
+            self._solve_linear_once(b)
+        finally:
+            self.linear_solve_seconds += time.process_time() - start
+        self._check_options_used()
+
+    def _solve_linear_once(self, b):
         try:
             self.ksp.solve(b, self._increment)
             failed = self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
@@ -398,7 +412,6 @@ class LinearSolver(_Solver):
         elif raised is not None:
             raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}); "
                               f"try other options under -{self.sub.prefix}") from None
-        self._check_options_used()
 
 
 class NewtonSolver(_Solver):
@@ -418,6 +431,7 @@ class NewtonSolver(_Solver):
         self.snes.setFunction(self._function, self._F)
         self._tangent_matrices = None
         self.ksp = self.snes.getKSP()
+        self._assembly_seconds = 0.0
         self._configure(self.ksp.getPC())
         self.snes.setFromOptions()
         self.history: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
@@ -431,13 +445,17 @@ class NewtonSolver(_Solver):
         self.backend.update_ghosts(self.sub.unknown)
 
     def _function(self, snes, x, F) -> None:
+        start = time.process_time()
         self._load(x)
         self._assemble_residual(self.backend.petsc_vector(self.sub.unknown), b=F)
+        self._assembly_seconds += time.process_time() - start
 
     def _tangent(self, snes, x, J, P) -> None:
+        start = time.process_time()
         self._load(x)
         tangent, _ = self._assemble_jacobian()  # into the matrices handed to SNES (same objects)
         self._assemble_preconditioner(tangent)
+        self._assembly_seconds += time.process_time() - start
 
     def _attach_tangent(self) -> None:
         """Create the tangent (and preconditioning) matrices once, at the initial state."""
@@ -474,12 +492,16 @@ class NewtonSolver(_Solver):
                           linear_iterations=self.snes.getLinearSolveIterations(), reason=reason)
 
     def _run_snes(self) -> None:
+        """SNES solve; its time outside the residual and tangent callbacks is linear algebra."""
         self.snes.setConvergenceHistory(length=self.snes.getTolerances()[3] + 1, reset=True)
+        self._assembly_seconds, start = 0.0, time.process_time()
         try:
             self.snes.solve(None, self._x)
         except PETSc.Error as error:
             raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}); "
                               f"try other options under -{self.sub.prefix}") from None
+        finally:
+            self.linear_solve_seconds += time.process_time() - start - self._assembly_seconds
 
     def _failure(self, reason: int) -> str:
         """One line: which solve, why SNES stopped, how far it got, where to change options."""

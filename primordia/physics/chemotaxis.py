@@ -278,7 +278,7 @@ class Chemotaxis(Physics):
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
                 linear=True, constant_jacobian=jacobian_is_constant(jacobian, self.disc),
-                operator=operator, petsc_options=_solver_defaults(species),
+                operator=operator, petsc_options=_solver_defaults(species, self.disc.backend.comm.size > 1),
             ))
         return problems
 
@@ -310,10 +310,18 @@ def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict
             "pc_fieldsplit_type": "additive", **blocks}
 
 
-def _solver_defaults(species: Species) -> dict:
-    """Direct solves for constant symmetric matrices, Krylov for the rest (overridable)."""
+def _solver_defaults(species: Species, parallel: bool = False) -> dict:
+    """Direct solves for constant symmetric matrices, Krylov for the rest (overridable).
+
+    A constant matrix is factorised once, so in serial each step costs two triangular
+    solves; on several ranks those go through MUMPS, whose distributed triangular solves
+    cost several times a serial one, so there the symmetric positive definite matrices of
+    the diffusing species get CG with BoomerAMG (set up once, the matrix is constant).
+    """
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}
     if species.attractant is not None:  # nonsymmetric M-matrix, rebuilt every step
         return {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
+    if parallel:
+        return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
