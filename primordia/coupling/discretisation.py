@@ -123,6 +123,11 @@ class Discretisation:
             group.rate = self.backend.function(group.space, f"{group.name}_rate")
         return self._component(name, group.rate, "rate")
 
+    def rate_function(self, name: str):
+        """The backend function holding the rate of ``name``'s group (e.g. for an initial-rate solve)."""
+        self.rate(name)
+        return self._group(name).rate
+
     def set_rate(self, name: str, values) -> None:
         """Set the rate of a field (e.g. an initial solid velocity) to the interpolant of ``values``."""
         self.rate(name)
@@ -176,9 +181,9 @@ class Discretisation:
         return list(self._groups[group].fields)
 
     def group_of_function(self, function) -> str:
-        """The name of the group a backend function (``unknown``) holds."""
+        """The name of the group a backend function (``unknown``: its current value or its rate) holds."""
         for name, group in self._groups.items():
-            if group.current is function:
+            if group.current is function or group.rate is function:
                 return name
         raise KeyError("not a field group of this discretisation")
 

@@ -174,13 +174,16 @@ class Simulation:
         get (c - c_0) v = 0 so the solve neither moves them nor meets zero rows.
         """
         owned = {spec.name for spec in physics.fields()}
-        group = self.disc.group_of_function(subproblem.unknown)
-        others = [name for name in self.disc.group_fields(group) if name not in owned]
+        disc = self.disc
+        group = disc.group_of_function(subproblem.unknown)
+        others = [name for name in disc.group_fields(group) if name not in owned]
         if not others:
             return subproblem
-        disc = self.disc
-        residual = subproblem.residual + sum(
-            ufl.inner(disc.field(name) - disc.previous(name), disc.test(name)) * disc.dx for name in others)
+        if subproblem.unknown is disc.group_function(group):
+            held = {name: disc.field(name) - disc.previous(name) for name in others}
+        else:  # an initial rate: the others' rates stay 0
+            held = {name: disc.rate(name) for name in others}
+        residual = subproblem.residual + sum(ufl.inner(held[name], disc.test(name)) * disc.dx for name in others)
         return dataclasses.replace(subproblem, residual=residual,
                                    jacobian=ufl.derivative(residual, subproblem.unknown))
 

@@ -92,6 +92,10 @@ class Condition:
         """Dirichlet constraints (backend objects) on the field's group."""
         return []
 
+    def homogeneous(self, disc) -> list:
+        """The same constraints with zero values (for increments and rates), new objects each call."""
+        return []
+
     def update(self, disc, t: float) -> None:
         """Refresh time-dependent prescribed values (Dirichlet kinds)."""
 
@@ -107,10 +111,18 @@ class _Dirichlet(Condition):
     def _values(self, t: float):
         return lambda x: self.formula.numpy(x, t)
 
+    def _target(self, disc):
+        """(space, component path) of what the condition fixes."""
+        return self._space_and_path(disc)
+
     def dirichlet(self, disc):
-        space, path = self._space_and_path(disc)
+        space, path = self._target(disc)
         self._bcs = [disc.backend.dirichlet_bc(space, self.boundary, self._values(disc.time), component=path)]
         return self._bcs
+
+    def homogeneous(self, disc):
+        space, path = self._target(disc)
+        return [disc.backend.dirichlet_bc(space, self.boundary, 0.0, component=path)]
 
     def update(self, disc, t):
         if self.formula.depends_on_time():
@@ -135,11 +147,8 @@ class NormalDisplacement(_Dirichlet):
 
     kind, field, default_value, holds_normal_displacement = "normal_displacement", "u", "0", True
 
-    def dirichlet(self, disc):
-        axis = _normal_axis(disc.mesh_data, self.boundary)
-        space, path = self._space_and_path(disc, (axis,))
-        self._bcs = [disc.backend.dirichlet_bc(space, self.boundary, self._values(disc.time), component=path)]
-        return self._bcs
+    def _target(self, disc):
+        return self._space_and_path(disc, (_normal_axis(disc.mesh_data, self.boundary),))
 
 
 class Traction(Condition):

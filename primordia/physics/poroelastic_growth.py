@@ -45,8 +45,12 @@ Under the seed's 2D law (4.14) F_g(0) != I (gamma(0) = delta_3 m_0 / (1 + m_0^2)
 so u = 0 is not an equilibrium.  Before the first step the module solves the
 static problem (no inertia, p = 0 as in (2.6)) for (u, psi) with the growth
 ramped in ``initial_load_steps`` stages, F_g(s) = I + s (F_g(0) - I),
-s = 1/N, ..., 1: the run starts from the equilibrium of its initial growth,
-with u_t(0) = 0 and p(0) = 0 (option ``initial_equilibrium = false`` skips it).
+s = 1/N, ..., 1, and then the velocity with which that equilibrium follows the
+growth over the first step (one linear solve of the linearised static problem): the run
+starts from the equilibrium of its initial growth, moving with it, and p(0) = 0
+(option ``initial_equilibrium = false`` skips both).  The seed's u_t(0) = 0 would
+have to be accelerated to the growth's rate at once: Newton then fails on the first
+step for faster growth (delta_2 = 0.5), at every dt.
 
 The kinematics this module provides to the transport equations
 (:mod:`primordia.physics.kinematics`): J, J C^-1, tr C - d, no advecting
@@ -200,11 +204,11 @@ class PoroelasticGrowth(Physics):
             velocity=None, deformation_gradient=self.F,
             quadrature_degree=self.opts["quadrature_degree"]), self.name)
 
-    def growth_tensor(self, ramp=None):
-        """F_g of the growth law at the current fields and time; I + s (F_g - I) with a ramp s."""
+    def growth_tensor(self, ramp=None, time=None):
+        """F_g of the growth law at the current fields and time (or ``time``); I + s (F_g - I) with a ramp s."""
         disc = self.disc
         fields = {name: disc.field(name) for name in self.growth_law.requires}
-        F_g = self.growth_law.growth_tensor(fields, disc.t, disc.x, disc.gdim)
+        F_g = self.growth_law.growth_tensor(fields, disc.t if time is None else time, disc.x, disc.gdim)
         return F_g if ramp is None else ufl.Identity(disc.gdim) + ramp * (F_g - ufl.Identity(disc.gdim))
 
     def fluid_source(self):
@@ -284,14 +288,43 @@ class PoroelasticGrowth(Physics):
         if not self.opts["initial_equilibrium"]:
             return []
         disc = self.disc
-        static = (self._stress_terms(self.growth_tensor(self.ramp))
-                  + disc.field("p") * disc.test("p") * self.dx                               # p(0) = 0 (2.6)
-                  + self._boundary_terms())
         unknown = disc.unknown("u")
-        return [Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
-                           jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
-                           continuation=(self.ramp, self.opts["initial_load_steps"]),
-                           **self._solver(), failure_hint=self._failure_hint())]
+        static = self._static_residual(self.growth_tensor(self.ramp))
+        equilibrium = Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
+                                 jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
+                                 continuation=(self.ramp, self.opts["initial_load_steps"]),
+                                 **self._solver(), failure_hint=self._failure_hint())
+        return [equilibrium, self._initial_velocity()]
+
+    def _static_residual(self, F_g):
+        """The static problem of the initial state: no inertia, p = 0 (seed (2.6))."""
+        disc = self.disc
+        return (self._stress_terms(F_g)
+                + disc.field("p") * disc.test("p") * self.dx                                 # p(0) = 0 (2.6)
+                + self._boundary_terms())
+
+    def _initial_velocity(self) -> Subproblem:
+        """The velocity with which the initial equilibrium follows the growth over the first step.
+
+        The seed's u_t(0) = 0 (2.6) is inconsistent with growth at a finite rate: J_e = 1 makes the
+        volume follow J_g at once, so a tissue at rest would have to be accelerated instantly, with a
+        solid pressure growing like 1/dt^2 as the step shrinks (Newton then fails on the first step
+        for the faster rates, at every dt).  The static equilibrium R(u, psi; t) = 0, linearised,
+        moves with dR/d(u, psi) [v, psi_t] = -(R(t_0 + dt) - R(t_0)) / dt at fixed (u, psi): one
+        linear solve for the initial rate of the (u, psi, p) group.  The growth's secant over the
+        first step, not its derivative at t_0: the laws' in-plane stretches grow like sqrt(t),
+        infinitely fast at t = 0 (u_t at fixed cells: the chemistry's own rate is not known yet;
+        p_t = 0 as p = 0 holds).
+        """
+        disc = self.disc
+        unknown, rate = disc.unknown("u"), disc.rate_function("u")
+        static = self._static_residual(self.growth_tensor())
+        advanced = self._static_residual(self.growth_tensor(time=disc.t + disc.dt))
+        residual = ufl.derivative(static, unknown, rate) + (1.0 / disc.dt) * (advanced - static)
+        return Subproblem(name=f"{self.name}.initial_velocity", unknown=rate, residual=residual,
+                          jacobian=ufl.derivative(residual, rate), linear=True,
+                          bcs=[bc for condition in self.conditions for bc in condition.homogeneous(disc)],
+                          **self._solver())
 
     def before_step(self, t, dt):
         for condition in self.conditions:
