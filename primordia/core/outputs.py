@@ -273,6 +273,9 @@ def run_is_alive(process: dict) -> bool:
         return False
     except PermissionError:
         return True
+    with contextlib.suppress(OSError, IndexError):  # a zombie (killed, not yet reaped) is not running
+        if Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] in "ZX":
+            return False
     with contextlib.suppress(OSError):  # a recycled pid belongs to some other program
         return b"primordia" in Path(f"/proc/{pid}/cmdline").read_bytes()
     return True

@@ -48,11 +48,12 @@ def test_a_run_killed_at_a_random_step_and_restarted_ends_bit_for_bit_as_the_uni
     time.sleep(chance.uniform(0.0, 0.3))  # anywhere in the next steps: a solve, a write, the outputs
     rc.kill_group(process)
     process.communicate(timeout=60)
+    rc.wait_until_gone(killed)
     assert rc.summary(killed)["status"] == "running"  # what a killed process leaves
     assert rc.checkpointed_step(killed) < steps
 
     restarted = rc.run("run", "--restart", killed, "--no-progress", ranks=ranks, env=env)
-    assert restarted.returncode == 0, restarted.stderr[-3000:]
+    assert restarted.returncode == 0, (rc.primordia_lines(restarted.stderr), restarted.stderr[-3000:])
     after = rc.summary(killed)
     assert after["status"] == "completed" and after["restarts"] == 1 and after["steps"] == steps
 

@@ -122,6 +122,17 @@ def kill_group(process: subprocess.Popen, signum: int = signal.SIGKILL) -> None:
     os.killpg(process.pid, signum)
 
 
+def wait_until_gone(out: Path, timeout: float = 30) -> None:
+    """Wait until the process that wrote ``out``'s summary has died: killed MPI ranks outlive mpirun for a moment,
+    and a restart refuses a folder whose run still looks alive."""
+    from primordia.core.outputs import run_is_alive
+
+    deadline = time.monotonic() + timeout
+    while run_is_alive(summary(out).get("process") or {}):
+        assert time.monotonic() < deadline, "the killed run's process is still alive"
+        time.sleep(0.1)
+
+
 def finish(process: subprocess.Popen, timeout: float = 120) -> tuple[int, str]:
     """The exit status and stderr of a started run (a timeout is a hang)."""
     try:

@@ -1,0 +1,75 @@
+"""Strong scaling from 1 to N ranks, and whether the parallel run gives the serial answer.
+
+For each example (with its size and number of steps), runs ``primordia run`` on 1 rank and under
+``mpirun -n RANKS`` and prints the wall time per step of each (``summary.json``: outputs included,
+set-up excluded; the first step, which compiles the forms, is amortised over the steps), the
+speedup, and the largest relative difference between the two runs' final integrals, minima and
+maxima of every field (the solvers' tolerance bounds it, not round-off: iterative solvers on
+other partitions take other paths to their tolerance).
+
+    .venv/bin/python benchmarks/bench_scaling.py                         # examples 1a, 2a, 4 (small)
+    .venv/bin/python benchmarks/bench_scaling.py --examples ex04_small --set 'mesh.cells=[40,40,4]' --steps 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: example -> (mesh cells, dt, steps): the seed's mesh for 1a, a quarter of it for 2a, 4 at laptop size.
+CASES = {
+    "ex01a": ("[171,171]", 0.2, 200),
+    "ex02a": ("[86,86]", 0.2, 10),
+    "ex04_small": ("[20,20,2]", 0.5, 6),
+}
+
+
+def run(example: str, ranks: int, steps: int | None, extra: list[str], out: Path) -> dict:
+    cells, dt, default_steps = CASES[example]
+    steps = steps or default_steps
+    command = [sys.executable, "-m", "primordia.cli", "run", str(ROOT / f"examples/{example}.toml"), "--out", str(out),
+               "--set", f"mesh.cells={cells}", "--set", f"time.t_final={steps * dt}",
+               "--set", f"output.times=[{steps * dt}]", "--set", "output.pictures=false", "--no-progress", *extra]
+    if ranks > 1:
+        command = ["mpirun", "-n", str(ranks), *command]
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    subprocess.run(command, check=True, env=env, capture_output=True)
+    return json.loads((out / "summary.json").read_text())
+
+
+def largest_difference(serial: dict, parallel: dict) -> float:
+    worst = 0.0
+    for name, stats in serial["final"].items():
+        for key, value in stats.items():
+            scale = max(abs(value), 1e-12)
+            worst = max(worst, abs(parallel["final"][name][key] - value) / scale)
+    return worst
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--examples", nargs="+", default=list(CASES), choices=list(CASES))
+    parser.add_argument("--ranks", type=int, default=2)
+    parser.add_argument("--steps", type=int, default=None)
+    parser.add_argument("--set", action="append", default=[], help="an extra config override (both runs)")
+    args = parser.parse_args()
+    extra = [a for s in args.set for a in ("--set", s)]
+    print(f"{'example':>11} {'dofs':>9} {'1 rank ms/step':>15} {f'{args.ranks} ranks ms/step':>16} {'speedup':>8} "
+          f"{'max rel. difference':>20}", flush=True)
+    for example in args.examples:
+        out = Path(f"/tmp/primordia-bench-scaling/{example}")
+        serial = run(example, 1, args.steps, extra, out / "np1")
+        parallel = run(example, args.ranks, args.steps, extra, out / f"np{args.ranks}")
+        print(f"{example:>11} {serial['dofs_total']:>9} {serial['ms_per_step']:>15.1f} {parallel['ms_per_step']:>16.1f} "
+              f"{serial['ms_per_step'] / parallel['ms_per_step']:>8.2f} {largest_difference(serial, parallel):>20.1e}",
+              flush=True)
+
+
+if __name__ == "__main__":
+    main()
