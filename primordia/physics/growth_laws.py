@@ -112,13 +112,19 @@ class GrowthLaw(ABC):
         """The coefficients of k_i (x) k_i in F_g - I, as printed after (4.12): roots in-plane, gamma_3 as is."""
         return [positive_sqrt(g) if i < 2 else g for i, g in enumerate(gammas)]
 
+    def directions_at(self, X, dimension: int) -> list:
+        """k_1, ..., k_d at the reference point ``X`` as UFL vectors: the constant :meth:`frame` here.
+
+        A law whose frame varies in space (a fibre field k_1(X)) overrides this; its k_i must
+        stay orthonormal at every X.
+        """
+        return [ufl.as_vector([float(c) for c in k]) for k in self.frame(dimension)]
+
     def growth_tensor(self, fields: Mapping[str, Any], t, X, dimension: int):
         """F_g = I + sum_i s_i k_i (x) k_i (the unnumbered equation after seed (4.12)), a UFL tensor."""
-        frame = self.frame(dimension)
         tensor = ufl.Identity(dimension)
-        for stretch, k in zip(self.stretches(self.factors(fields, t, X, dimension)), frame):
-            direction = ufl.as_vector([float(c) for c in k])
-            tensor = tensor + stretch * ufl.outer(direction, direction)
+        for stretch, k in zip(self.stretches(self.factors(fields, t, X, dimension)), self.directions_at(X, dimension)):
+            tensor = tensor + stretch * ufl.outer(k, k)
         return tensor
 
 
