@@ -10,37 +10,10 @@ from pathlib import Path
 
 import pytest
 
-# helpers shared by the test tiers (imported as plain modules by the test files)
-sys.path.insert(0, str(Path(__file__).parent / "support"))
+from small_config import SMALL_CONFIG
 
 #: The console script installed next to this interpreter (the CLI a user runs).
 PRIMORDIA = Path(sys.executable).parent / "primordia"
-
-#: A small but complete chemotaxis run: 8 x 8 squares of (0, 4)^2, five steps, no pictures.
-SMALL_CONFIG = """\
-[model]
-name = "small"
-physics = ["chemotaxis"]
-
-[kinetics]
-name = "painter2018"
-
-[parameters]
-m0 = 0.75
-D_m = 0.03
-
-[mesh]
-type = "rectangle"
-upper = [4.0, 4.0]
-cells = [8, 8]
-
-[time]
-dt = 0.2
-t_final = 1.0
-
-[output]
-pictures = false
-"""
 
 
 @pytest.fixture

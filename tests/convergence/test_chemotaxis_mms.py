@@ -10,7 +10,7 @@ T = 1/4): the time error then shrinks like h^2 too, and a spatial error of
 order h would show as a rate near 1.  With D_m = 0.5 the cell Peclet number
 chi |grad f| h / D_m stays below 0.6 on the coarsest mesh, where the fitted
 flux is already in its central (second-order) regime.  The exact solution,
-the sources and the rate fit live in ``mms.py``.
+the sources and the rate fit live in ``tests/support/mms.py``.
 """
 
 from __future__ import annotations

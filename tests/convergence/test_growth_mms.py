@@ -11,7 +11,7 @@
   motion: every species at second order in L2, with dt = h^2, for both transport
   schemes (the exponentially fitted flux then runs on the pulled-back metric).
 
-Exact solutions and sources: ``growth_mms.py``; the rate fit: ``mms.py``.
+Exact solutions and sources: ``tests/support/growth_mms.py``; the rate fit: ``tests/support/mms.py``.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ all three meshes (rates 0.08, 0.004); with the backward difference it falls at 3
 The exact solution is written once, as the formula strings of the run's
 boundary conditions (``displacement``, ``fluid_pressure``); the sources are
 derived from the same strings in UFL, the Neumann data (``traction``,
-``fluid_flux``) with sympy (see ``mms.py``).
+``fluid_flux``) with sympy (see ``tests/support/mms.py``).
 """
 
 from __future__ import annotations

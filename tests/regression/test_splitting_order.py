@@ -39,17 +39,15 @@ Measured (relative distance, successive orders):
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "convergence"))
-from mms import observed_rates  # noqa: E402  (the one rate helper of the convergence tier)
+from primordia.coupling.orchestrator import Simulation
+from primordia.model import Model
 
-from primordia.coupling.orchestrator import Simulation  # noqa: E402
-from primordia.model import Model  # noqa: E402
+from mms import observed_rates  # the one rate helper of the convergence tier
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "ex01b.toml"
 FINAL_TIME = 1.0

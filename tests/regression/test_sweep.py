@@ -13,11 +13,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import SMALL_CONFIG
 from dask.distributed import LocalCluster
 
 from primordia.core.errors import ConfigError
 from primordia.sweep import SEED_KEY, Axis, Sweep, execute, run_sweep
+
+from small_config import SMALL_CONFIG
 
 COARSE = (SMALL_CONFIG.replace("cells = [8, 8]", "cells = [16, 16]").replace("t_final = 1.0", "t_final = 2.0")
           .replace("pictures = false", "pictures = false\ntimes = [1.0, 2.0]"))

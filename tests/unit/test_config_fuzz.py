@@ -19,11 +19,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from primordia.cli import main
-from primordia.core import io
+from primordia.core.json_toml import write_toml
 from primordia.core.errors import PrimordiaError
 from primordia.model import Model
 
-from conftest import SMALL_CONFIG
+from small_config import SMALL_CONFIG
 
 BASE = tomllib.loads(SMALL_CONFIG)
 #: Keys the fuzzing grafts values onto: real ones of every section, and some that exist nowhere.
@@ -104,7 +104,7 @@ def _assert_answered(status: int, stdout: str, stderr: str) -> None:
 def test_the_command_answers_any_config_file_in_one_line(config, tmp_path_factory, capsys):
     path = tmp_path_factory.mktemp("fuzz") / "config.toml"
     try:
-        io.write_toml(path, config)
+        write_toml(path, config)
     except PrimordiaError:
         pytest.skip("not writable as TOML")  # e.g. a NaN key; never happens with these strategies
     status = _bounded(lambda: main(["run", str(path), "--dry-run", "--out", str(path.parent / "out")]))

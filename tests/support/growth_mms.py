@@ -259,7 +259,7 @@ def registered(problem):
     """Register the problem's source module (and the test growth law, the prescribed motion) for the block."""
     physics = [_sources_physics(problem, problem.fields), PrescribedMotion]
     pm = get_plugin_manager()
-    plugin = pm.register(_Plugin(physics, [StretchLaw]), name="tests.convergence.growth_mms")
+    plugin = pm.register(_Plugin(physics, [StretchLaw]), name="tests.support.growth_mms")
     try:
         yield
     finally:
