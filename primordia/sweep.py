@@ -198,7 +198,8 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     Never raises for a failed run.
     """
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
-    from primordia.core import io
+    from primordia.core.atomic_files import atomic_write_text
+    from primordia.core.json_toml import write_json
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -216,7 +217,7 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     except subprocess.TimeoutExpired as expired:  # its output so far comes as bytes
         log = b"".join(part or b"" for part in (expired.stdout, expired.stderr)).decode(errors="replace")
         reason = f"timed out after {timeout:g} s"
-    io.atomic_write_text(directory / "run.log", log)
+    atomic_write_text(directory / "run.log", log)
     if not reason:
         try:
             analyse_run(directory, pictures=False)
@@ -224,7 +225,7 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
             reason = f"pattern metrics: {type(error).__name__}: {error}"
     record = {"status": "failed" if reason else "completed", "reason": reason, "fingerprint": fingerprint,
               "wall_time_s": time.perf_counter() - start, "overrides": list(overrides)}
-    io.write_json(directory / RECORD_FILE, record)
+    write_json(directory / RECORD_FILE, record)
     return record
 
 

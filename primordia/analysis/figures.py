@@ -1,4 +1,4 @@
-"""Figures in the layout of seed Figures 3.1-3.3 (matplotlib, Agg backend).
+"""Figures in the layout of seed Figures 3.1-3.3 (matplotlib ``Figure`` objects, no pyplot).
 
 :func:`patterning_figure` draws one row of the seed's figures from a
 :func:`~primordia.analysis.patterning.patterning_space` Dataset:
@@ -11,29 +11,29 @@
 3. the dispersion curves max Re phi(k^2) for the same values.
 
 :func:`dispersion_figure` draws the growth rates of one parameter set.
+
+The figures are ``matplotlib.figure.Figure`` objects saved by file name: no pyplot,
+so importing this module chooses no GUI backend and changes nothing global, and
+figures are drawn the same with or without a display.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import xarray as xr
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
-
-from primordia.analysis.patterning import (  # noqa: E402
+from primordia.analysis.patterning import (
     COUPLED_CORRECTED_CURVES,
     COUPLED_CURVES,
     CRITICAL_SCALES,
     UNCOUPLED_CURVES,
 )
+from primordia.core.atomic_files import atomic_path
 
 #: Colours of the curves at 50%, 75%, 100% (critical, green as in the seed), 125%, 150%.
 SCALE_COLOURS = ("tab:blue", "tab:cyan", "tab:green", "tab:orange", "tab:red")
@@ -140,7 +140,8 @@ def draw_critical_curves(ax_constant, ax_dispersion, ds: xr.Dataset) -> None:
 
 def patterning_figure(ds: xr.Dataset, path=None):
     """One row of seed Figures 3.1/3.2: patterning space, a_0 (d_0) curves, dispersion curves."""
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
+    fig = Figure(figsize=(16, 4.8), layout="constrained")
+    axes = fig.subplots(1, 3)
     draw_patterning_space(axes[0], ds)
     draw_critical_curves(axes[1], axes[2], ds)
     return _finish(fig, path)
@@ -149,7 +150,8 @@ def patterning_figure(ds: xr.Dataset, path=None):
 def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
     """Re phi(k) and Im phi(k) of the leading roots, and the constant term: det M(0, k) (derived analysis), or
     a_0, d_0 (seed's, as a_0/k^2, d_0/((kappa/eta)(2mu+lambda)k^6))."""
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
+    fig = Figure(figsize=(16, 4.8), layout="constrained")
+    axes = fig.subplots(1, 3)
     k = ds["k"].values
     real, imag = ds["growth_rate_real"].values, ds["growth_rate_imag"].values
     for b in range(min(branches, real.shape[1])):
@@ -192,16 +194,10 @@ def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
 
 
 def _finish(fig, path):
-    """Save to ``path`` (via a temporary file and a rename, so no half-written PNG) and close."""
+    """Save to ``path`` atomically (never a half-written picture) when given; return the figure."""
     if path is not None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(handle)
-        try:
+        with atomic_path(path) as temporary:
             fig.savefig(temporary, dpi=130, format=path.suffix.lstrip(".") or "png")
-            os.replace(temporary, path)
-        finally:
-            Path(temporary).unlink(missing_ok=True)
-            plt.close(fig)
     return fig

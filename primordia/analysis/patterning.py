@@ -19,8 +19,6 @@ at 50%, 75%, 125% and 150% of it.  All quantities are dimensionless.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +37,7 @@ from primordia.analysis.dispersion import (
 )
 from primordia.analysis.linearisation import linearise, wave_vectors
 from primordia.analysis.polynomials import a0, a0_quadratic, d0, d0_quadratic
+from primordia.core.atomic_files import atomic_path
 from primordia.core.errors import ConfigError
 from primordia.physics.seed_parameters import seed_parameters
 
@@ -375,21 +374,15 @@ def boundary_agreement(ds: xr.Dataset, numerical: str = "unstable_numerical",
 
 
 def save_dataset(ds: xr.Dataset, path) -> Path:
-    """Write ``ds`` as NetCDF (scipy engine) atomically: temp file in the same directory, then rename."""
+    """Write ``ds`` as NetCDF (scipy engine), atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     clean = ds.copy()
     for name, var in clean.variables.items():  # NetCDF3 has no +-inf-safe bool; inf is fine, bool is not
         if var.dtype == bool:
             clean[name] = var.astype(np.int8)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(handle)
-    try:
+    with atomic_path(path) as temporary:
         clean.to_netcdf(temporary, engine="scipy")
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
     return path
 
 

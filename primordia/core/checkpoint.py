@@ -5,7 +5,7 @@ A checkpoint is one ``.npz`` file: every numpy array of the state stored exactly
 step, dt, the step controller, solver statistics, the outputs' rows so far, the
 configuration).  Python floats go through JSON by their shortest round-tripping
 repr, so they come back bit for bit too.  The file is written next to its final
-name and renamed over it (:func:`primordia.core.io.atomic_path`), so a run killed
+name and renamed over it (:func:`primordia.core.atomic_files.atomic_path`), so a run killed
 while writing leaves the previous checkpoint whole.  Nothing is unpickled on
 reading: a checkpoint holds data, never code.
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primordia.core import io
+from primordia.core.atomic_files import atomic_path
 from primordia.core.errors import PrimordiaError
 
 #: The checkpoint of a run, in its output directory.
@@ -31,7 +31,7 @@ def write(path: str | Path, tree: dict) -> Path:
     """Write ``tree`` (dicts, lists, numbers, strings, None, numpy arrays) to ``path`` atomically."""
     arrays: dict[str, np.ndarray] = {}
     meta = json.dumps({"format": FORMAT, "tree": _flatten(tree, arrays)}, default=_json_scalar)
-    with io.atomic_path(path) as temporary:
+    with atomic_path(path) as temporary:
         with open(temporary, "wb") as stream:
             np.savez(stream, meta=np.array(meta), **arrays)
     return Path(path)

@@ -262,7 +262,7 @@ def _structured_mesh(points, cells, lower, upper, sides: Mapping[str, tuple[int,
 
 
 # ---------------------------------------------------------------------------
-# Topology helpers (also used by the plotting code in primordia.core.io)
+# Topology helpers (also used by the plotting code in primordia.core.pictures)
 # ---------------------------------------------------------------------------
 
 

@@ -2,7 +2,7 @@
 
 Each :class:`Output` contributes its own files: it is told when the run starts,
 at every output time, and when the run ends (normally or not).  Every file is
-written atomically (:mod:`primordia.core.io`), so whatever has been written
+written atomically (:mod:`primordia.core.atomic_files`), so whatever has been written
 stays readable if a run dies part-way.
 
 Built-in outputs: the resolved configuration (``config.toml``), the fields in
@@ -29,7 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from primordia.core import io
+from primordia.core.json_toml import write_json, write_toml
+from primordia.core.pictures import plot_field, plot_fields_grid
+from primordia.core.scalar_series import ScalarSeries
+from primordia.core.xdmf import XdmfSeries
 from primordia.core.checkpoint import CHECKPOINT_FILE
 from primordia.core.plugins import hookimpl
 
@@ -71,7 +74,7 @@ class ResolvedConfig(Output):
 
     def start(self, run):
         if run.is_root:
-            io.write_toml(run.out_dir / "config.toml", run.model.resolved_config())
+            write_toml(run.out_dir / "config.toml", run.model.resolved_config())
 
 
 class FieldsXdmf(Output):
@@ -80,7 +83,7 @@ class FieldsXdmf(Output):
     name = "xdmf"
 
     def start(self, run):
-        self.series = io.XdmfSeries(run.out_dir, run.mesh_data, name="fields") if run.is_root else None
+        self.series = XdmfSeries(run.out_dir, run.mesh_data, name="fields") if run.is_root else None
 
     def snapshot(self, run):
         values = run.vertex_values()
@@ -91,7 +94,7 @@ class FieldsXdmf(Output):
         return self.series.state() if self.series is not None else {}
 
     def resume(self, run, state):
-        self.series = io.XdmfSeries(run.out_dir, run.mesh_data, name="fields") if run.is_root else None
+        self.series = XdmfSeries(run.out_dir, run.mesh_data, name="fields") if run.is_root else None
         if run.is_root:
             self.series.restore(state)
 
@@ -106,7 +109,7 @@ class ScalarSeriesNetcdf(Output):
     name = "series"
 
     def start(self, run):
-        self.series = io.ScalarSeries(run.out_dir / "series.nc") if run.is_root else None
+        self.series = ScalarSeries(run.out_dir / "series.nc") if run.is_root else None
         self.record(run)
 
     def record(self, run):
@@ -129,7 +132,7 @@ class ScalarSeriesNetcdf(Output):
         return self.series.state() if self.series is not None else {}
 
     def resume(self, run, state):
-        self.series = io.ScalarSeries(run.out_dir / "series.nc") if run.is_root else None
+        self.series = ScalarSeries(run.out_dir / "series.nc") if run.is_root else None
         if run.is_root:
             self.series.restore(state)
 
@@ -162,12 +165,12 @@ class Pictures(Output):
         for name in run.model.output["snapshot_fields"]:
             label = f"{name}, t = {run.time:g}"
             field = self._scalar(values[name])
-            io.plot_field(run.out_dir / f"{name}_t{run.time:07.2f}.png", run.mesh_data, field, title=label,
+            plot_field(run.out_dir / f"{name}_t{run.time:07.2f}.png", run.mesh_data, field, title=label,
                           displacement=displacement, displacement_scale=scale)
             self.snapshots.setdefault(name, {})[label] = field
             if displacement is not None:
                 self.snapshot_displacements.setdefault(name, {})[label] = displacement
-            io.plot_fields_grid(run.out_dir / f"{name}_snapshots.png", run.mesh_data, self.snapshots[name],
+            plot_fields_grid(run.out_dir / f"{name}_snapshots.png", run.mesh_data, self.snapshots[name],
                                 title=f"{name} at the snapshot times",
                                 displacements=self.snapshot_displacements.get(name), displacement_scale=scale)
 
@@ -186,7 +189,7 @@ class Pictures(Output):
             fields = {(f"|{name}|" if v.ndim == 2 else name): self._scalar(v) for name, v in values.items()}
             displacement = values.get("u")
             displacements = None if displacement is None else {key: displacement for key in fields}
-            io.plot_fields_grid(run.out_dir / "final_fields.png", run.mesh_data, fields,
+            plot_fields_grid(run.out_dir / "final_fields.png", run.mesh_data, fields,
                                 title=f"all fields at t = {run.time:g} ({status})", shared_colour_scale=False,
                                 displacements=displacements, displacement_scale=run.model.output["displacement_scale"])
 
@@ -223,7 +226,7 @@ class Summary(Output):
         if run.is_root:
             if status == "running":
                 summary["process"] = {"pid": os.getpid(), "host": socket.gethostname()}
-            io.write_json(run.out_dir / "summary.json", summary)
+            write_json(run.out_dir / "summary.json", summary)
 
 
 @hookimpl

@@ -458,14 +458,14 @@ class Simulation:
             return
         import json
 
-        from primordia.core import io
+        from primordia.core.json_toml import write_json
 
         path = self.out_dir / "summary.json"
         try:
             summary = json.loads(path.read_text())
             summary.update(status=status, steps=self.step_index, time=self.time)
             summary.pop("process", None)
-            io.write_json(path, summary)
+            write_json(path, summary)
         except (OSError, ValueError, PrimordiaError):
             pass
 

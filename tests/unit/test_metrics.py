@@ -23,8 +23,9 @@ from primordia.analysis.patterns.metrics import (
     nearest_neighbour_distances,
 )
 from primordia.analysis.patterns.run import analyse_run, pattern_kind, predicted_mode
-from primordia.core import io
+from primordia.core.json_toml import write_json, write_toml
 from primordia.core.meshes import rectangle
+from primordia.core.xdmf import XdmfSeries
 
 SIDE = 20.0
 MESH = rectangle((0.0, 0.0), (SIDE, SIDE), cells=(100, 100))
@@ -135,12 +136,12 @@ def write_run(directory, stretch: float, spacing: float = 3.0):
     width = spacing / 6
     spots = gaussian_spots(MESH.points, hexagonal_lattice(spacing, 3 * width), width)
     noise = 0.5 + 0.01 * np.random.default_rng(0).uniform(-1, 1, MESH.num_vertices)
-    series = io.XdmfSeries(directory, MESH)
+    series = XdmfSeries(directory, MESH)
     for t, amplitude in ((10.0, 0.5), (20.0, 1.0)):
         series.write(t, {"m": amplitude * spots, "b": noise, "u": (stretch - 1.0) * MESH.points})
-    io.write_toml(directory / "config.toml", {"model": {"physics": ["chemotaxis"]},
+    write_toml(directory / "config.toml", {"model": {"physics": ["chemotaxis"]},
                                               "parameters": {"m0": 0.75, "D_m": 0.03}})
-    io.write_json(directory / "summary.json", {"status": "completed"})
+    write_json(directory / "summary.json", {"status": "completed"})
 
 
 def test_run_directory_in_reference_and_current_configuration(tmp_path):

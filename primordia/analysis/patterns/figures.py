@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
-from primordia.core.io import atomic_path
+from primordia.core.atomic_files import atomic_path
 
 
 def _save(figure: Figure, path) -> Path:

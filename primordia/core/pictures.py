@@ -1,0 +1,220 @@
+"""PNG pictures of vertex fields: :func:`plot_field`, :func:`plot_fields_grid`.
+
+Drawn on a ``matplotlib.figure.Figure`` (no pyplot, so no GUI backend is chosen
+and nothing global changes), saved atomically (:mod:`primordia.core.atomic_files`).
+Serial: draw on one MPI rank.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from primordia.core.atomic_files import atomic_path, writable_target
+from primordia.core.errors import PrimordiaError
+from primordia.core.mesh import MeshData
+from primordia.core.meshes import exterior_facets
+
+
+def plot_field(
+    path: str | Path,
+    mesh: MeshData,
+    values,
+    title: str = "",
+    displacement=None,
+    displacement_scale: float = 1.0,
+    cmap: str = "viridis",
+    vmin: float | None = None,
+    vmax: float | None = None,
+) -> Path:
+    """Draw vertex ``values`` as a smoothly shaded (gouraud) PNG with a colorbar.
+
+    With ``displacement`` (n_vertices, gdim) the field is drawn on the
+    deformed configuration ``points + displacement_scale * displacement`` and
+    the x-axis label says "displacement x<scale>".  A 3D mesh is drawn as its top
+    face (the boundary facets on z = z_max) seen from above.
+    """
+    return plot_fields_grid(
+        path,
+        mesh,
+        {title: values},
+        title="",
+        displacements=None if displacement is None else {title: displacement},
+        displacement_scale=displacement_scale,
+        cmap=cmap,
+        vmin=vmin,
+        vmax=vmax,
+        shared_colour_scale=False,
+    )
+
+
+def plot_fields_grid(
+    path: str | Path,
+    mesh: MeshData,
+    fields: Mapping[str, np.ndarray],
+    title: str = "",
+    displacements: Mapping[str, np.ndarray] | None = None,
+    displacement_scale: float = 1.0,
+    cmap: str = "viridis",
+    vmin: float | None = None,
+    vmax: float | None = None,
+    ncols: int | None = None,
+    shared_colour_scale: bool = True,
+) -> Path:
+    """Draw several vertex fields side by side in one PNG, each panel titled by its key.
+
+    Made for snapshot rows such as the seed's figures of m at t = 160, 280,
+    400, 520: ``{"t = 160": m160, "t = 280": m280, ...}``.  With
+    ``shared_colour_scale`` all panels use one colour range (``vmin``/``vmax``
+    or the range of all values) and one colorbar; otherwise each panel gets
+    its own.  ``displacements`` maps panel keys to (n_vertices, gdim)
+    displacements: those panels are drawn on the deformed configuration, as in
+    :func:`plot_field`, with the outline of the undeformed domain in grey and
+    their x label saying "displacement x<scale>".  ``ncols`` defaults to all
+    panels in one row.  A 3D mesh gets two rows of panels: its top face seen
+    from above, and the vertical slice through the middle of its y extent
+    (the seed's Figure 5.5 shows both).
+    """
+    from matplotlib.figure import Figure
+
+    if not fields:
+        raise PrimordiaError(f"cannot plot {path}: no fields given")
+    target = writable_target(path)
+    views = [_plot_surface(mesh)] if mesh.gdim == 2 else [_plot_surface(mesh), _slice_surface(mesh)]
+    panels = {}
+    for view in views:
+        for key, values in fields.items():
+            label = key if len(views) == 1 else f"{key} ({view.label})"
+            panels[label] = (view, _panel_data(mesh, view, key, values, (displacements or {}).get(key),
+                                               displacement_scale))
+    if shared_colour_scale:
+        vmin, vmax = _colour_range([v for _, (_, v) in panels.values()], vmin, vmax)
+    ncols = len(fields) if ncols is None else max(1, min(int(ncols), len(fields)))
+    rows_per_view = -(-len(fields) // ncols)
+    nrows = rows_per_view * len(views)
+    # each view's rows as tall as its drawn extent needs (a slice of a thin slab is a thin strip)
+    heights = [max(0.25, view.aspect(mesh)) for view in views for _ in range(rows_per_view)]
+    figure = Figure(figsize=(4.2 * ncols + (0.8 if shared_colour_scale else 0.0), 0.6 + 3.6 * sum(heights)),
+                    layout="constrained")
+    axes = figure.subplots(nrows, ncols, squeeze=False, gridspec_kw={"height_ratios": heights})
+    slots = [axes[v * rows_per_view + i // ncols, i % ncols] for v in range(len(views)) for i in range(len(fields))]
+    used = {id(ax) for ax in slots}
+    for ax in axes.ravel():
+        if id(ax) not in used:
+            ax.set_axis_off()
+    image = None
+    for ax, (label, (view, (triangulation, values))), key in zip(slots, panels.items(), list(fields) * len(views)):
+        image = _draw_panel(ax, triangulation, values, label, cmap, vmin, vmax, view.axis_names)
+        if (displacements or {}).get(key) is not None:
+            _draw_outline(ax, mesh, view)
+            ax.set_xlabel(f"{view.axis_names[0]}    (displacement x{displacement_scale:g})")
+        if not shared_colour_scale:
+            figure.colorbar(image, ax=ax, shrink=0.85)
+    if shared_colour_scale:
+        figure.colorbar(image, ax=slots, shrink=0.85)
+    if title:
+        figure.suptitle(title)
+    with atomic_path(target) as temporary:
+        figure.savefig(temporary, format="png", dpi=110)
+    return target
+
+
+class _View:
+    """A drawn 2D surface of a mesh: its vertices, triangles (in local indices) and plane axes."""
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, axes: tuple[int, int], label: str):
+        self.vertices, self.triangles, self.axes, self.label = vertices, triangles, axes, label
+
+    @property
+    def axis_names(self) -> tuple[str, str]:
+        return tuple("xyz"[a] for a in self.axes)
+
+    def aspect(self, mesh: MeshData) -> float:
+        """Height over width of the undeformed view."""
+        extent = np.ptp(mesh.points[self.vertices][:, self.axes], axis=0)
+        return float(extent[1] / extent[0]) if extent[0] > 0 else 1.0
+
+
+def _plot_surface(mesh: MeshData) -> _View:
+    """The whole mesh (2D), or the top face z = z_max of a 3D mesh seen from above."""
+    if mesh.gdim == 2:
+        return _View(np.arange(mesh.num_vertices), mesh.cells, (0, 1), "")
+    facets = exterior_facets(mesh.cells)
+    z = mesh.points[:, 2]
+    tolerance = 1e-10 * np.ptp(mesh.points, axis=0).max()
+    top = facets[np.all(np.abs(z[facets] - z.max()) <= tolerance, axis=1)]
+    vertices, local = np.unique(top, return_inverse=True)
+    return _View(vertices, local.reshape(top.shape), (0, 1), f"top, z = {z.max():g}")
+
+
+def _slice_surface(mesh: MeshData) -> _View:
+    """The faces of a 3D mesh lying in the vertex plane y = const nearest the middle, seen along y.
+
+    Structured boxes (and any mesh with a plane of faces there) are cut exactly; the
+    plane is the one holding most vertices among those nearest the middle.
+    """
+    y = mesh.points[:, 1]
+    tolerance = 1e-10 * np.ptp(mesh.points, axis=0).max()
+    levels = np.unique(np.round(y / max(tolerance, 1e-300)) * tolerance)
+    middle = 0.5 * (y.min() + y.max())
+    level = levels[np.argmin(np.abs(levels - middle))]
+    on_plane = np.abs(y - level) <= 10 * tolerance
+    faces = np.sort(mesh.cells[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), axis=1)
+    faces = np.unique(faces[np.all(on_plane[faces], axis=1)], axis=0)
+    if len(faces) == 0:
+        raise PrimordiaError(f"cannot draw a slice of the mesh: no cell faces lie in the plane y = {level:g}")
+    vertices, local = np.unique(faces, return_inverse=True)
+    return _View(vertices, local.reshape(faces.shape), (0, 2), f"slice y = {level:g}")
+
+
+def _panel_data(mesh: MeshData, view: _View, key, values, displacement, scale):
+    """A matplotlib Triangulation of the (deformed) view and the values on it."""
+    from matplotlib.tri import Triangulation
+
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape != (mesh.num_vertices,):
+        raise PrimordiaError(
+            f"cannot plot field {key!r}: expected {mesh.num_vertices} vertex values, got shape {values.shape}"
+        )
+    xy = mesh.points[:, view.axes]
+    if displacement is not None:
+        displacement = np.asarray(displacement, dtype=np.float64)
+        if displacement.shape != (mesh.num_vertices, mesh.gdim):
+            raise PrimordiaError(
+                f"cannot plot field {key!r}: displacement must have shape "
+                f"({mesh.num_vertices}, {mesh.gdim}), got {displacement.shape}"
+            )
+        xy = xy + scale * displacement[:, view.axes]
+    xy = xy[view.vertices]
+    return Triangulation(xy[:, 0], xy[:, 1], view.triangles), values[view.vertices]
+
+
+def _draw_outline(ax, mesh: MeshData, view: _View) -> None:
+    """The boundary of the undeformed view, in grey (where the tissue started)."""
+    from matplotlib.collections import LineCollection
+
+    edges = np.sort(view.triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    boundary = unique[counts == 1]
+    xy = mesh.points[view.vertices][:, view.axes]
+    ax.add_collection(LineCollection(xy[boundary], colors="0.45", linewidths=0.8, linestyles="--"))
+    ax.autoscale_view()
+
+
+def _colour_range(all_values: Sequence[np.ndarray], vmin, vmax) -> tuple[float | None, float | None]:
+    """``vmin``/``vmax`` if given, else the finite range of all values."""
+    finite = np.concatenate([v[np.isfinite(v)] for v in all_values])
+    if finite.size == 0:
+        return vmin, vmax
+    return (float(finite.min()) if vmin is None else vmin), (float(finite.max()) if vmax is None else vmax)
+
+
+def _draw_panel(ax, triangulation, values, title, cmap, vmin, vmax, axis_names=("x", "y")):
+    image = ax.tripcolor(triangulation, values, shading="gouraud", cmap=cmap, vmin=vmin, vmax=vmax)
+    ax.set_aspect("equal")
+    ax.set_title(str(title))
+    ax.set_xlabel(axis_names[0])
+    ax.set_ylabel(axis_names[1])
+    return image

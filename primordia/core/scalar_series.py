@@ -1,0 +1,145 @@
+"""Named scalars per output time in one netCDF file (:class:`ScalarSeries`).
+
+Serial: write on one MPI rank.  The file is rewritten atomically at every row
+(:mod:`primordia.core.atomic_files`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from primordia.core.atomic_files import atomic_path, writable_target
+from primordia.core.errors import PrimordiaError
+
+#: netCDF variable names primordia writes: letters, digits and a few safe signs.
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.+-]*$")
+
+
+class ScalarSeries:
+    """Named scalars per output time in one netCDF file (``series.nc``), rewritten atomically.
+
+    ``append(t, {"m_integral": ..., "m_min": ..., "linear_iterations": ...})``
+    adds a row; the file then has dimension ``time`` and one float64 variable
+    per key.  A key first seen at a later row is NaN in the earlier rows, and
+    a row that omits a known key is NaN there.  ``attrs`` maps a key (or
+    ``"time"``) to netCDF attributes such as ``{"units": "dimensionless",
+    "description": "integral of m over the domain"}``.
+
+    Events that do not fall on the rows (e.g. every rejected time step) go to
+    their own dimension: ``add_event("rejection", {"time": 0.4, "dt": 0.1,
+    "reason": "..."})`` gives variables ``rejection_time``, ``rejection_dt`` and
+    ``rejection_reason`` along the dimension ``rejection`` (numbers as float64,
+    text as strings).
+    """
+
+    def __init__(self, path: str | Path, attrs: Mapping[str, Mapping[str, str]] | None = None):
+        self.path = writable_target(path)
+        self._times: list[float] = []
+        self._columns: dict[str, list[float]] = {}
+        self._attrs: dict[str, dict[str, str]] = {}
+        self._events: dict[str, list[dict]] = {}
+        self._add_attrs(attrs)
+
+    @property
+    def times(self) -> list[float]:
+        return list(self._times)
+
+    def append(self, t: float, row: Mapping[str, float], attrs: Mapping[str, Mapping[str, str]] | None = None) -> None:
+        """Add the scalars of ``row`` at time ``t`` and rewrite the file."""
+        t = self._check_time(t)
+        values = {key: _scalar(key, value) for key, value in row.items()}
+        self._add_attrs(attrs)
+        for key in values:
+            self._columns.setdefault(key, [math.nan] * len(self._times))
+        self._times.append(t)
+        for key, column in self._columns.items():
+            column.append(values.get(key, math.nan))
+        self._write()
+
+    def add_event(self, dimension: str, event: Mapping[str, float | str]) -> None:
+        """Record one event along ``dimension`` (numbers and strings by name) and rewrite the file."""
+        _variable_name(dimension)
+        row = {}
+        for key, value in event.items():
+            _variable_name(f"{dimension}_{key}")
+            row[key] = value if isinstance(value, str) else _scalar(f"{dimension}_{key}", value)
+        self._events.setdefault(dimension, []).append(row)
+        self._write()
+
+    def dataset(self):
+        """The series so far as an ``xarray.Dataset``."""
+        import xarray as xr
+
+        data_vars = {
+            key: ("time", np.asarray(column, dtype=np.float64), self._attrs.get(key, {}))
+            for key, column in self._columns.items()
+        }
+        for dimension, events in self._events.items():
+            for key in dict.fromkeys(k for event in events for k in event):
+                values = [event.get(key) for event in events]
+                text = any(isinstance(v, str) for v in values)
+                column = (np.array(["" if v is None else str(v) for v in values], dtype=str) if text
+                          else np.array([math.nan if v is None else v for v in values], dtype=np.float64))
+                data_vars[f"{dimension}_{key}"] = (dimension, column)
+        coords = {"time": ("time", np.asarray(self._times, dtype=np.float64), self._attrs.get("time", {}))}
+        return xr.Dataset(data_vars, coords=coords)
+
+    def state(self) -> dict:
+        """The rows and events so far (what :meth:`restore` takes back)."""
+        return {"times": list(self._times), "columns": {k: list(v) for k, v in self._columns.items()},
+                "attrs": {k: dict(v) for k, v in self._attrs.items()},
+                "events": {k: [dict(e) for e in v] for k, v in self._events.items()}}
+
+    def restore(self, state: Mapping) -> None:
+        """Continue from ``state`` and rewrite the file: rows written after it are gone."""
+        self._times = [float(t) for t in state["times"]]
+        self._columns = {k: [float(x) for x in v] for k, v in state["columns"].items()}
+        self._attrs = {k: dict(v) for k, v in state["attrs"].items()}
+        self._events = {k: [dict(e) for e in v] for k, v in state.get("events", {}).items()}
+        self._write()
+
+    def _write(self) -> None:
+        dataset = self.dataset()
+        with atomic_path(self.path) as temporary:
+            dataset.to_netcdf(temporary, engine="scipy")
+
+    def _check_time(self, t) -> float:
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.number)) or not math.isfinite(t):
+            raise PrimordiaError(f"scalar series {self.path}: time must be a finite number, got {t!r}")
+        t = float(t)
+        if self._times and t <= self._times[-1]:
+            raise PrimordiaError(
+                f"scalar series {self.path}: time {t:g} does not follow the last written time {self._times[-1]:g}"
+            )
+        return t
+
+    def _add_attrs(self, attrs) -> None:
+        for key, key_attrs in (attrs or {}).items():
+            if not isinstance(key_attrs, Mapping):
+                raise PrimordiaError(f"scalar series attributes of {key!r} must be a mapping, got {key_attrs!r}")
+            self._attrs.setdefault(_variable_name(key), {}).update({str(k): str(v) for k, v in key_attrs.items()})
+
+
+def _variable_name(key) -> str:
+    if not isinstance(key, str) or not _SAFE_NAME.match(key):
+        raise PrimordiaError(f"scalar series name must be letters, digits, '_', '.', '+' or '-', got {key!r}")
+    return key
+
+
+def _scalar(key, value) -> float:
+    """``value`` as a float, or a one-line PrimordiaError naming ``key``."""
+    if _variable_name(key) == "time":
+        raise PrimordiaError("scalar series: 'time' is the series dimension, not a column name")
+    if isinstance(value, (bool, np.bool_)):
+        return float(value)
+    if np.ndim(value) != 0:
+        raise PrimordiaError(f"scalar series value {key!r} must be a single number, got shape {np.shape(value)}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise PrimordiaError(f"scalar series value {key!r} must be a number, got {value!r}") from None

@@ -1,0 +1,72 @@
+"""PNG pictures of vertex fields (primordia.core.pictures)."""
+
+from __future__ import annotations
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+from primordia.core.errors import PrimordiaError
+from primordia.core.meshes import box
+from primordia.core.pictures import plot_field, plot_fields_grid
+from file_writers import bump, leftovers, square  # noqa: F401
+
+
+def read_png(path):
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    return matplotlib.image.imread(path)[..., :3]
+
+
+def distinct_colours(image) -> int:
+    return len(np.unique((image * 255).astype(np.uint8).reshape(-1, 3), axis=0))
+
+
+def test_plot_field_draws_a_coloured_field(tmp_path, square):
+    path = plot_field(tmp_path / "m.png", square, bump(square, 0.0), title="m at t = 0")
+    image = read_png(path)
+    assert path.stat().st_size > 10_000
+    assert distinct_colours(image) > 200, "a gouraud-shaded field has many colours"
+    viridis_yellow = np.array([0.993, 0.906, 0.144])
+    assert np.any(np.all(np.abs(image - viridis_yellow) < 0.05, axis=-1)), "the maximum is drawn in yellow"
+    assert leftovers(tmp_path) == []
+
+
+def test_plot_field_on_the_deformed_configuration_is_another_picture(tmp_path, square):
+    values = bump(square, 0.0)
+    plain = read_png(plot_field(tmp_path / "plain.png", square, values))
+    shear = np.column_stack([0.3 * square.points[:, 1], np.zeros(square.num_vertices)])
+    deformed = read_png(
+        plot_field(tmp_path / "deformed.png", square, values, displacement=shear, displacement_scale=2.0)
+    )
+    assert plain.shape == deformed.shape and not np.array_equal(plain, deformed)
+
+
+def test_plot_field_of_a_box_draws_its_top_face(tmp_path):
+    mesh = box((0, 0, 0), (2, 1, 1), (4, 2, 2))
+    image = read_png(plot_field(tmp_path / "box.png", mesh, mesh.points[:, 0] + mesh.points[:, 2]))
+    assert distinct_colours(image) > 100
+
+
+def test_plot_fields_grid_puts_panels_side_by_side(tmp_path, square):
+    snapshots = {f"t = {t}": bump(square, t / 100) for t in (160, 280, 400, 520)}
+    row = read_png(plot_fields_grid(tmp_path / "row.png", square, snapshots, title="m"))
+    single = read_png(plot_field(tmp_path / "one.png", square, snapshots["t = 160"]))
+    assert row.shape[1] > 3 * single.shape[1]
+    grid = read_png(plot_fields_grid(tmp_path / "grid.png", square, snapshots, ncols=2, shared_colour_scale=False))
+    assert grid.shape[0] > 1.5 * single.shape[0]
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"values": np.zeros(3)}, "expected 28 vertex values, got shape \\(3,\\)"),
+        ({"displacement": np.zeros((28, 3))}, "displacement must have shape \\(28, 2\\)"),
+        ({"path": "no/such/dir/m.png"}, "does not exist"),
+    ],
+)
+def test_plot_field_errors(tmp_path, square, kwargs, message):
+    arguments = {"path": tmp_path / "m.png", "mesh": square, "values": np.zeros(28)} | kwargs
+    if kwargs.get("path"):
+        arguments["path"] = tmp_path / kwargs["path"]
+    with pytest.raises(PrimordiaError, match=message):
+        plot_field(**arguments)
