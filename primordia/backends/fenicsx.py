@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 import ufl
 
-from primordia.core.backend import Backend, BoundaryCondition, DofLayout, index_set, sub_elements
+from primordia.core.backend import Backend, BoundaryCondition, index_set, sub_elements
 from primordia.core.mesh import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
@@ -49,7 +49,6 @@ class FenicsxBackend(Backend):
     """dolfinx 0.5.2: MPI-parallel assembly of UFL forms into PETSc objects."""
 
     name = "fenicsx"
-    parallel = True
 
     def __init__(self, comm=None):
         from mpi4py import MPI
@@ -210,15 +209,6 @@ class FenicsxBackend(Backend):
 
     def update_ghosts(self, function) -> None:
         function.x.scatter_forward()
-
-    def dof_layout(self, space) -> DofLayout:
-        index_map = space.dofmap.index_map
-        bs = space.dofmap.index_map_bs
-        start, stop = index_map.local_range
-        ghosts = index_map.ghosts
-        if bs > 1:
-            ghosts = (ghosts[:, None] * bs + np.arange(bs)).ravel()
-        return DofLayout(owned_range=(start * bs, stop * bs), ghosts=np.asarray(ghosts, dtype=np.int64))
 
     def interpolate(self, function, values) -> None:
         if isinstance(values, fem.Function):

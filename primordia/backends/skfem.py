@@ -48,7 +48,7 @@ from primordia.backends.ufl_numpy import (
     reference_quadrature,
     unsupported,
 )
-from primordia.core.backend import Backend, BoundaryCondition, DofLayout, index_set, sub_elements
+from primordia.core.backend import Backend, BoundaryCondition, index_set, sub_elements
 from primordia.core.errors import MeshError, PrimordiaError
 from primordia.core.mesh import MeshData
 
@@ -656,7 +656,6 @@ class SkfemBackend(Backend):
     """scikit-fem 12: serial assembly of UFL forms (evaluated with numpy) into PETSc objects."""
 
     name = "skfem"
-    parallel = False
 
     def __init__(self, comm=None):
         if comm is None:
@@ -909,9 +908,6 @@ class SkfemBackend(Backend):
 
     def update_ghosts(self, function) -> None:
         """Nothing to do: a serial run has no ghosts."""
-
-    def dof_layout(self, space) -> DofLayout:
-        return DofLayout(owned_range=(0, space.num_dofs), ghosts=np.empty(0, dtype=np.int64))
 
     def interpolate(self, function, values) -> None:
         space = function.function_space

@@ -45,23 +45,6 @@ PointFunction = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
-class DofLayout:
-    """Parallel layout of a space's DOF vector (block size 1 per scalar DOF).
-
-    ``owned_range`` is the global index range [start, stop) this rank owns;
-    ``ghosts`` holds the global indices of ghost DOFs, in the order they
-    follow the owned ones in ``local_array``.
-    """
-
-    owned_range: tuple[int, int]
-    ghosts: np.ndarray
-
-    @property
-    def num_owned(self) -> int:
-        return self.owned_range[1] - self.owned_range[0]
-
-
-@dataclass(frozen=True)
 class BoundaryCondition:
     """A backend's Dirichlet condition (opaque ``handle``) and the DOFs it fixes."""
 
@@ -75,8 +58,6 @@ class Backend(ABC):
 
     #: Name used in configs and on the command line (``--backend NAME``).
     name: ClassVar[str]
-    #: Whether the backend runs with more than one MPI rank.
-    parallel: ClassVar[bool] = False
 
     def __init__(self, comm):
         self.comm = comm
@@ -160,10 +141,6 @@ class Backend(ABC):
     @abstractmethod
     def update_ghosts(self, function) -> None:
         """Refresh ghost values after the owned values changed."""
-
-    @abstractmethod
-    def dof_layout(self, space) -> DofLayout:
-        """Parallel layout of ``space``'s DOFs."""
 
     @abstractmethod
     def interpolate(self, function, values) -> None:
