@@ -1,0 +1,171 @@
+"""Run configurations (primordia.core.config): reading TOML, ``--set`` overrides, structure and types.
+
+What a whole model does with a configuration is in test_model.py; random configurations and
+``--set`` strings through the command are in test_config_fuzz.py.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from primordia.core import config
+from primordia.core.errors import ConfigError
+
+from small_config import SMALL_CONFIG
+
+
+def one_line_error(make, *args) -> str:
+    with pytest.raises(ConfigError) as caught:
+        make(*args)
+    message = str(caught.value)
+    assert "\n" not in message, message
+    return message
+
+
+# -- reading a file ------------------------------------------------------------------------------
+def test_a_toml_file_is_read_with_the_folder_it_lives_in(tmp_path):
+    path = tmp_path / "runs" / "small.toml"
+    path.parent.mkdir()
+    path.write_text(SMALL_CONFIG)
+    table = config.load_config(path)
+    assert table["mesh"] == {"type": "rectangle", "upper": [4.0, 4.0], "cells": [8, 8]}
+    assert table["time"] == {"dt": 0.2, "t_final": 1.0}
+    assert table["parameters"]["D_m"] == 0.03
+    assert table["_base_dir"] == str(path.parent.resolve())  # relative mesh paths are read from here
+
+
+def test_a_byte_order_mark_is_not_part_of_the_toml(tmp_path):
+    path = tmp_path / "bom.toml"
+    path.write_bytes("\ufeff[time]\ndt = 0.5\n".encode())
+    assert config.load_config(path)["time"] == {"dt": 0.5}
+
+
+@pytest.mark.parametrize("make, fragment", [
+    (lambda d: d / "missing.toml", "config file not found"),
+    (lambda d: d, "is a folder, not a TOML file"),
+    (lambda d: Path(os.devnull), "is not a regular file"),
+    (lambda d: _write(d / "binary.toml", b"[time]\ndt = \xff\xfe\n"), "is not UTF-8 text (byte 12: b'\\xff')"),
+    (lambda d: _write(d / "broken.toml", b"[time\ndt = 1\n"), "invalid TOML"),
+    (lambda d: _write(d / "twice.toml", b"[time]\ndt = 1\ndt = 2\n"), "invalid TOML"),
+    (lambda d: _write(d / "huge.toml", b"#" * (config.MAX_CONFIG_BYTES + 1)), "larger than 1 MB"),
+])
+def test_a_file_that_is_no_configuration_is_one_line(tmp_path, make, fragment):
+    assert fragment in one_line_error(config.load_config, make(tmp_path))
+
+
+def _write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
+
+
+# -- --set overrides ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("text, keys, value", [
+    ("parameters.D_m=0.05", ["parameters", "D_m"], 0.05),
+    (" time.t_final = 1e3 ", ["time", "t_final"], 1000.0),
+    ("mesh.cells=[4, 4]", ["mesh", "cells"], [4, 4]),
+    ("output.pictures=false", ["output", "pictures"], False),
+    ("model.backend=skfem", ["model", "backend"], "skfem"),  # a bare word is a string
+    ('model.name="a=b"', ["model", "name"], "a=b"),  # only the first '=' separates
+    ("physics.chemotaxis.scheme=\"fitted\"", ["physics", "chemotaxis", "scheme"], "fitted"),
+    ("coupling.options={tolerance = 1e-8}", ["coupling", "options"], {"tolerance": 1e-8}),
+])
+def test_an_assignment_is_dotted_keys_and_a_toml_value(text, keys, value):
+    assert config.parse_assignment(text) == (keys, value)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("parameters.D_m", "--set expects section.key=value, got 'parameters.D_m'"),
+    ("=1", "--set expects section.key=value"),
+    ("D_m=1", "--set key must name a section and a key (e.g. parameters.D_m), got 'D_m'"),
+    ("parameters..D_m=1", "must name a section and a key"),
+    ("parameters.=1", "must name a section and a key"),
+])
+def test_a_malformed_assignment_is_one_line(text, fragment):
+    assert fragment in one_line_error(config.parse_assignment, text)
+
+
+def test_overrides_apply_to_a_copy_and_create_tables():
+    original = {"time": {"dt": 0.2, "t_final": 1.0}, "mesh": {"cells": [8, 8]}}
+    changed = config.apply_overrides(original, ["time.dt=0.1", "mesh.cells=[2, 2]", "solver.chemotaxis_m.ksp_type=cg",
+                                                "time.dt=0.05"])
+    assert changed == {"time": {"dt": 0.05, "t_final": 1.0}, "mesh": {"cells": [2, 2]},
+                       "solver": {"chemotaxis_m": {"ksp_type": "cg"}}}
+    assert original == {"time": {"dt": 0.2, "t_final": 1.0}, "mesh": {"cells": [8, 8]}}
+    assert config.apply_overrides(original, []) == original
+
+
+def test_an_override_through_a_value_that_is_not_a_table():
+    message = one_line_error(config.apply_overrides, {"time": 5}, ["time.dt=1"])
+    assert message == "--set time.dt=1: time is not a table"
+
+
+# -- structure -------------------------------------------------------------------------------------------
+def test_a_valid_structure_passes_with_open_sections_taking_any_key():
+    config.check_structure({"_base_dir": "/somewhere", "model": {"physics": ["chemotaxis"], "backend": "skfem"},
+                            "parameters": {"anything": 1.0}, "mesh": {"type": "rectangle", "whatever": 1},
+                            "physics": {"chemotaxis": {"option": 1}}, "solver": {"chemotaxis_m": {"ksp_type": "cg"}},
+                            "time": {"dt": 0.1, "t_final": 1.0, "t_start": 0.0, "adaptive": False, "dt_min": 0.01}})
+
+
+@pytest.mark.parametrize("table, expected", [
+    ({"nonsense": {}}, "unknown config section [nonsense] (known: model, kinetics, growth_law, physics"),
+    ({"time": {"dt": 1, "nonsense": 2}}, "unknown key time.nonsense (known: adaptive, dt, dt_min, t_final, t_start)"),
+    ({"output": {"pictures": False, "format": "vtk"}}, "unknown key output.format"),
+    ({"checkpoint": {"every_seconds": 1}}, "unknown key checkpoint.every_seconds"),
+    ({"model": {"physic": ["chemotaxis"]}}, "unknown key model.physic"),
+    ({"time": 3}, "config section [time] must be a table"),
+    ({"physics": {"chemotaxis": 3}}, "physics.chemotaxis must be a table ([physics.NAME]), got 3"),
+    ({"solver": {"chemotaxis_m": "cg"}}, "solver.chemotaxis_m must be a table ([solver.PREFIX])"),
+])
+def test_unknown_and_misshapen_tables_are_named(table, expected):
+    assert expected in one_line_error(config.check_structure, table)
+
+
+# -- types of values and options ---------------------------------------------------------------------------
+def test_require_returns_the_value_of_the_right_kind():
+    assert config.require({"time": {"dt": 0.2}}, "time", "dt") == 0.2
+    assert config.require({"time": {"dt": 1}}, "time", "dt") == 1
+    assert config.require({"mesh": {"type": "box"}}, "mesh", "type", str) == "box"
+
+
+@pytest.mark.parametrize("table, kind, expected", [
+    ({}, (int, float), "missing time.dt in the configuration"),
+    ({"time": {}}, (int, float), "missing time.dt in the configuration"),
+    ({"time": {"dt": True}}, (int, float), "time.dt must be a number, got True"),
+    ({"time": {"dt": "0.2"}}, (int, float), "time.dt must be a number, got '0.2'"),
+    ({"time": {"dt": 0.2}}, str, "time.dt must be a str, got 0.2"),
+])
+def test_require_names_a_missing_or_mistyped_value(table, kind, expected):
+    assert one_line_error(config.require, table, "time", "dt", kind) == expected
+
+
+DEFAULTS = {"flag": False, "count": 2, "scale": 1.0, "scheme": "fitted", "names": ["m"], "table": {}, "free": None}
+
+
+def test_options_merge_over_their_defaults():
+    merged = config.merge_options("physics p", DEFAULTS, {"count": 3, "scale": 2, "free": object})
+    assert merged == {**DEFAULTS, "count": 3, "scale": 2, "free": object}  # an integer is a number; None: anything
+    assert DEFAULTS["count"] == 2
+    assert config.merge_options("physics p", DEFAULTS, {}) == DEFAULTS
+
+
+@pytest.mark.parametrize("key, value, kind", [
+    ("flag", 1, "true or false"), ("count", 1.5, "an integer"), ("count", True, "an integer"),
+    ("scale", "1", "a number"), ("scale", False, "a number"), ("scheme", 1, "a string"),
+    ("names", "m", "a list"), ("names", ("m",), "a list"), ("table", [], "a table"),
+])
+def test_an_option_of_the_wrong_type_is_named_with_the_type_its_default_has(key, value, kind):
+    assert one_line_error(config.merge_options, "physics p", DEFAULTS, {key: value}) == \
+        f"physics p: option '{key}' must be {kind}, got {value!r}"
+
+
+def test_an_unknown_option_lists_the_known_ones():
+    assert one_line_error(config.merge_options, "kinetics k", DEFAULTS, {"cuont": 1}) == \
+        "kinetics k: unknown option 'cuont' (known: flag, count, scale, scheme, names, table, free)"
+    assert one_line_error(config.merge_options, "kinetics k", {}, {"a": 1}) == \
+        "kinetics k: unknown option 'a' (known: none)"
+    assert "options must be a table of name = value, got [1]" in one_line_error(
+        config.merge_options, "kinetics k", DEFAULTS, [1])
