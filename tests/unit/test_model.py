@@ -1,0 +1,178 @@
+"""Composing a model (primordia.model): in Python and from TOML, with every input checked before any assembly.
+
+Reading the TOML file itself is in test_config.py; parameters by their declarations in
+test_parameters.py; running a model in test_orchestrator.py.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from primordia.core.errors import ConfigError, PluginError, PrimordiaError
+from primordia.core.meshes import rectangle
+from primordia.model import Model
+
+from small_config import SMALL_CONFIG
+
+#: The small config of the CLI tests (tests/support/small_config.py), composed in Python.
+SMALL = dict(physics=["chemotaxis"], kinetics="painter2018", parameters={"m0": 0.75, "D_m": 0.03},
+             mesh={"type": "rectangle", "upper": [4.0, 4.0], "cells": [8, 8]}, dt=0.2, t_final=1.0,
+             output={"pictures": False}, name="small")
+
+
+def small(**changes) -> Model:
+    return Model(**{**SMALL, **changes})
+
+
+def one_line_error(kind, **changes) -> str:
+    with pytest.raises(kind) as caught:
+        small(**changes)
+    message = str(caught.value)
+    assert "\n" not in message, message
+    return message
+
+
+# -- what a model holds ------------------------------------------------------------------------
+def test_a_model_composed_in_python_fills_in_its_defaults():
+    model = small()
+    assert [p.name for p in model.physics_objects] == ["chemotaxis"]
+    assert model.kinetics_object.name == "painter2018"
+    assert model.parameters["m0"] == 0.75 and model.parameters["D_m"] == 0.03
+    assert model.parameters["alpha"] == 4.0  # seed Table 3.1, not given
+    assert (model.t_start, model.dt, model.t_final, model.num_steps) == (0.0, 0.2, 1.0, 5)
+    assert model.adaptive and model.dt_min == pytest.approx(0.2 / 2 ** 10)
+    assert model.output["times"] == [1.0]  # the end, unless told
+    assert model.output["snapshot_fields"] == ["m"]  # the first field, unless told
+    assert model.checkpoint == {"every_steps": 0, "every_minutes": 10.0}
+    assert (model.coupling, model.backend) == ("sequential", "fenicsx")
+    assert (model.mesh_data.num_vertices, model.mesh_data.num_cells) == (81, 128)
+
+
+def test_a_model_from_toml_is_the_model_composed_in_python(small_config):
+    from_file = Model.from_file(small_config())
+    assert from_file.resolved_config() == small().resolved_config()
+    assert from_file.base_dir == small_config().parent.resolve()
+
+
+def test_overrides_reach_the_model_from_a_file(small_config):
+    model = Model.from_file(small_config(), ["time.dt=0.1", "output.times=[0.5, 0.3]", "parameters.D_m=0.05",
+                                             'coupling.scheme="strang"', "model.backend=skfem"])
+    assert (model.dt, model.num_steps) == (0.1, 10)
+    assert model.output["times"] == [0.3, 0.5]  # sorted
+    assert model.parameters["D_m"] == 0.05
+    assert (model.coupling, model.backend) == ("strang", "skfem")
+
+
+def test_the_resolved_config_states_every_choice():
+    resolved = small(output={"times": [0.4, 1.0], "snapshot_fields": ["f", "m"], "pictures": False},
+                     coupling={"scheme": "fixed_point", "tolerance": 1e-8},
+                     solver={"chemotaxis_m": {"ksp_type": "cg"}}, description="a test").resolved_config()
+    assert resolved["model"] == {"name": "small", "physics": ["chemotaxis"], "backend": "fenicsx",
+                                 "description": "a test"}
+    assert resolved["kinetics"] == {"name": "painter2018", "priming_wave": True}
+    assert resolved["time"] == {"t_start": 0.0, "dt": 0.2, "t_final": 1.0, "adaptive": True, "dt_min": 0.2 / 1024}
+    assert resolved["output"]["times"] == [0.4, 1.0] and resolved["output"]["snapshot_fields"] == ["f", "m"]
+    assert resolved["coupling"] == {"scheme": "fixed_point", "tolerance": 1e-8}
+    assert resolved["solver"] == {"chemotaxis_m": {"ksp_type": "cg"}}
+    assert resolved["mesh"] == SMALL["mesh"]
+    assert resolved["physics"]["chemotaxis"]["flux_scheme"] == "exponential_fitting"  # a default, written out
+    assert len(resolved["parameters"]) > 20 and resolved["parameters"]["D_m"] == 0.03
+
+
+def test_an_in_memory_mesh_is_described_in_the_resolved_config():
+    model = small(mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(2, 2)))
+    assert model.resolved_config()["mesh"] == {"type": "in-memory", "vertices": 9, "cells": 8,
+                                               "description": model.mesh_data.description}
+
+
+def test_inputs_varying_in_time_are_checked_over_the_run_and_at_output_times():
+    times = small(t_start=1.0, t_final=2.0, output={"times": [1.2, 2.0]}).sample_times(count=3)
+    assert times == [1.0, 1.2, 1.5, 2.0]
+
+
+def test_differences_from_another_run_leave_out_what_a_restart_may_change():
+    model = small()
+    resolved = model.resolved_config()
+    assert model.differences(resolved) == []
+    longer = small(t_final=2.0, output={"pictures": True}).resolved_config()
+    assert model.differences(longer) == []  # t_final and outputs may change on restart
+    other = small(parameters={"m0": 0.75, "D_m": 0.05}, dt=0.1).resolved_config()
+    assert model.differences(other) == ["parameters.D_m", "time.dt"]
+    del resolved["physics"]["chemotaxis"]["seed"]  # written before the option existed: at its default
+    assert model.differences(resolved) == []
+
+
+# -- what a model refuses, in one line -----------------------------------------------------------------
+@pytest.mark.parametrize("changes, fragment", [
+    ({"physics": ["chemotaxis", "chemotaxis"]}, "model.physics lists 'chemotaxis' twice"),
+    ({"physics": []}, "model.physics must be a non-empty list of names, got []"),
+    ({"physics": ["chemotaxis", ""]}, "model.physics must be a non-empty list of names"),
+    ({"physics": ["poroelasticity"]}, "[kinetics] is given but no physics module of this model uses reaction kinetics"),
+    ({"kinetics": {"name": "painter2018", "nope": 1}}, "kinetics painter2018: unknown option 'nope'"),
+    ({"kinetics": 3}, "[kinetics] must be a table with a name"),
+    ({"kinetics": {"name": 3}}, "kinetics.name must be the name of a kinetics, got 3"),
+    ({"parameters": {"D_mm": 1.0}}, "unknown parameter 'D_mm' (did you mean D_m?)"),
+    ({"parameters": {"D_m": -1.0}}, "parameter D_m must be > 0"),
+    ({"parameters": [1.0]}, "[parameters] must be a table of name = value"),
+    ({"physics_options": {"poroelasticity": {}}}, "[physics.poroelasticity] configures a module that is not in "
+                                                  "model.physics (chemotaxis)"),
+    ({"physics_options": {"chemotaxis": {"nope": 1}}}, "physics chemotaxis: unknown option 'nope'"),
+    ({"physics_options": {"chemotaxis": 3}}, "physics.chemotaxis must be a table of options"),
+    ({"physics_options": {"chemotaxis": {"flux_scheme": "upwind"}}}, "physics.chemotaxis.flux_scheme must be one of"),
+    ({"dt": 0.0}, "time.dt must be > 0, got 0"),
+    ({"dt": True}, "time.dt must be a number, got True"),
+    ({"dt": float("nan")}, "time.dt must be a number, got nan"),
+    ({"dt": 0.3}, "time.t_final - time.t_start = 1 is not a multiple of dt = 0.3"),
+    ({"dt": 1e-9}, "more than 10,000,000: is dt in the model's (dimensionless) time units?"),
+    ({"t_final": 0.0}, "time.t_final (0) must be greater than time.t_start (0)"),
+    ({"adaptive": 1}, "time.adaptive must be true or false, got 1"),
+    ({"dt_min": 0.5}, "time.dt_min must be a number in (0, dt = 0.2], got 0.5"),
+    ({"dt_min": 0.0}, "time.dt_min must be a number in (0, dt = 0.2]"),
+    ({"output": {"times": [0.5]}}, "output time 0.5 is not a multiple of dt = 0.2 after t_start"),
+    ({"output": {"times": [1.2]}}, "output time 1.2 lies outside (t_start, t_final] = (0, 1]"),
+    ({"output": {"times": [0.0]}}, "output time 0 lies outside (t_start, t_final]"),
+    ({"output": {"times": "1"}}, "output.times must be a list of numbers, got '1'"),
+    ({"output": {"series_every": 0}}, "output.series_every must be a positive integer (steps), got 0"),
+    ({"output": {"pictures": "no"}}, "output.pictures must be true or false, got 'no'"),
+    ({"output": {"snapshot_fields": ["u"]}}, "output.snapshot_fields names 'u', which is not a field of this model "
+                                             "(m, e, f, b)"),
+    ({"output": {"displacement_scale": -1}}, "output.displacement_scale must be a number >= 0, got -1"),
+    ({"output": {"format": "vtk"}}, "unknown key output.format (known: times, snapshot_fields"),
+    ({"checkpoint": {"every_steps": -1}}, "checkpoint.every_steps must be an integer >= 0"),
+    ({"checkpoint": {"every_minutes": "x"}}, "checkpoint.every_minutes must be a number >= 0"),
+    ({"checkpoint": {"every_hours": 1}}, "unknown key checkpoint.every_hours"),
+    ({"checkpoint": 3}, "[checkpoint] must be a table (every_steps, every_minutes), got 3"),
+    ({"coupling": 3}, "[coupling] must be a table (scheme = \"...\" and its options), got 3"),
+    ({"coupling": {"scheme": 3}}, "coupling.scheme must be the name of a splitting scheme, got 3"),
+    ({"solver": [1]}, "[solver] must be a table of [solver.PREFIX] tables, got [1]"),
+    ({"backend": ""}, "model.backend must name a backend"),
+    ({"name": 3}, "model.name must be a string, got 3"),
+    ({"description": None}, "model.description must be a string, got None"),
+    ({"growth_law": "seed2d"}, "[growth_law] is given but no physics module of this model grows"),
+    ({"physics": ["poroelastic_growth"], "kinetics": None}, "physics poroelastic_growth needs a growth law"),
+    ({"mesh": None}, "a model needs a mesh (a MeshData or a [mesh] table)"),
+    ({"mesh": {"type": "disc"}}, "[mesh] type must be one of 'rectangle', 'box', 'file', got 'disc'"),
+])
+def test_a_bad_input_is_one_config_error_naming_it(changes, fragment):
+    assert fragment in one_line_error(ConfigError, **changes)
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"physics": ["chemotaxs"]}, "unknown physics 'chemotaxs' (registered: active_stress, chemotaxis"),
+    ({"kinetics": "painter2019"}, "unknown kinetics 'painter2019' (registered: painter2018"),
+])
+def test_an_unknown_plugin_name_lists_the_registered_ones(changes, fragment):
+    assert fragment in one_line_error(PluginError, **changes)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    (SMALL_CONFIG.replace("[time]\ndt = 0.2\n", "[time]\n"), "the configuration needs [time] dt and t_final"),
+    (SMALL_CONFIG.replace('[mesh]\ntype = "rectangle"\nupper = [4.0, 4.0]\ncells = [8, 8]\n', ""),
+     "the configuration needs a [mesh] table"),
+    (SMALL_CONFIG + "\n[nonsense]\nkey = 1\n", "unknown config section [nonsense]"),
+    (SMALL_CONFIG.replace("t_final = 1.0", "t_final = 1.0\nstop = 2.0"), "unknown key time.stop"),
+])
+def test_a_config_missing_or_adding_a_table_is_refused(small_config, text, fragment):
+    with pytest.raises(PrimordiaError) as caught:
+        Model.from_file(small_config(text))
+    assert fragment in str(caught.value)
