@@ -1,0 +1,260 @@
+"""The orchestrator (primordia.coupling.orchestrator): setup order, step and time bookkeeping, outputs, summary, errors.
+
+Small runs of the chemotaxis system (4 x 4 squares, dt = 0.2) on fenicsx, watched through the
+public plugin hooks: a physics module that only records what the run asks of it (listed
+*before* chemotaxis, whose field m it reads) and an output that records every moment it is
+called at.  The splitting schemes' own bookkeeping is in test_splitting.py; restarts and
+signals through the real command in tests/regression/test_restart.py.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from primordia.core.errors import ConfigError, PluginError, SolverError
+from primordia.core.meshes import rectangle
+from primordia.core.outputs import Output
+from primordia.core.plugins import hookimpl
+from primordia.coupling.orchestrator import Simulation
+from primordia.model import Model
+from primordia.physics.base import Physics
+from primordia.testing import registered
+
+DT = 0.2
+
+
+class Recorder(Physics):
+    """Owns no field, reads m, and records each call; fails a step on request (a solve that diverged)."""
+
+    name = "recorder"
+    #: read: the field it reads; fail_at: the end time of the step to fail (-1: none); fail_dt: fail it only when taken with this dt (0: any)
+    options = {"fail_at": -1.0, "fail_dt": 0.0, "read": "m"}
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.calls: list[tuple] = []
+
+    @property
+    def requires(self):
+        return (self.opts["read"],)
+
+    def fields(self):
+        return []
+
+    def setup(self, disc):
+        self.calls.append(("setup", disc.field(self.opts["read"]).ufl_shape))
+
+    def initialise(self, disc):
+        self.calls.append(("initialise",))
+
+    def subproblems(self):
+        return []
+
+    def before_step(self, t, dt):
+        self.calls.append(("before_step", t, dt))
+        if abs(t - self.opts["fail_at"]) < 1e-9 and self.opts["fail_dt"] in (0.0, dt):
+            raise SolverError(f"recorder: injected failure at t = {t:g}")
+
+
+class Recording(Output):
+    """Every moment an output is called at: (moment, step, time), and the integral of m at the start."""
+
+    name = "recording"
+
+    def __init__(self):
+        self.moments: list[tuple] = []
+
+    def start(self, run):
+        self.moments.append(("start", run.step_index, run.time))
+        self.initial_mass = run.field_statistics()["m"]["integral"]
+
+    def record(self, run):
+        self.moments.append(("record", run.step_index, run.time))
+
+    def snapshot(self, run):
+        self.moments.append(("snapshot", run.step_index, run.time))
+
+    def rejection(self, run, event):
+        self.moments.append(("rejection", run.step_index, event["time"], event["dt"]))
+
+    def finish(self, run, status):
+        self.moments.append(("finish", run.step_index, run.time, status))
+
+
+class WatchingPlugin:
+    @hookimpl
+    def primordia_physics(self):
+        return [Recorder]
+
+    @hookimpl
+    def primordia_outputs(self):
+        return [Recording]
+
+
+@pytest.fixture(scope="module")
+def watching():
+    with registered(WatchingPlugin(), name="tests.unit.test_orchestrator"):
+        yield
+
+
+def model(t_final=1.0, recorder=None, output=None, **changes) -> Model:
+    return Model(**{"physics": ["recorder", "chemotaxis"], "parameters": {"m0": 0.75},
+                    "mesh": rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4)), "dt": DT, "t_final": t_final,
+                    "output": {"pictures": False, **(output or {})}, "physics_options": {"recorder": recorder or {}},
+                    **changes})
+
+
+def recording(sim) -> Recording:
+    (output,) = [o for o in sim.outputs if o.name == "recording"]
+    return output
+
+
+@pytest.fixture(scope="module")
+def completed(watching, tmp_path_factory):
+    """Five steps to t = 1, snapshots at 0.2, 0.6 and 1.0, a series point every second step."""
+    out = tmp_path_factory.mktemp("completed")
+    sim = Simulation(model(output={"times": [0.6, 0.2, 1.0], "series_every": 2}), backend="fenicsx",
+                     out_dir=out, existing="refuse")
+    sim.setup()
+    assert (sim.status, sim.step_index, sim.time) == ("running", 0, 0.0)
+    return sim.run()
+
+
+# -- setup and the time loop --------------------------------------------------------------------
+def test_modules_that_own_fields_are_set_up_first_then_every_module_initialised_then_stepped(completed):
+    calls = completed.model.physics_objects[0].calls
+    assert calls[0] == ("setup", ())  # listed first, set up after chemotaxis made m (a scalar)
+    assert calls[1] == ("initialise",)
+    steps = calls[2:]
+    assert [name for name, *_ in steps] == ["before_step"] * 5
+    assert [t for _, t, _ in steps] == pytest.approx([0.2, 0.4, 0.6, 0.8, 1.0], abs=1e-12)
+    assert all(dt == DT for _, _, dt in steps)
+
+
+def test_steps_and_time_are_counted_on_the_grid_of_dt(completed):
+    assert (completed.status, completed.step_index) == ("completed", 5)
+    assert completed.time == 5 * DT  # computed from the step count: no drift of a sum of dt
+    assert completed.step_sizes() == {"dt": DT, "rejections": 0.0}
+    counts = completed.iteration_counts()
+    assert {"chemotaxis_m_linear_iterations", "chemotaxis_f_linear_iterations"} <= set(counts)
+    assert all(len(its) == 5 for its in completed.iterations.values())  # one record per step and subproblem
+
+
+def test_outputs_are_called_at_start_at_series_steps_at_snapshot_times_and_at_the_end(completed):
+    moments = recording(completed).moments
+    assert moments[0] == ("start", 0, 0.0)
+    assert moments[-1] == ("finish", 5, 5 * DT, "completed")
+    assert [(step, t) for moment, step, t in moments[1:-1] if moment == "snapshot"] == \
+        [(1, 1 * DT), (3, 3 * DT), (5, 5 * DT)]  # output.times, sorted, hit exactly on the grid of dt
+    # every series_every = 2 steps and at every snapshot
+    assert [step for moment, step, _ in moments[1:-1] if moment == "record"] == [1, 2, 3, 4, 5]
+    assert not [m for m in moments if m[0] == "rejection"]
+
+
+def test_the_summary_states_the_run(completed):
+    summary = json.loads((completed.out_dir / "summary.json").read_text())
+    assert summary == completed.summary("completed") | {"wall_time_s": summary["wall_time_s"],
+                                                         "ms_per_step": summary["ms_per_step"]}
+    assert (summary["status"], summary["backend"], summary["mpi_ranks"]) == ("completed", "fenicsx", 1)
+    assert (summary["steps"], summary["time"], summary["dt"]) == (5, 5 * DT, DT)
+    assert summary["cells"] == 32
+    assert summary["dofs"] == {"m": 25, "e": 25, "f": 25, "b": 25} and summary["dofs_total"] == 100
+    assert (summary["rejected_steps"], summary["restarts"], summary["checkpoint_step"]) == (0, 0, 5)
+    assert summary["splitting_scheme"] == "sequential"
+    assert set(summary["mean_linear_iterations"]) == {"chemotaxis.m", "chemotaxis.e", "chemotaxis.f", "chemotaxis.b"}
+    assert summary["wall_time_s"] > 0 and summary["ms_per_step"] == pytest.approx(1e3 * summary["wall_time_s"] / 5)
+    final = summary["final"]
+    assert set(final) == {"m", "e", "f", "b"}
+    # zero-flux boundaries and no reaction in the cell equation: the cells are conserved (seed (2.3a), (2.7a))
+    assert final["m"]["integral"] == pytest.approx(recording(completed).initial_mass, rel=1e-9)
+    assert final["m"]["integral"] == pytest.approx(0.75 * 16, rel=1e-2)
+    values = completed.vertex_values()
+    for name, stats in final.items():
+        assert (stats["min"], stats["max"]) == (float(values[name].min()), float(values[name].max()))
+
+
+def test_a_completed_run_leaves_a_checkpoint_and_its_outputs(completed):
+    written = {path.name for path in completed.out_dir.iterdir()}
+    assert {"summary.json", "config.toml", "checkpoint.npz"} <= written
+
+
+# -- error paths ---------------------------------------------------------------------------------
+def one_line(caught) -> str:
+    message = str(caught.value)
+    assert "\n" not in message, message
+    return message
+
+
+def test_a_directory_holding_a_run_is_refused_unless_told(watching, completed):
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(), out_dir=completed.out_dir, existing="refuse").setup()
+    assert "already holds" in one_line(caught)
+    assert "use --overwrite to replace it, or --restart" in str(caught.value)
+
+
+def test_a_restart_needs_a_checkpoint(watching, tmp_path):
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(), out_dir=tmp_path / "empty", existing="restart").setup()
+    assert "holds no checkpoint to restart from" in one_line(caught)
+
+
+def test_an_output_directory_that_is_a_file(watching, tmp_path):
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(), out_dir=tmp_path / "file").setup()
+    assert one_line(caught) == f"the output directory {tmp_path / 'file'} is a file, not a directory"
+
+
+@pytest.mark.parametrize("changes, fragment", [
+    ({"backend": "fenics"}, "fenics"),
+    ({"coupling": "leapfrog"}, "leapfrog"),
+])
+def test_an_unknown_backend_or_scheme_is_refused_before_any_assembly(watching, tmp_path, changes, fragment):
+    with pytest.raises(PluginError) as caught:
+        model(**changes).run(out=tmp_path)
+    assert fragment in one_line(caught)
+
+
+def test_a_field_no_module_provides_is_named_at_setup(watching, tmp_path):
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(recorder={"read": "u"}), out_dir=tmp_path).setup()
+    assert one_line(caught) == ("field 'u' is required but no physics module of this model provides it "
+                                "(provided: m, e, f, b)")
+
+
+def test_a_restart_of_another_model_names_what_differs(watching, completed, tmp_path):
+    shutil.copytree(completed.out_dir, tmp_path / "run")
+    other = model(parameters={"m0": 0.75, "D_m": 0.05})
+    with pytest.raises(ConfigError) as caught:
+        Simulation(other, out_dir=tmp_path / "run", existing="restart").setup()
+    assert "parameters.D_m differs from the checkpointed run's" in one_line(caught)
+
+
+def test_a_failed_step_is_retried_in_halves_and_the_grid_of_dt_is_kept(watching, tmp_path):
+    sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4, "fail_dt": DT}), out_dir=tmp_path).setup().run()
+    assert (sim.status, sim.step_index, sim.time) == ("completed", 3, 3 * DT)
+    assert len(sim.rejections) == 1
+    (rejection,) = sim.rejections
+    assert (rejection["time"], rejection["dt"]) == (pytest.approx(0.2), DT)
+    assert "injected failure at t = 0.4" in rejection["reason"]
+    steps = [(t, dt) for name, *rest in sim.model.physics_objects[0].calls[2:] if name == "before_step"
+             for t, dt in [rest]]
+    # step 2 failed whole, then went in two halves; step 3 grew back to dt (a step that follows two halves)
+    assert [dt for _, dt in steps] == pytest.approx([0.2, 0.2, 0.1, 0.1, 0.2])
+    assert [t for t, _ in steps] == pytest.approx([0.2, 0.4, 0.3, 0.4, 0.6])
+    assert ("rejection", 1, pytest.approx(0.2), DT) in recording(sim).moments
+    assert json.loads((tmp_path / "summary.json").read_text())["rejected_steps"] == 1
+
+
+def test_without_adaptive_steps_a_failed_step_stops_the_run_naming_it(watching, tmp_path):
+    sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, adaptive=False), out_dir=tmp_path).setup()
+    with pytest.raises(SolverError) as caught:
+        sim.run()
+    assert one_line(caught) == "step 2 (t = 0.2 -> 0.4): recorder: injected failure at t = 0.4"
+    assert (sim.step_index, sim.time) == (1, DT)  # the failed step was undone
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"].startswith("stopped at t = 0.2: step 2 (t = 0.2 -> 0.4)")
+    assert summary["checkpoint_step"] == 1  # the whole steps are kept for a restart
