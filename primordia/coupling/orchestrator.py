@@ -38,8 +38,8 @@ from primordia.core.errors import ConfigError, InterruptedRun, PluginError, Prim
 from primordia.core.plugins import choose, get_plugin_manager, registry
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
-from primordia.coupling.discretisation import Discretisation
 from primordia.coupling.solvers import SubproblemSolver, accumulate
+from primordia.physics.discretisation import Discretisation
 
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
 NEGATIVE_TOLERANCE = 1e-8
@@ -203,6 +203,7 @@ class Simulation:
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
         self.scheme.build(self)
+        self.disc.check_contributions()
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
         self.diagnostics = [d for physics in self.model.physics_objects for d in physics.diagnostics()]
@@ -641,6 +642,11 @@ class Simulation:
         return self._wall_before + clock.perf_counter() - self.wall_start
 
     # -- what outputs read ------------------------------------------------------------------
+    @property
+    def displacement_field(self) -> str | None:
+        """The field the physics declares the tissue's displacement (pictures deform by it), or None."""
+        return self.disc.displacement_field()
+
     def vertex_values(self) -> dict:
         """All fields at the MeshData vertices (rank 0; None elsewhere), cached per state."""
         if self._vertex_cache is None or self._vertex_cache[0] != self._state_version:
@@ -710,8 +716,8 @@ class Simulation:
             "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items() if its},
             "mean_newton_iterations": {name: float(np.mean([its for its, _ in record]))
                                        for name, record in self.newton.items() if record},
-            "mean_fixed_point_iterations": (float(np.mean(self.coupling_iterations["fixed_point"]))
-                                            if self.coupling_iterations.get("fixed_point") else None),
+            "mean_coupling_iterations": {scheme: float(np.mean(its))
+                                         for scheme, its in self.coupling_iterations.items() if its},
             "splitting_scheme": self.scheme.name,
         }
 

@@ -40,7 +40,6 @@ from petsc4py import PETSc
 from primordia.core.backend import sub_elements
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
-from primordia.coupling.edge_flux import apply_operator
 from primordia.coupling.solver_options import (
     SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
 
@@ -296,7 +295,7 @@ class _Solver:
         b = self.backend.assemble_residual(sub.residual, sub.jacobian, sub.bcs, sub.unknown,
                                            b=b if b is not None else self._residual)
         if sub.operator is not None:
-            apply_operator(sub.operator, x, b)
+            sub.operator.apply(x, b)
         return b
 
 
@@ -333,7 +332,7 @@ class LinearSolver(_Solver):
         if self._affine.available:
             b = self._residual = self._affine.residual(x, self._residual)
             if sub.operator is not None:
-                apply_operator(sub.operator, x, b)
+                sub.operator.apply(x, b)
         else:
             b = self._residual = self._assemble_residual(x)
         if not np.isfinite(b.norm()):

@@ -29,6 +29,7 @@ import ufl
 from primordia.core.config import merge_options
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
+from primordia.core.validation import number
 from primordia.coupling.solver_options import check_tables
 from primordia.coupling.solvers import accumulate
 from primordia.physics.base import Subproblem
@@ -42,9 +43,7 @@ class SplittingScheme(ABC):
     def __init__(self, physics: list, **options):
         self.physics = physics
         self.opts = merge_options(f"coupling scheme '{self.name}'", self.options, options)
-        inner = self.opts.get("inner_steps", 1)
-        if not isinstance(inner, int) or isinstance(inner, bool) or inner < 1:
-            raise ConfigError(f"coupling.inner_steps must be a positive integer, got {inner!r}")
+        number(self.opts.get("inner_steps", 1), "coupling.inner_steps", at_least=1, integer=True)
 
     def field_groups(self, physics: list) -> dict[str, list]:
         """Which fields are solved together: by default, as each module groups its own."""
@@ -112,11 +111,8 @@ class FixedPoint(SplittingScheme):
 
     def __init__(self, physics, **options):
         super().__init__(physics, **options)
-        tolerance, iterations = self.opts["tolerance"], self.opts["max_iterations"]
-        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or tolerance <= 0:
-            raise ConfigError(f"coupling.tolerance must be > 0, got {tolerance!r}")
-        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-            raise ConfigError(f"coupling.max_iterations must be a positive integer, got {iterations!r}")
+        number(self.opts["tolerance"], "coupling.tolerance", above=0)
+        number(self.opts["max_iterations"], "coupling.max_iterations", at_least=1, integer=True)
 
     def advance(self, sim, t0, dt):
         groups = sim.disc.groups()
@@ -165,9 +161,10 @@ class Monolithic(SplittingScheme):
 
     def build(self, sim):
         subproblems = [sub for module in self.physics for sub in module.subproblems()]
-        if any(sub.operator is not None for sub in subproblems):
-            raise ConfigError("the monolithic scheme cannot include algebraic operators "
-                              "(use physics.chemotaxis.flux_scheme = \"galerkin\")")
+        for sub in subproblems:
+            if sub.operator is not None:
+                raise ConfigError(f"the monolithic scheme cannot include {sub.name}: its algebraic operator "
+                                  f"acts on its own field alone (choose a form without one in its module's options)")
         unknown = subproblems[0].unknown
         residual = sum((sub.residual for sub in subproblems[1:]), subproblems[0].residual)
         stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]

@@ -1,4 +1,4 @@
-r"""Isotropic active stress driven by the cell density (seed eq. (2.4)).
+r"""Isotropic active stress driven by the cell density (seed eq. (2.5)).
 
     sigma_act = (lambda + 2 mu / 3) tau m / (1 + zeta m^2) I
 
@@ -14,24 +14,21 @@ from __future__ import annotations
 import ufl
 
 from primordia.core.errors import ConfigError
-from primordia.physics.base import Physics
+from primordia.physics.base import Coupling
 from primordia.physics.seed_parameters import ACTIVE_STRESS
 
 
 def active_stress(m, mu, lmbda, tau, zeta, dimension: int):
-    """Seed eq. (2.4): (lambda + 2 mu/3) tau m / (1 + zeta m^2) I."""
+    """Seed eq. (2.5): (lambda + 2 mu/3) tau m / (1 + zeta m^2) I."""
     return (lmbda + 2.0 * mu / 3.0) * tau * m / (1.0 + zeta * m**2) * ufl.Identity(dimension)
 
 
-class ActiveStress(Physics):
-    """Adds sigma_act(m) to the total stress of the momentum balance."""
+class ActiveStress(Coupling):
+    """Adds sigma_act(m) to the total stress of the momentum balance (seed eqs. (2.1b), (2.5))."""
 
     name = "active_stress"
     parameters = ACTIVE_STRESS
     requires = ("m", "u", "lame_constants")
-
-    def fields(self):
-        return []
 
     def check_composition(self, modules):
         finite = [module.name for module in modules if module.finite_strain]
@@ -44,10 +41,4 @@ class ActiveStress(Physics):
     def setup(self, disc):
         mu, lmbda = disc.field("lame_constants")  # provided by the poroelasticity module
         sigma = active_stress(disc.field("m"), mu, lmbda, self.params["tau"], self.params["zeta"], disc.gdim)
-        disc.contribute("u", lambda w: ufl.inner(sigma, ufl.grad(w)) * disc.dx)
-
-    def initialise(self, disc):
-        pass
-
-    def subproblems(self):
-        return []
+        disc.contribute("u", lambda w: ufl.inner(sigma, ufl.grad(w)) * disc.dx, by=self.name)  # (2.1b), (2.1c)

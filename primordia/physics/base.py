@@ -25,7 +25,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import ufl
@@ -34,6 +34,9 @@ from ufl.algorithms import expand_derivatives
 from primordia.core.config import merge_options
 from primordia.core.parameters import Parameter
 
+if TYPE_CHECKING:
+    from primordia.physics.discretisation import Discretisation
+
 
 @dataclass(frozen=True)
 class FieldSpec:
@@ -41,11 +44,13 @@ class FieldSpec:
 
     name: str
     degree: int = 1
-    shape: tuple[int, ...] = ()  # () scalar, ("gdim",) vector via vector=True
+    #: A vector field (gdim components), else a scalar.
     vector: bool = False
     description: str = ""
     #: Fields with the same group are solved together (one mixed function); None: alone.
     group: str | None = None
+    #: The tissue's displacement: outputs draw the fields on the configuration it deforms to.
+    displacement: bool = False
 
 
 @dataclass
@@ -115,7 +120,8 @@ class AlgebraicOperator(ABC):
     discrete property (e.g. the exponentially fitted chemotactic flux that
     keeps the cell density non-negative).  ``update`` is called once per time
     step before the solve; the operator's matrix is added to the Jacobian and
-    its action to the residual.
+    its action (:meth:`apply`) to the residual, so the solver layer needs to
+    know nothing of the operator but this interface.
     """
 
     @abstractmethod
@@ -125,6 +131,10 @@ class AlgebraicOperator(ABC):
     @abstractmethod
     def matrix(self):
         """The PETSc Mat of the operator (pattern of the P1 stiffness matrix)."""
+
+    def apply(self, x, residual) -> None:
+        """residual += A x (PETSc vectors of the unknown and of the residual)."""
+        self.matrix().multAdd(x, residual, residual)
 
 
 class Physics(ABC):
@@ -163,12 +173,12 @@ class Physics(ABC):
         """The fields this module owns."""
 
     @abstractmethod
-    def setup(self, disc) -> None:
-        """Build forms on ``disc`` (a :class:`~primordia.coupling.discretisation.Discretisation`)."""
+    def setup(self, disc: Discretisation) -> None:
+        """Build forms on ``disc`` (:class:`~primordia.physics.discretisation.Discretisation`)."""
 
     @abstractmethod
-    def initialise(self, disc) -> None:
-        """Set the initial values of the owned fields (seed eq. (2.5) etc.)."""
+    def initialise(self, disc: Discretisation) -> None:
+        """Set the initial values of the owned fields (seed eq. (2.6) etc.)."""
 
     @abstractmethod
     def subproblems(self) -> list[Subproblem]:
@@ -222,7 +232,25 @@ class Physics(ABC):
         """Take back what :meth:`state` returned (on restart, after ``setup``, or when a step is undone)."""
 
 
-def jacobian_is_constant(jacobian: ufl.Form, disc) -> bool:
+
+class Coupling(Physics):
+    """A module that only couples: it owns no field and solves nothing, it adds terms to others' laws.
+
+    Subclasses implement :meth:`setup`, where they declare their terms with
+    ``disc.contribute(field, term, by=self.name)`` (e.g. active stress in the momentum
+    balance, the FGF sink in the FGF balance law).
+    """
+
+    def fields(self) -> list[FieldSpec]:
+        return []
+
+    def initialise(self, disc: Discretisation) -> None:
+        """Nothing to set: a coupling owns no field."""
+
+    def subproblems(self) -> list[Subproblem]:
+        return []
+
+def jacobian_is_constant(jacobian: ufl.Form, disc: Discretisation) -> bool:
     """True when a Jacobian reads no field and not the time: assembled and factorised once."""
     expanded = expand_derivatives(jacobian)  # before expansion, derivative() still lists the unknown
     return not expanded.coefficients() and disc.t not in expanded.constants()

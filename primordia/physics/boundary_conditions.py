@@ -103,31 +103,24 @@ class Condition:
 class _Dirichlet(Condition):
     """Prescribes (part of) a field; value formulas are evaluated at the DOF points."""
 
-    def _space_and_path(self, disc, extra: tuple[int, ...] = ()):
-        function, index = disc.function_of(self.field)
-        path = (() if index is None else (index,)) + extra
-        return function.ufl_function_space(), (path or None)
-
     def _values(self, t: float):
         return lambda x: self.formula.numpy(x, t)
 
-    def _target(self, disc):
-        """(space, component path) of what the condition fixes."""
-        return self._space_and_path(disc)
+    def _component(self, disc) -> int | None:
+        """The component of the field the condition fixes (None: all of it)."""
+        return None
 
     def dirichlet(self, disc):
-        space, path = self._target(disc)
-        self._bcs = [disc.backend.dirichlet_bc(space, self.boundary, self._values(disc.time), component=path)]
+        self._bcs = [disc.dirichlet_bc(self.field, self.boundary, self._values(disc.time), self._component(disc))]
         return self._bcs
 
     def homogeneous(self, disc):
-        space, path = self._target(disc)
-        return [disc.backend.dirichlet_bc(space, self.boundary, 0.0, component=path)]
+        return [disc.dirichlet_bc(self.field, self.boundary, 0.0, self._component(disc))]
 
     def update(self, disc, t):
         if self.formula.depends_on_time():
             for bc in self._bcs:
-                disc.backend.update_dirichlet_bc(bc, self._values(t))
+                disc.update_dirichlet_bc(bc, self._values(t))
 
 
 class Clamped(_Dirichlet):
@@ -147,8 +140,8 @@ class NormalDisplacement(_Dirichlet):
 
     kind, field, default_value, holds_normal_displacement = "normal_displacement", "u", "0", True
 
-    def _target(self, disc):
-        return self._space_and_path(disc, (_normal_axis(disc.mesh_data, self.boundary),))
+    def _component(self, disc):
+        return _normal_axis(disc.mesh_data, self.boundary)
 
 
 class Traction(Condition):

@@ -4,7 +4,7 @@ The species, their diffusivities and which one climbs which gradient are
 declared by the kinetics plugin (:class:`~primordia.physics.kinetics.base.Species`);
 this module states their balance laws once, for whatever species it is given.
 For the built-in ``painter2018`` (the seed's m, e, f, b) in the dimensionless
-form of seed section 3 (D_b = delta_B = kappa_F = kappa_B = gamma = 1 by
+form of seed section 2 (D_b = delta_B = kappa_F = kappa_B = gamma = 1 by
 default) they are
 
     dm/dt = div( D_m grad m - chi(m) m grad f ),  chi(m) = alpha exp(-gamma m)   (2.3a)
@@ -61,9 +61,11 @@ from __future__ import annotations
 import numpy as np
 import ufl
 
-from primordia.core import ops as ops_
 from primordia.core.errors import ConfigError
+from primordia.core.ops import NUMPY, UFL
+from primordia.core.validation import number, numbers
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
+from primordia.physics.edge_flux import ExponentiallyFittedFlux
 from primordia.physics.kinetics.base import Species
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
@@ -129,32 +131,18 @@ class Chemotaxis(Physics):
                "solve": "split", "preconditioner": "block_jacobi"}
 
     def validate_options(self):
-        if self.opts["flux_scheme"] not in FLUX_SCHEMES:
-            raise ConfigError(f"physics.chemotaxis.flux_scheme must be one of {', '.join(FLUX_SCHEMES)}, "
-                              f"got {self.opts['flux_scheme']!r}")
-        amplitude = self.opts["perturbation"]
-        if not isinstance(amplitude, (int, float)) or not 0 <= amplitude < 1:
-            raise ConfigError(f"physics.chemotaxis.perturbation must be a number in [0, 1), got {amplitude!r}")
-        if not isinstance(self.opts["seed"], int) or isinstance(self.opts["seed"], bool):
-            raise ConfigError(f"physics.chemotaxis.seed must be an integer, got {self.opts['seed']!r}")
-        if self.opts["accumulation"] not in ACCUMULATIONS:
-            raise ConfigError(f"physics.chemotaxis.accumulation must be one of {', '.join(ACCUMULATIONS)}, "
-                              f"got {self.opts['accumulation']!r}")
-        if self.opts["perturbation_shape"] not in PERTURBATION_SHAPES:
-            raise ConfigError(f"physics.chemotaxis.perturbation_shape must be one of "
-                              f"{', '.join(PERTURBATION_SHAPES)}, got {self.opts['perturbation_shape']!r}")
-        for key, allowed in (("solve", SOLVES), ("preconditioner", COUPLED_PRECONDITIONERS)):
+        where = f"physics.{self.name}"
+        for key, allowed in (("flux_scheme", FLUX_SCHEMES), ("accumulation", ACCUMULATIONS),
+                             ("perturbation_shape", PERTURBATION_SHAPES), ("solve", SOLVES),
+                             ("preconditioner", COUPLED_PRECONDITIONERS)):
             if self.opts[key] not in allowed:
-                raise ConfigError(f"physics.chemotaxis.{key} must be one of {', '.join(allowed)}, "
-                                  f"got {self.opts[key]!r}")
+                raise ConfigError(f"{where}.{key} must be one of {', '.join(allowed)}, got {self.opts[key]!r}")
+        number(self.opts["perturbation"], f"{where}.perturbation", at_least=0, below=1)
+        number(self.opts["seed"], f"{where}.seed", integer=True)
+        numbers(self.opts["wavenumber"], f"{where}.wavenumber", length=(1, 2, 3))
         if self.opts["solve"] == "coupled" and self.opts["flux_scheme"] == "exponential_fitting":
-            raise ConfigError("physics.chemotaxis.solve = \"coupled\" needs flux_scheme = \"galerkin\" "
+            raise ConfigError(f"{where}.solve = \"coupled\" needs flux_scheme = \"galerkin\" "
                               "(the exponentially fitted flux acts on the species as separate fields)")
-        wavenumber = self.opts["wavenumber"]
-        if (not isinstance(wavenumber, list) or not 1 <= len(wavenumber) <= 3
-                or not all(isinstance(k, (int, float)) and not isinstance(k, bool) for k in wavenumber)):
-            raise ConfigError(f"physics.chemotaxis.wavenumber must be a list of numbers (k_x, k_y[, k_z]), "
-                              f"got {wavenumber!r}")
 
     @property
     def species(self) -> tuple[Species, ...]:
@@ -183,12 +171,12 @@ class Chemotaxis(Physics):
         for species in self.species:
             if species.perturbed:
                 points = disc.mesh_data.points
-                state = self.kinetics.initial_state(t0, ops_.NUMPY.at(tuple(points.T)))[species.name]
+                state = self.kinetics.initial_state(t0, NUMPY.at(tuple(points.T)))[species.name]
                 disc.set_vertex_values(species.name, np.broadcast_to(state, len(points))
                                        * (1.0 + self.opts["perturbation"] * self._perturbation(points)))
             else:
                 disc.interpolate(species.name, lambda x, name=species.name: np.broadcast_to(
-                    self.kinetics.initial_state(t0, ops_.NUMPY.at(x))[name], x.shape[1:]).copy())
+                    self.kinetics.initial_state(t0, NUMPY.at(x))[name], x.shape[1:]).copy())
 
     def _perturbation(self, points: np.ndarray) -> np.ndarray:
         """Relative perturbation of the perturbed species at the vertices: U(-1, 1) noise, or prod_i cos(k_i x_i)."""
@@ -201,7 +189,7 @@ class Chemotaxis(Physics):
 
     def _reactions(self):
         state = {s.name: self.disc.field(s.name) for s in self.species}
-        return self.kinetics.split_rates(state, self.disc.t, ops_.UFL.at(self.disc.x))
+        return self.kinetics.split_rates(state, self.disc.t, UFL.at(self.disc.x))
 
     def species_residual(self, species: Species, reactions) -> ufl.Form:
         """The residual of one species: the terms of its balance law (+ contributed couplings).
@@ -217,13 +205,14 @@ class Chemotaxis(Physics):
                                 motion.volume_ratio_previous if conservative else None)  # (2.3a-d), (4.17a-d)
         production, loss_rate = reactions[species.name]
         if production != 0 or loss_rate != 0:
-            residual += reaction(production, loss_rate, c, test, disc.dx_lumped, motion.volume_ratio)
+            residual += reaction(production, loss_rate, c, test, disc.dx_lumped, motion.volume_ratio)  # (2.3b-d)
         if species.diffusivity is not None and not self._fitted(species):
-            residual += diffusive_flux(self.params[species.diffusivity], c, test, dx, motion.metric)
+            residual += diffusive_flux(self.params[species.diffusivity], c, test, dx, motion.metric)  # (2.3a,c,d)
         if species.attractant is not None and not self._fitted(species):
-            chi = self.sensitivity(species, disc.previous(species.name), ops_.UFL)
-            residual += chemotactic_flux(chi, c, disc.previous(species.attractant), test, dx, motion.metric)
-        for term in disc.contributions(species.name, test):
+            chi = self.sensitivity(species, disc.previous(species.name), UFL)
+            residual += chemotactic_flux(chi, c, disc.previous(species.attractant), test, dx,
+                                         motion.metric)  # (2.3a)
+        for term in disc.contributions(species.name, test):  # couplings, e.g. advection and the FGF sink
             residual += term
         return residual
 
@@ -255,8 +244,6 @@ class Chemotaxis(Physics):
         return species.attractant is not None and self.opts["flux_scheme"] == "exponential_fitting"
 
     def subproblems(self):
-        from primordia.coupling.edge_flux import ExponentiallyFittedFlux
-
         reactions = self._reactions()
         if self.opts["solve"] == "coupled":
             return [self._coupled(reactions)]
@@ -268,17 +255,17 @@ class Chemotaxis(Physics):
             operator = None
             if self._fitted(species):
                 motion = self.disc.kinematics
-                operator = ExponentiallyFittedFlux(
+                operator = ExponentiallyFittedFlux(  # (2.3a): D_m grad m - chi m grad f, fitted
                     self.disc, species.name, species.attractant,
                     diffusivity=self.params[species.diffusivity],
-                    sensitivity=lambda c, species=species: self.sensitivity(species, c, ops_.NUMPY),
+                    sensitivity=lambda c, species=species: self.sensitivity(species, c, NUMPY),
                     metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
                 self._fitted_operators = {**getattr(self, "_fitted_operators", {}), species.name: operator}
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
                 linear=True, constant_jacobian=jacobian_is_constant(jacobian, self.disc),
-                operator=operator, petsc_options=_solver_defaults(species, self.disc.backend.comm.size > 1),
+                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks > 1),
             ))
         return problems
 

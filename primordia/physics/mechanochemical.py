@@ -37,7 +37,7 @@ from __future__ import annotations
 import ufl
 
 from primordia.core.errors import ConfigError
-from primordia.physics.base import Physics
+from primordia.physics.base import Coupling
 from primordia.physics.seed_parameters import MECHANOCHEMICAL
 
 
@@ -53,7 +53,7 @@ def fgf_sink(xi_f, volume_change, volume_ratio, test, dx):
     return xi_f * volume_ratio * volume_change * test * dx
 
 
-class MechanoChemical(Physics):
+class MechanoChemical(Coupling):
     """Solid advection of the advected species (m, f, b) and the volume sink xi_f div u (of f)."""
 
     name = "mechanochemical"
@@ -78,34 +78,25 @@ class MechanoChemical(Physics):
             raise ConfigError("mechanochemical couples the species of a kinetics to the solid: "
                               "add chemotaxis to model.physics")
 
-    def fields(self):
-        return []
-
     def setup(self, disc):
         # terms are built when the balance laws are (after every module's setup): the kinematics
         # of the mechanics module are known by then
         for species in self.advected:
-            disc.contribute(species, lambda test, species=species: self._advection(disc, species, test))
+            disc.contribute(species, lambda test, species=species: self._advection(disc, species, test), by=self.name)
         for species in self.sinks:
-            disc.contribute(species, lambda test: self._sink(disc, test))
+            disc.contribute(species, lambda test: self._sink(disc, test), by=self.name)
 
     @staticmethod
     def _advection(disc, species: str, test):
         velocity = disc.kinematics.velocity
         if velocity is None:  # material coordinates: advection is in the material derivative
             return None
-        return solid_advection(velocity, disc.previous(species), test, disc.dx)
+        return solid_advection(velocity, disc.previous(species), test, disc.dx)  # (2.3a), (2.3c), (2.3d)
 
     def _sink(self, disc, test):
         motion = disc.kinematics
         if motion.volume_change is None:
             raise ConfigError("mechanochemical: the mechanics module provides no volume-change measure "
                               "for the FGF sink")
-        return fgf_sink(self.params["xi_f"], motion.volume_change, motion.volume_ratio, test,
+        return fgf_sink(self.params["xi_f"], motion.volume_change, motion.volume_ratio, test,  # (2.3c), (4.17c)
                         disc.dx_degree(motion.quadrature_degree))
-
-    def initialise(self, disc):
-        pass
-
-    def subproblems(self):
-        return []

@@ -63,6 +63,7 @@ import ufl
 
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import Parameter
+from primordia.core.validation import flag, number, numbers
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem
 from primordia.physics.boundary_conditions import conditions_from_config, encloses
 from primordia.physics.growth_laws import fluid_source
@@ -158,29 +159,21 @@ class PoroelasticGrowth(Physics):
         self.requires = tuple(growth_law.requires) if growth_law is not None else ()
 
     def validate_options(self):
-        mu = self.opts["shear_modulus"]
-        if isinstance(mu, bool) or not isinstance(mu, (int, float)) or not mu > 0:
-            raise ConfigError(f"physics.poroelastic_growth.shear_modulus must be a positive number, got {mu!r}")
-        for key, low in (("quadrature_degree", 1), ("initial_load_steps", 1)):
-            value = self.opts[key]
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ConfigError(f"physics.poroelastic_growth.{key} must be an integer >= {low}, got {value!r}")
-        if not isinstance(self.opts["initial_equilibrium"], bool):
-            raise ConfigError(f"physics.poroelastic_growth.initial_equilibrium must be true or false, "
-                              f"got {self.opts['initial_equilibrium']!r}")
+        where = f"physics.{self.name}"
+        number(self.opts["shear_modulus"], f"{where}.shear_modulus", above=0)
+        for key in ("quadrature_degree", "initial_load_steps"):
+            number(self.opts[key], f"{where}.{key}", at_least=1, integer=True)
+        flag(self.opts["initial_equilibrium"], f"{where}.initial_equilibrium")
         if self.opts["preconditioner"] not in PRECONDITIONERS:
-            raise ConfigError(f"physics.poroelastic_growth.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
+            raise ConfigError(f"{where}.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
                               f"got {self.opts['preconditioner']!r}")
-        beta = self.opts["stabilisation"]
-        if (not isinstance(beta, list) or len(beta) != 2
-                or not all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in beta)):
-            raise ConfigError(f"physics.poroelastic_growth.stabilisation must be [beta_s, beta_f] (seed section 5.2: "
-                              f"[1.0, 0.1]), got {beta!r}")
+        numbers(self.opts["stabilisation"], f"{where}.stabilisation", length=2)  # [beta_s, beta_f]
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
     def fields(self):
-        return [FieldSpec("u", degree=2, vector=True, group=GROUP, description="displacement (reference configuration)"),
+        return [FieldSpec("u", degree=2, vector=True, group=GROUP, displacement=True,
+                          description="displacement (reference configuration)"),
                 FieldSpec("psi", degree=1, group=GROUP, description="solid pressure (multiplier of J_e = 1)"),
                 FieldSpec("p", degree=1, group=GROUP, description="fluid pressure")]
 
@@ -196,7 +189,7 @@ class PoroelasticGrowth(Physics):
         self.F, self.F_previous = deformation_gradient(u), deformation_gradient(u_previous)
         self.C, self.C_previous = right_cauchy_green(self.F), right_cauchy_green(self.F_previous)
         self.J = ufl.det(self.F)
-        self.ramp = disc.backend.constant(disc.mesh, 1.0)  # growth continuation of the initial solve
+        self.ramp = disc.constant(1.0)  # growth continuation of the initial solve
         disc.provide_kinematics(Kinematics(
             volume_ratio=self.J, volume_ratio_previous=ufl.det(self.F_previous),
             metric=self.J * ufl.inv(self.C),                         # J C^-1 (4.17a)-(4.17d)

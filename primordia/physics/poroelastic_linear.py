@@ -31,6 +31,7 @@ import ufl
 
 from primordia.core.errors import ConfigError
 from primordia.core.expressions import Formula
+from primordia.core.validation import number
 from primordia.physics.base import FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.boundary_conditions import conditions_from_config
 from primordia.physics.kinematics import Kinematics
@@ -79,7 +80,7 @@ def darcy_flux(conductivity, eta, p, q, dx):
 
 
 class LinearPoroelasticity(Physics):
-    """Seed eqs. (2.1a)-(2.1c) with (2.2) and boundary conditions (2.6b)-(2.6c)."""
+    """Seed eqs. (2.1a)-(2.1c) with (2.2) and boundary conditions (2.7b)-(2.7c)."""
 
     name = "poroelasticity"
     parameters = POROELASTICITY
@@ -91,9 +92,8 @@ class LinearPoroelasticity(Physics):
             raise ConfigError("physics.poroelasticity.displacement_degree must be 1 (P1-P1, the seed's) "
                               "or 2 (Taylor-Hood P2-P1)")
         for key in ("shear_modulus", "lame_lambda"):
-            value = self.opts[key]
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0):
-                raise ConfigError(f"physics.poroelasticity.{key} must be a positive number, got {value!r}")
+            if self.opts[key] is not None:
+                number(self.opts[key], f"physics.poroelasticity.{key}", above=0)
         if self.opts["preconditioner"] not in PRECONDITIONERS:
             raise ConfigError(f"physics.poroelasticity.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
                               f"got {self.opts['preconditioner']!r}")
@@ -108,7 +108,7 @@ class LinearPoroelasticity(Physics):
         return mu, lmbda
 
     def fields(self):
-        return [FieldSpec("u", degree=self.opts["displacement_degree"], vector=True, group=GROUP,
+        return [FieldSpec("u", degree=self.opts["displacement_degree"], vector=True, group=GROUP, displacement=True,
                           description="skeleton displacement"),
                 FieldSpec("p", degree=1, group=GROUP, description="pore pressure")]
 
@@ -128,7 +128,7 @@ class LinearPoroelasticity(Physics):
         return Formula(self.opts["conductivity"], dict(self.params), "conductivity").ufl(self.disc.x, self.disc.t)
 
     def initialise(self, disc):
-        """Seed eq. (2.5): u = 0, du/dt = 0, p = 0 (fields start at zero)."""
+        """Seed eq. (2.6): u = 0, du/dt = 0, p = 0 (fields start at zero)."""
 
     def subproblems(self):
         disc, prm = self.disc, self.params
@@ -136,10 +136,10 @@ class LinearPoroelasticity(Physics):
         u_n, p_n = disc.previous("u"), disc.previous("p")
         w, q = disc.test("u"), disc.test("p")
         mu, lmbda = self.lame()
-        momentum = (inertia(prm["rho"], u, u_n, self.velocity, w, disc.dt, disc.dx)
-                    + stress_divergence(poroelastic_stress(u, p, mu, lmbda), w, disc.dx))
-        mass = (storage(prm["C_0"], prm["alpha_BW"], p, p_n, u, u_n, q, disc.dt, disc.dx)
-                + darcy_flux(self.conductivity(), prm["eta"], p, q, disc.dx))
+        momentum = (inertia(prm["rho"], u, u_n, self.velocity, w, disc.dt, disc.dx)               # (2.1c)
+                    + stress_divergence(poroelastic_stress(u, p, mu, lmbda), w, disc.dx))       # (2.1c), (2.2)
+        mass = (storage(prm["C_0"], prm["alpha_BW"], p, p_n, u, u_n, q, disc.dt, disc.dx)         # (2.1a)
+                + darcy_flux(self.conductivity(), prm["eta"], p, q, disc.dx))                   # (2.1a)
         residual = momentum + mass
         for condition in self.conditions:
             for field_terms in condition.terms(disc).values():

@@ -14,7 +14,7 @@ from primordia.backends.skfem import SkfemBackend
 from primordia.core.errors import ConfigError
 from primordia.core.mesh import MeshData
 from primordia.core.meshes import rectangle
-from primordia.coupling.discretisation import Discretisation
+from primordia.physics.discretisation import Discretisation
 from primordia.physics.base import FieldSpec
 from primordia.physics.boundary_conditions import conditions_from_config, encloses
 from primordia.physics.kinematics import Kinematics

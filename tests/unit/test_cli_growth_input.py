@@ -19,7 +19,7 @@ COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "ou
     (["--set", 'model.physics=["chemotaxis", "poroelastic_growth", "mechanochemical", "active_stress"]'],
      ["active_stress", "cannot join poroelastic_growth"]),
     (["--set", "parameters.delta_2=-0.1"], ["parameter delta_2 must be >= 0"]),
-    (["--set", "physics.poroelastic_growth.shear_modulus=0"], ["shear_modulus must be a positive number"]),
+    (["--set", "physics.poroelastic_growth.shear_modulus=0"], ["shear_modulus must be a number > 0"]),
     (["--set", "physics.poroelastic_growth.boundary=[{boundary='left', type='springs'}]"],
      ["unknown boundary condition type 'springs'", "robin"]),
     (["--set", "physics.chemotaxis.accumulation=lagrangian"], ["accumulation must be one of material, conservative"]),

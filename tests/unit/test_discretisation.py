@@ -13,8 +13,8 @@ import ufl
 from primordia.backends.skfem import SkfemBackend
 from primordia.core.errors import ConfigError
 from primordia.core.meshes import rectangle
-from primordia.coupling.discretisation import Discretisation
 from primordia.physics.base import FieldSpec
+from primordia.physics.discretisation import Discretisation
 from primordia.physics.kinematics import MOTIONLESS, Kinematics
 
 
@@ -67,6 +67,28 @@ def test_contributions_are_built_when_asked_and_none_adds_nothing(disc):
     forms = disc.contributions("c", disc.test("c"))
     assert len(forms) == 1
     assert disc.backend.assemble_vector(forms[0]).sum() == pytest.approx(4.0)
+    disc.check_contributions()  # the owner of c read them
+
+
+def test_a_contribution_no_balance_law_reads_is_refused(disc):
+    disc.add_group("c", [FieldSpec("c")], {"c": "chemistry"})
+    with pytest.raises(ConfigError, match="field 'q' is required but no physics module"):
+        disc.contribute("q", lambda test: test * disc.dx, by="bead")
+    disc.contribute("c", lambda test: test * disc.dx, by="bead")
+    with pytest.raises(ConfigError, match="bead adds a term to the balance law of 'c', but chemistry does not read"):
+        disc.check_contributions()
+
+
+def test_dirichlet_conditions_fix_a_field_in_its_group(disc):
+    disc.add_group("mech", [FieldSpec("u", vector=True, group="mech", displacement=True), FieldSpec("p", group="mech")],
+                   {"u": "mechanics", "p": "mechanics"})
+    assert disc.displacement_field() == "u"
+    pressure = disc.dirichlet_bc("p", "left", 2.0)
+    normal = disc.dirichlet_bc("u", "left", lambda x: 0.5 * np.ones(x.shape[1]), component=0)
+    vector = disc.backend.petsc_vector(disc.unknown("p"))
+    disc.backend.set_dirichlet(vector, [pressure, normal])
+    values = disc.backend.local_array(disc.unknown("p"))
+    assert sorted(set(np.round(values, 12))) == [0.0, 0.5, 2.0]  # p = 2 and u_x = 0.5 on the left, 0 elsewhere
 
 
 def test_kinematics_default_to_a_motionless_tissue_and_have_one_provider(disc):

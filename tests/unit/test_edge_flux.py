@@ -1,4 +1,4 @@
-"""The exponentially fitted (Scharfetter-Gummel / EAFE) transport operator (primordia.coupling.edge_flux).
+"""The exponentially fitted (Scharfetter-Gummel / EAFE) transport operator (primordia.physics.edge_flux).
 
 The operator is assembled through the backend interface only, so it is checked
 on every backend: its sign pattern and zero column sums (hence positivity and
@@ -18,8 +18,8 @@ import ufl
 from primordia.core.mesh import MeshData
 from primordia.core.meshes import rectangle
 from primordia.core.plugins import get_plugin_manager, registry
-from primordia.coupling.discretisation import Discretisation
-from primordia.coupling.edge_flux import ExponentiallyFittedFlux, bernoulli
+from primordia.physics.discretisation import Discretisation
+from primordia.physics.edge_flux import ExponentiallyFittedFlux, bernoulli
 from primordia.physics.base import FieldSpec
 
 BACKENDS = ["fenicsx", "skfem"]

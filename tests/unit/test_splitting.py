@@ -47,7 +47,7 @@ def test_a_fixed_point_step_leaves_no_petsc_garbage(tmp_path, monkeypatch, capfd
     assert "Total entries: 0" in report, report
 
 
-@pytest.mark.parametrize("value, message", [(0.0, "coupling.tolerance must be > 0"), (-1.0, "must be > 0")])
+@pytest.mark.parametrize("value, message", [(0.0, "coupling.tolerance must be a number > 0"), (-1.0, "must be a number > 0")])
 def test_a_bad_fixed_point_tolerance_is_one_line(tmp_path, value, message):
     with pytest.raises(ConfigError, match=message):
         Model.from_file(EX01B, [*SMALL, 'coupling.scheme="fixed_point"', f"coupling.tolerance={value}"]).run(

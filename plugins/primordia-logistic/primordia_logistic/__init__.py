@@ -15,7 +15,7 @@ hookimpl = pluggy.HookimplMarker("primordia")
 
 
 class Painter2018Logistic(Painter2018):
-    """Seed eqs. (2.2b)-(2.2d) with R_m = r_m m (1 - m / m_cap) added to (2.2a)."""
+    """Seed eqs. (2.3b)-(2.3d) with R_m = r_m m (1 - m / m_cap) added to (2.3a)."""
 
     name = "painter2018_logistic"
     parameters = Painter2018.parameters + (

@@ -1,11 +1,14 @@
 """The discretised run a physics module sees: mesh, measures, fields, time.
 
-:class:`Discretisation` hands physics modules UFL objects made by the run's
-backend (spaces, fields, constants, measures) and keeps, for every field, its
+This is the API a physics author writes against.  :class:`Discretisation`
+hands physics modules UFL objects made by the run's backend (spaces, fields,
+constants, measures, Dirichlet conditions) and keeps, for every field, its
 current value and its value at the start of the step (``previous``).  It is
 also where couplings meet: a module adds a term to another module's balance
-law with :meth:`contribute`, and reads a field another module owns with
-:meth:`field` (a missing provider is named).
+law with :meth:`Discretisation.contribute`, and reads a field another module
+owns with :meth:`Discretisation.field` (a missing provider is named).  A term
+contributed to a field whose balance law no subproblem reads is an error
+(:meth:`Discretisation.check_contributions`), not a term silently lost.
 
 Fields are stored in *groups*: the fields of a group are solved together and
 live in one backend function (a mixed function when the group has several
@@ -13,42 +16,64 @@ fields, e.g. displacement and pore pressure).  ``field``, ``previous``,
 ``rate`` and ``test`` return UFL expressions either way, so a physics module
 reads the same whether its fields are alone, grouped with each other, or all
 in one monolithic group (the splitting scheme decides the grouping).
+
+The coupling layer (:mod:`primordia.coupling`) creates the discretisation and
+drives it (groups, time, stored values); a physics module only reads from it
+and declares to it, and never needs the backend behind it.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import ufl
 
+from primordia.core.backend import Backend, BoundaryCondition, PointFunction
 from primordia.core.errors import ConfigError
+from primordia.core.mesh import MeshData
 from primordia.physics.kinematics import MOTIONLESS, Kinematics
+
+if TYPE_CHECKING:
+    from primordia.physics.base import FieldSpec
+
+#: A term one module adds to another's balance law: the test function in, a UFL form (or None) out.
+Term = Callable[[Any], "ufl.Form | None"]
 
 
 @dataclass
 class _Group:
     name: str
     fields: list[str]
-    space: object
-    current: object
-    previous: object
-    rate: object | None = None
+    space: Any
+    current: Any
+    previous: Any
+    rate: Any | None = None
 
     def index(self, field: str) -> int | None:
         return None if len(self.fields) == 1 else self.fields.index(field)
 
 
 class Discretisation:
-    def __init__(self, backend, mesh_data):
-        self.backend = backend
+    """The mesh, measures, fields and time of one run, on one backend (see the module docstring).
+
+    What physics reads: ``mesh_data``, ``gdim``, ``dx``, ``dx_lumped``, ``ds(boundary)``, ``x``,
+    ``n``, ``t`` (time at the end of the step, a UFL constant), ``dt``, ``time`` (a float),
+    ``field``, ``previous``, ``rate``, ``test``, ``trial``, ``unknown``, ``kinematics``.
+    What physics declares: ``provide``, ``provide_kinematics``, ``contribute``.
+    """
+
+    def __init__(self, backend: Backend, mesh_data: MeshData):
+        self.backend = backend  # for the coupling layer; physics goes through the methods below
         self.mesh_data = mesh_data
         self.mesh = backend.create_mesh(mesh_data)
         self.cell = self.mesh.ufl_domain().ufl_cell()
-        self.gdim = mesh_data.gdim
-        self.dx = backend.measure("dx", self.mesh)
-        self.dx_lumped = backend.lumped_dx(self.mesh)
+        self.gdim: int = mesh_data.gdim
+        self.dx: ufl.Measure = backend.measure("dx", self.mesh)
+        self.dx_lumped: ufl.Measure = backend.lumped_dx(self.mesh)
         self._ds = backend.measure("ds", self.mesh)
         self.x = ufl.SpatialCoordinate(self.mesh.ufl_domain())
         self.n = ufl.FacetNormal(self.mesh.ufl_domain())
@@ -58,19 +83,20 @@ class Discretisation:
         self._groups: dict[str, _Group] = {}
         self._group_of: dict[str, str] = {}
         self._owner: dict[str, str] = {}
-        self._specs: dict[str, object] = {}
+        self._specs: dict[str, FieldSpec] = {}
         self._splits: dict[tuple[str, str], tuple] = {}
-        self._provided: dict[str, tuple[object, str]] = {}
-        self._contributions: dict[str, list[Callable]] = defaultdict(list)
+        self._provided: dict[str, tuple[Any, str]] = {}
+        self._contributions: dict[str, list[tuple[Term, str]]] = defaultdict(list)
+        self._consumed: set[str] = set()
         self._kinematics: tuple[Kinematics, str] | None = None
 
     # -- spaces and fields --------------------------------------------------------------
-    def element(self, spec) -> ufl.FiniteElementBase:
+    def element(self, spec: FieldSpec) -> ufl.FiniteElementBase:
         if spec.vector:
             return ufl.VectorElement("Lagrange", self.cell, spec.degree)
         return ufl.FiniteElement("Lagrange", self.cell, spec.degree)
 
-    def add_group(self, name: str, specs: list, owners: dict[str, str]) -> None:
+    def add_group(self, name: str, specs: Sequence[FieldSpec], owners: dict[str, str]) -> None:
         """Create the function holding the fields ``specs`` (solved together)."""
         for spec in specs:
             if spec.name in self._group_of or spec.name in self._provided:
@@ -128,7 +154,7 @@ class Discretisation:
         self.rate(name)
         return self._group(name).rate
 
-    def set_rate(self, name: str, values) -> None:
+    def set_rate(self, name: str, values: PointFunction | float) -> None:
         """Set the rate of a field (e.g. an initial solid velocity) to the interpolant of ``values``."""
         self.rate(name)
         self._interpolate_into(self._group(name).rate, name, values)
@@ -159,7 +185,16 @@ class Discretisation:
         index = group.index(name)
         return self._splits[key][0 if index is None else index]
 
-    def function_of(self, name: str) -> tuple[object, int | None]:
+    def constant(self, value: float):
+        """A UFL constant on the mesh whose value can be changed between solves (``.value = ...``)."""
+        return self.backend.constant(self.mesh, value)
+
+    @property
+    def ranks(self) -> int:
+        """How many MPI ranks share the mesh (solver defaults may differ in parallel)."""
+        return self.backend.comm.size
+
+    def function_of(self, name: str) -> tuple[Any, int | None]:
         """(backend function, component index or None) holding a field, for output."""
         group = self._group(name)
         return group.current, group.index(name)
@@ -170,6 +205,10 @@ class Discretisation:
 
     def field_names(self) -> list[str]:
         return list(self._group_of)
+
+    def displacement_field(self) -> str | None:
+        """The field declared the tissue's displacement (``FieldSpec.displacement``), or None."""
+        return next((name for name, spec in self._specs.items() if spec.displacement), None)
 
     def groups(self) -> list[str]:
         return list(self._groups)
@@ -214,28 +253,75 @@ class Discretisation:
         return MOTIONLESS if self._kinematics is None else self._kinematics[0]
 
     # -- measures -------------------------------------------------------------------------
-    def ds(self, boundary: str | None = None):
+    def ds(self, boundary: str | None = None) -> ufl.Measure:
         return self._ds if boundary is None else self._ds(self.mesh_data.boundary_id(boundary))
 
-    def dx_degree(self, degree: int | None):
+    def dx_degree(self, degree: int | None) -> ufl.Measure:
         """``dx`` with a fixed quadrature degree (``None``: the backend's estimate)."""
         return self.dx if degree is None else self.dx(metadata={"quadrature_degree": int(degree)})
 
-    def ds_degree(self, degree: int | None, boundary: str | None = None):
+    def ds_degree(self, degree: int | None, boundary: str | None = None) -> ufl.Measure:
         """``ds`` (on ``boundary``) with a fixed quadrature degree (``None``: the backend's estimate)."""
         measure = self.ds(boundary)
         return measure if degree is None else measure(metadata={"quadrature_degree": int(degree)})
 
-    # -- couplings ------------------------------------------------------------------------
-    def contribute(self, field_name: str, term: Callable):
-        """Add ``term(test)`` (a UFL form, or None for nothing) to the residual of ``field_name``'s balance law."""
-        self._contributions[field_name].append(term)
+    # -- Dirichlet conditions -------------------------------------------------------------
+    def dirichlet_bc(self, name: str, boundary: str, values: PointFunction | float,
+                     component: int | None = None) -> BoundaryCondition:
+        """Fix field ``name`` (its ``component``, for a vector field) on ``boundary`` to ``values``.
 
-    def contributions(self, field_name: str, test) -> list:
-        return [form for form in (term(test) for term in self._contributions[field_name]) if form is not None]
+        ``values`` is a number or a function of the points x (shape (gdim, n)); the condition
+        acts on the unknown of ``name``'s group, whatever the grouping.
+        """
+        group = self._group(name)
+        index = group.index(name)
+        path = tuple(i for i in (index, component) if i is not None)
+        return self.backend.dirichlet_bc(group.space, boundary, values, component=path or None)
+
+    def update_dirichlet_bc(self, bc: BoundaryCondition, values: PointFunction | float) -> None:
+        """Give a condition of :meth:`dirichlet_bc` new values (e.g. at a new time)."""
+        self.backend.update_dirichlet_bc(bc, values)
+
+    # -- algebraic operators --------------------------------------------------------------
+    def assemble_matrix(self, form: ufl.Form, A=None):
+        """The PETSc matrix of a bilinear form (into ``A`` when given), for an algebraic operator."""
+        return self.backend.assemble_matrix(form, A=A)
+
+    def previous_vector(self, name: str):
+        """The PETSc vector of a field's start-of-step value (a field alone in its group)."""
+        if not self.is_alone(name):
+            raise ConfigError(f"field '{name}' shares its function with {', '.join(self.unknown_fields(name))}: "
+                              f"an algebraic operator needs it alone")
+        return self.backend.petsc_vector(self._group(name).previous)
+
+    @property
+    def comm(self):
+        """The MPI communicator of the mesh."""
+        return self.backend.comm
+
+    # -- couplings ------------------------------------------------------------------------
+    def contribute(self, field_name: str, term: Term, by: str = "a coupling") -> None:
+        """Add ``term(test)`` (a UFL form, or None for nothing) to the residual of ``field_name``'s balance law.
+
+        ``by`` names the contributing module in the error raised when no balance law reads the term.
+        """
+        self._group(field_name)  # a field no module provides is named now
+        self._contributions[field_name].append((term, by))
+
+    def contributions(self, field_name: str, test) -> list[ufl.Form]:
+        """The terms contributed to ``field_name``'s balance law: what its owner adds to the residual."""
+        self._consumed.add(field_name)
+        return [form for form in (term(test) for term, _ in self._contributions[field_name]) if form is not None]
+
+    def check_contributions(self) -> None:
+        """Refuse (one line) a term contributed to a field whose balance law no subproblem read."""
+        for field_name, terms in self._contributions.items():
+            if terms and field_name not in self._consumed:
+                raise ConfigError(f"{terms[0][1]} adds a term to the balance law of '{field_name}', but "
+                                  f"{self.owner(field_name)} does not read contributed terms")
 
     # -- values ---------------------------------------------------------------------------
-    def set_vertex_values(self, name: str, values):
+    def set_vertex_values(self, name: str, values: np.ndarray) -> None:
         """Set a P1 field from values at every mesh vertex (MeshData order)."""
         group = self._group(name)
         index = group.index(name)
@@ -249,10 +335,11 @@ class Discretisation:
         self.backend.set_vertex_values(alone, values)
         self._interpolate_into(group.current, name, alone)
 
-    def interpolate(self, name: str, values):
+    def interpolate(self, name: str, values: PointFunction | float) -> None:
+        """Set a field to the interpolant of ``values`` (a number or a function of the points x)."""
         self._interpolate_into(self._group(name).current, name, values)
 
-    def _interpolate_into(self, function, name: str, values):
+    def _interpolate_into(self, function, name: str, values) -> None:
         """Interpolate ``values`` into ``name``'s part of a group function (current, rate...)."""
         index = self._group(name).index(name)
         if index is None:
@@ -260,13 +347,13 @@ class Discretisation:
         else:
             self.backend.interpolate_component(function, index, values)
 
-    def store_previous(self, groups: list[str] | None = None):
+    def store_previous(self, groups: Sequence[str] | None = None) -> None:
         """previous <- current, for every group (start of a step) or the given ones."""
         for name in groups or self._groups:
             group = self._groups[name]
             self.backend.local_array(group.previous)[:] = self.backend.local_array(group.current)
 
-    def update_rates(self, dt: float, groups: list[str] | None = None):
+    def update_rates(self, dt: float, groups: Sequence[str] | None = None) -> None:
         """rate <- (current - previous) / dt for every group (or the given ones) whose rate is used."""
         for name in groups or self._groups:
             group = self._groups[name]
@@ -274,13 +361,13 @@ class Discretisation:
                 rate = self.backend.local_array(group.rate)
                 rate[:] = (self.backend.local_array(group.current) - self.backend.local_array(group.previous)) / dt
 
-    def set_time(self, t: float, dt: float):
+    def set_time(self, t: float, dt: float) -> None:
         self.time = t
         self.t.value = t
         self.dt.value = dt
 
     # -- state: what the next step reads ------------------------------------------------
-    def state_functions(self) -> dict[str, object]:
+    def state_functions(self) -> dict[str, Any]:
         """Every backend function the next step reads, by ``GROUP/current``, ``GROUP/previous``, ``GROUP/rate``.
 
         A splitting scheme stores a group's start value when it advances that group,
@@ -295,11 +382,11 @@ class Discretisation:
                 functions[f"{name}/rate"] = group.rate
         return functions
 
-    def copy_state(self) -> dict[str, object]:
+    def copy_state(self) -> dict[str, np.ndarray]:
         """A copy of this rank's values (owned and ghost) of every state function: see :meth:`restore_state`."""
         return {key: self.backend.local_array(function).copy() for key, function in self.state_functions().items()}
 
-    def restore_state(self, saved: dict[str, object]) -> None:
+    def restore_state(self, saved: dict[str, np.ndarray]) -> None:
         """Put back the values of :meth:`copy_state` (undo a rejected or interrupted step)."""
         for key, function in self.state_functions().items():
             self.backend.local_array(function)[:] = saved[key]

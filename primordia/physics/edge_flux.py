@@ -15,19 +15,22 @@ B(x) ~ 1 - x/2 and A reduces to the central (second-order) discretisation
 (Xu & Zikatanov, Math. Comp. 68 (1999) 1429-1446).
 
 The construction is row-local on the assembled PETSc matrix (global column
-indices, ghost values from the backend), so it runs unchanged on every backend
-and in parallel.
+indices, ghost values gathered), so it runs unchanged on every backend and in
+parallel.  The operator applies itself (:meth:`AlgebraicOperator.apply`): the
+solver layer adds its matrix and its action without knowing what it is.
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 import ufl
 from petsc4py import PETSc
 
 from primordia.physics.base import AlgebraicOperator
+from primordia.physics.discretisation import Discretisation
 
 
 def bernoulli(x: np.ndarray) -> np.ndarray:
@@ -50,12 +53,11 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
     is the start-of-step value (``disc.previous``), as the IMEX scheme requires.
     """
 
-    def __init__(self, disc, species: str, attractant: str, diffusivity: float, sensitivity,
-                 metric=None, quadrature_degree: int | None = None):
+    def __init__(self, disc: Discretisation, species: str, attractant: str, diffusivity: float,
+                 sensitivity: Callable[[np.ndarray], np.ndarray], metric=None, quadrature_degree: int | None = None):
         self.disc, self.species, self.attractant = disc, species, attractant
         self.diffusivity = float(diffusivity)
         self.sensitivity = sensitivity
-        backend = disc.backend
         space = disc.field(species).ufl_function_space()
         trial, test = ufl.TrialFunction(space), ufl.TestFunction(space)
         gradient = ufl.grad(trial) if metric is None else ufl.dot(metric, ufl.grad(trial))
@@ -63,11 +65,11 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._moving = metric is not None  # the metric follows the deformation: reassemble at every update
         self.negative_weights = 0  # edges with w_ij < 0 at the last update (0: an M-matrix)
         self.most_negative_weight = 0.0  # the most negative w_ij relative to the largest one (<= 0)
-        stiffness = backend.assemble_matrix(self._stiffness_form)
+        stiffness = disc.assemble_matrix(self._stiffness_form)
         self._stiffness = stiffness.duplicate(copy=True) if self._moving else None
         self._A = stiffness
         self._prepare_edges(stiffness)
-        self._prepare_gather(backend.petsc_vector(disc.previous(species)))
+        self._prepare_gather(disc.previous_vector(species))
         self._prepare_pairs()
         if self.negative_weights and not self._moving:
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
@@ -89,7 +91,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
     def _set_weights(self, values):
         """Edge weights w_ij = -S_ij (scaled by D), and how many are negative (not an M-matrix)."""
         weights = np.where(self._diagonal, 0.0, -values)
-        comm = self.disc.backend.comm
+        comm = self.disc.comm
         scale = comm.allreduce(float(np.abs(values).max(initial=0.0)), op=_max_op())
         self.negative_weights = comm.allreduce(int((weights < -1e-12 * scale).sum())) // 2  # each edge twice
         largest = comm.allreduce(float(weights.max(initial=0.0)), op=_max_op())
@@ -131,14 +133,14 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._values = np.zeros(len(self._columns))
 
     def _gather(self, name: str) -> np.ndarray:
-        vector = self.disc.backend.petsc_vector(self.disc.previous(name))
+        vector = self.disc.previous_vector(name)
         self._scatter.scatter(vector, self._gathered, addv=PETSc.InsertMode.INSERT,
                               mode=PETSc.ScatterMode.FORWARD)
         return self._gathered.getArray(readonly=True).copy()
 
     def update(self) -> None:
         if self._moving:
-            self.disc.backend.assemble_matrix(self._stiffness_form, A=self._stiffness)
+            self.disc.assemble_matrix(self._stiffness_form, A=self._stiffness)
             self._set_weights(self._stiffness.getValuesCSR()[2])
         c, a = self._gather(self.species), self._gather(self.attractant)
         low, high = self._edge_low, self._edge_high
@@ -164,7 +166,3 @@ def _max_op():
 
     return MPI.MAX
 
-
-def apply_operator(operator: AlgebraicOperator, x: PETSc.Vec, residual: PETSc.Vec) -> None:
-    """residual += A x."""
-    operator.matrix().multAdd(x, residual, residual)
