@@ -19,7 +19,8 @@ import pytest
 import xarray as xr
 
 from primordia.core.timestepping import StepController
-from test_cli_bad_input import assert_one_line_error
+
+from cli_checks import assert_one_line_error
 
 EX02A = Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml"
 

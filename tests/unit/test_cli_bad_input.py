@@ -18,18 +18,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-
-def assert_one_line_error(result, *fragments: str) -> str:
-    """Exit status 2, one stderr line ``primordia: error: ...`` containing every fragment."""
-    assert result.returncode == 2, (result.returncode, result.stderr)
-    assert "Traceback" not in result.stderr and "Traceback" not in result.stdout, result.stderr
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1, result.stderr
-    assert lines[0].startswith("primordia: error: "), lines[0]
-    for fragment in fragments:
-        assert fragment in lines[0], f"{fragment!r} not in {lines[0]!r}"
-    return lines[0]
-
+from cli_checks import assert_one_line_error
 
 BAD_OVERRIDES = [
     pytest.param(["--set", "nonsense.key=1"], ["unknown config section [nonsense]"], id="unknown-section"),

@@ -13,7 +13,8 @@ import json
 
 import pytest
 
-from test_plugins import FROZEN_KINETICS, listing
+from cli_checks import listing
+from plugin_sources import FROZEN_KINETICS
 
 RAISES = """\
 from primordia.core.plugins import hookimpl

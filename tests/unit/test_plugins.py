@@ -9,7 +9,6 @@ skipped; the ``firstresult`` choosers can be overridden; unknown names raise
 from __future__ import annotations
 
 import json
-import re
 import tomllib
 
 import pytest
@@ -21,46 +20,14 @@ from primordia.coupling.orchestrator import Simulation
 from primordia.coupling.splitting import Sequential
 from primordia.model import Model
 
+from cli_checks import listing
+from plugin_sources import FROZEN_KINETICS
+
 BUILT_IN = "primordia (built-in)"
-
-#: A third-party kinetics of the seed's species: nothing reacts, and the rest state is e, f, b = 1/2, 1/4, 1/8.
-FROZEN_KINETICS = """\
-from primordia.core.plugins import hookimpl
-from primordia.physics.kinetics.painter2018 import Painter2018
-
-
-class Frozen(Painter2018):
-    name = "frozen"
-
-    def split_rates(self, c, t, ops):
-        return {species: (0.0, 0.0) for species in self.species_names}
-
-    def initial_state(self, t0, ops):
-        return {"m": self.params["m0"], "e": 0.5, "f": 0.25, "b": 0.125}
-
-
-@hookimpl
-def primordia_kinetics():
-    return [Frozen]
-"""
 
 BROKEN_PLUGIN = """\
 raise RuntimeError("this plugin is broken on purpose")
 """
-
-
-def listing(stdout: str) -> dict[str, dict[str, str]]:
-    """``primordia plugins`` output as {kind: {name: rest of the line}}."""
-    table: dict[str, dict[str, str]] = {}
-    kind = None
-    for line in stdout.splitlines():
-        if re.fullmatch(r"[a-z_]+:", line):
-            kind = line[:-1]
-            table[kind] = {}
-        elif line.startswith("  ") and kind is not None:
-            name, _, rest = line.strip().partition(" ")
-            table[kind][name] = rest.strip()
-    return table
 
 
 def small_model(**kwargs) -> Model:
