@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from test_cli_bad_input import assert_one_line_error
+from cli_checks import assert_one_line_error
 
 EX02A = Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml"
 COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "output.times=[0.4]",
