@@ -140,9 +140,10 @@ class ScalarSeriesNetcdf(Output):
 class Pictures(Output):
     """PNGs of the snapshot fields at every snapshot time, and of every field at the end.
 
-    Vector fields are drawn as their magnitude.  When the model has a displacement
-    ``u``, fields are drawn on the deformed configuration, magnified by
-    ``output.displacement_scale`` (stated on the picture).
+    Vector fields are drawn as their magnitude.  When a physics module declares a
+    field the tissue's displacement (``FieldSpec.displacement``), fields are drawn
+    on the deformed configuration, magnified by ``output.displacement_scale``
+    (stated on the picture).
     """
 
     name = "pictures"
@@ -161,7 +162,7 @@ class Pictures(Output):
         values = run.vertex_values()
         if not run.is_root:
             return
-        displacement, scale = values.get("u"), run.model.output["displacement_scale"]
+        displacement, scale = values.get(run.displacement_field), run.model.output["displacement_scale"]
         for name in run.model.output["snapshot_fields"]:
             label = f"{name}, t = {run.time:g}"
             field = self._scalar(values[name])
@@ -187,7 +188,7 @@ class Pictures(Output):
         values = run.vertex_values()
         if run.is_root:
             fields = {(f"|{name}|" if v.ndim == 2 else name): self._scalar(v) for name, v in values.items()}
-            displacement = values.get("u")
+            displacement = values.get(run.displacement_field)
             displacements = None if displacement is None else {key: displacement for key in fields}
             plot_fields_grid(run.out_dir / "final_fields.png", run.mesh_data, fields,
                                 title=f"all fields at t = {run.time:g} ({status})", shared_colour_scale=False,
