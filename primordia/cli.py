@@ -29,9 +29,8 @@ EXIT_USAGE = 2
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse's own usage errors: one line, status 2
-        print(f"primordia: error: {message}", file=sys.stderr)
-        raise SystemExit(EXIT_USAGE)
+    def error(self, message):  # argparse's own usage errors: one line and status 2, as any bad input
+        raise ConfigError(message)
 
 
 def build_parser() -> argparse.ArgumentParser:

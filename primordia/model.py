@@ -25,10 +25,12 @@ from primordia.core import config as config_
 from primordia.core.errors import ConfigError
 from primordia.core.mesh import MeshData
 from primordia.core.parameters import ParameterSet
-from primordia.core.plugins import lookup
+from primordia.core.plugins import lookup, registry
+from primordia.core.validation import flag, number, numbers
 
-DEFAULT_OUTPUT = {"times": None, "snapshot_fields": None, "series_every": 10, "pictures": True,
-                  "displacement_scale": 1.0}
+#: The keys of ``[output]`` that say when the run writes (read by the run itself); every other key
+#: is an option one registered output declares (:attr:`primordia.core.outputs.Output.options`).
+OUTPUT_SCHEDULE = {"times": None, "snapshot_fields": None, "series_every": 10}
 #: Checkpoints: every N steps (0: never by steps) and every M minutes of wall time (0: never by time).
 #: A run shorter than ``every_minutes`` writes none but its last, at the end or when stopped.
 DEFAULT_CHECKPOINT = {"every_steps": 0, "every_minutes": 10.0}
@@ -133,13 +135,20 @@ class Model:
         return {cls.name: dict(table.get(cls.name, {})) for cls in self.physics_classes}
 
     def _output(self, table: dict) -> dict:
-        unknown = set(table) - set(DEFAULT_OUTPUT)
+        """``[output]``: the schedule, and the options of the registered outputs, with their defaults."""
+        from primordia.core.outputs import declared_options
+
+        if not isinstance(table, dict):
+            raise ConfigError(f"[output] must be a table, got {table!r}")
+        declared = declared_options(output for output, _ in registry("outputs").values())
+        unknown = set(table) - set(OUTPUT_SCHEDULE) - set(declared)
         if unknown:
-            raise ConfigError(f"unknown key output.{sorted(unknown)[0]} (known: {', '.join(DEFAULT_OUTPUT)})")
-        output = {**DEFAULT_OUTPUT, **table}
-        times = output["times"] if output["times"] is not None else [self.t_final]
-        if not isinstance(times, list) or not all(_is_number(t) for t in times):
-            raise ConfigError(f"output.times must be a list of numbers, got {times!r}")
+            raise ConfigError(f"unknown key output.{sorted(unknown)[0]} "
+                              f"(known: {', '.join([*OUTPUT_SCHEDULE, *declared])})")
+        output = {**OUTPUT_SCHEDULE, **{key: option.default for key, option in declared.items()}, **table}
+        for key in declared.keys() & table.keys():
+            output[key] = declared[key].check(table[key], f"output.{key}")
+        times = numbers(output["times"], "output.times") if output["times"] is not None else [self.t_final]
         for t in times:
             if not self.t_start < t <= self.t_final + 1e-12:
                 raise ConfigError(f"output time {t:g} lies outside (t_start, t_final] = "
@@ -147,17 +156,10 @@ class Model:
             if abs(round((t - self.t_start) / self.dt) * self.dt - (t - self.t_start)) > 1e-9 * max(1.0, t):
                 raise ConfigError(f"output time {t:g} is not a multiple of dt = {self.dt:g} after t_start")
         output["times"] = sorted(float(t) for t in times)
-        scale = output["displacement_scale"]
-        if not _is_number(scale) or scale < 0:
-            raise ConfigError(f"output.displacement_scale must be a number >= 0, got {scale!r}")
-        if not isinstance(output["pictures"], bool):
-            raise ConfigError(f"output.pictures must be true or false, got {output['pictures']!r}")
         fields = output["snapshot_fields"]
         if fields is not None and (not isinstance(fields, list) or not all(isinstance(f, str) for f in fields)):
             raise ConfigError(f"output.snapshot_fields must be a list of field names, got {fields!r}")
-        every = output["series_every"]
-        if not isinstance(every, int) or isinstance(every, bool) or every < 1:
-            raise ConfigError(f"output.series_every must be a positive integer (steps), got {every!r}")
+        number(output["series_every"], "output.series_every", integer=True, at_least=1, hint="steps")
         return output
 
     def _instantiate_physics(self):
@@ -213,7 +215,7 @@ class Model:
         resolved = {
             "model": {"name": self.name, "physics": [p.name for p in self.physics_objects], "backend": self.backend},
             "parameters": dict(self.parameters),
-            "physics": {p.name: dict(p.opts) for p in self.physics_objects},
+            "physics": {p.name: dict(p.settings) for p in self.physics_objects},
             "mesh": mesh,
             "time": {"t_start": self.t_start, "dt": self.dt, "t_final": self.t_final, "adaptive": self.adaptive,
                      "dt_min": self.dt_min},
@@ -224,7 +226,7 @@ class Model:
         if self.description:
             resolved["model"]["description"] = self.description
         if self.kinetics_object is not None:
-            resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.opts}
+            resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.settings}
         if self.growth_law_object is not None:
             resolved["growth_law"] = {"name": self.growth_law_object.name, **self.growth_law_object.opts}
         if self.solver:
@@ -304,19 +306,12 @@ def _backend_name(value, where: str) -> str:
     return value
 
 
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def _adaptivity(adaptive, dt_min, dt: float) -> tuple[bool, float]:
     """(time.adaptive, time.dt_min): whether failed steps are retried smaller, and down to which dt."""
-    if not isinstance(adaptive, bool):
-        raise ConfigError(f"time.adaptive must be true or false, got {adaptive!r}")
+    flag(adaptive, "time.adaptive")
     if dt_min is None:
         return adaptive, dt / 2 ** DEFAULT_HALVINGS
-    if not _is_number(dt_min) or not 0 < dt_min <= dt:
-        raise ConfigError(f"time.dt_min must be a number in (0, dt = {dt:g}], got {dt_min!r}")
-    return adaptive, float(dt_min)
+    return adaptive, float(number(dt_min, "time.dt_min", above=0, at_most=dt, hint=f"at most time.dt = {dt:g}"))
 
 
 def _checkpoint(table) -> dict:
@@ -329,11 +324,9 @@ def _checkpoint(table) -> dict:
     if unknown:
         raise ConfigError(f"unknown key checkpoint.{sorted(unknown)[0]} (known: {', '.join(DEFAULT_CHECKPOINT)})")
     checkpoint = {**DEFAULT_CHECKPOINT, **table}
-    steps, minutes = checkpoint["every_steps"], checkpoint["every_minutes"]
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
-        raise ConfigError(f"checkpoint.every_steps must be an integer >= 0 (0: never by steps), got {steps!r}")
-    if not _is_number(minutes) or minutes < 0:
-        raise ConfigError(f"checkpoint.every_minutes must be a number >= 0 (0: never by time), got {minutes!r}")
+    steps = number(checkpoint["every_steps"], "checkpoint.every_steps", integer=True, at_least=0,
+                   hint="0: never by steps")
+    minutes = number(checkpoint["every_minutes"], "checkpoint.every_minutes", at_least=0, hint="0: never by time")
     return {"every_steps": steps, "every_minutes": float(minutes)}
 
 
@@ -376,11 +369,8 @@ def _growth_law_table(growth_law, physics_classes) -> dict | None:
 
 
 def _time(t_start, dt, t_final) -> tuple[float, float, float]:
-    for key, value in (("t_start", t_start), ("dt", dt), ("t_final", t_final)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ConfigError(f"time.{key} must be a number, got {value!r}")
-    if dt <= 0:
-        raise ConfigError(f"time.dt must be > 0, got {dt:g}")
+    t_start, dt = number(t_start, "time.t_start"), number(dt, "time.dt", above=0)
+    t_final = number(t_final, "time.t_final")
     if t_final <= t_start:
         raise ConfigError(f"time.t_final ({t_final:g}) must be greater than time.t_start ({t_start:g})")
     steps = (t_final - t_start) / dt

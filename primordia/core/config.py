@@ -10,7 +10,8 @@ A configuration is a nested mapping with these tables (all optional but
     [parameters]   model constants by their seed names (Table 3.1)
     [mesh]         type = "rectangle" | "box" | "file", ...
     [time]         dt, t_final, t_start, adaptive, dt_min
-    [output]       times, snapshot_fields, series_every, pictures, displacement_scale
+    [output]       times, snapshot_fields, series_every, and the options the outputs declare
+                   (built in: pictures, displacement_scale)
     [checkpoint]   every_steps, every_minutes
     [coupling]     scheme = "sequential" | "strang" | "fixed_point" | "monolithic", and its options
     [solver.PREFIX] PETSc options of one subproblem (e.g. [solver.chemotaxis_m])
@@ -37,7 +38,7 @@ SECTIONS = {
     "parameters": None,  # open: validated against the declared parameters
     "mesh": None,  # open: validated by primordia.core.meshes.mesh_from_config
     "time": {"dt", "t_final", "t_start", "adaptive", "dt_min"},
-    "output": {"times", "snapshot_fields", "series_every", "pictures", "displacement_scale"},
+    "output": None,  # open: the schedule plus the options the registered outputs declare (primordia.model)
     "checkpoint": {"every_steps", "every_minutes"},
     "coupling": None,  # open: scheme plus the scheme's own options
     "solver": None,  # open: PETSc options by prefix

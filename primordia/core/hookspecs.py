@@ -99,7 +99,11 @@ def primordia_outputs() -> list[type]:
     """Output writers (subclasses of ``primordia.core.outputs.Output``).
 
     Every registered output is attached to every run; each decides from the
-    run's ``[output]`` table what, if anything, it writes.
+    run's ``[output]`` table what, if anything, it writes.  An output with options
+    declares them in its class attribute ``options`` (key ->
+    ``primordia.core.outputs.OutputOption(default, check, help)``): the model then
+    accepts those keys of ``[output]``, checks them and fills in their defaults
+    before the run; any other key is refused.  A key belongs to one output.
     """
 
 

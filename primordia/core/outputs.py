@@ -25,22 +25,50 @@ import json
 import os
 import shutil
 import socket
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
+from primordia.core.checkpoint import CHECKPOINT_FILE
+from primordia.core.errors import ConfigError
 from primordia.core.json_toml import write_json, write_toml
 from primordia.core.pictures import plot_field, plot_fields_grid
-from primordia.core.scalar_series import ScalarSeries
-from primordia.core.xdmf import XdmfSeries
-from primordia.core.checkpoint import CHECKPOINT_FILE
 from primordia.core.plugins import hookimpl
+from primordia.core.scalar_series import ScalarSeries
+from primordia.core.validation import flag, number
+from primordia.core.xdmf import XdmfSeries
+
+
+@dataclass(frozen=True)
+class OutputOption:
+    """One key of the run's ``[output]`` table that an output reads: its default, its check, what it means.
+
+    ``check(value, "output.KEY")`` returns the value to use or raises one
+    :class:`~primordia.core.errors.ConfigError` naming the key; the checks of
+    :mod:`primordia.core.validation` fit as they are (``flag``) or with their bounds
+    (``partial(number, at_least=0)``).  The default is used as it is, unchecked.
+    """
+
+    default: Any
+    check: Callable[[Any, str], Any]
+    help: str = ""
 
 
 class Output:
-    """Base class: override the moments you write at (all run on every rank)."""
+    """Base class: override the moments you write at (all run on every rank).
+
+    An output that can be configured declares its keys of ``[output]`` in
+    :attr:`options`; the model then accepts them, fills in their defaults and checks
+    them before the run, and the output reads them from ``run.model.output``.
+    """
 
     name: str
+    #: The keys of ``[output]`` this output reads (none by default); a key belongs to one output.
+    options: ClassVar[Mapping[str, OutputOption]] = {}
 
     def start(self, run) -> None:
         """Before the first step (after initial conditions are set)."""
@@ -147,6 +175,11 @@ class Pictures(Output):
     """
 
     name = "pictures"
+    options = {
+        "pictures": OutputOption(True, flag, "draw the PNGs (false: none)"),
+        "displacement_scale": OutputOption(1.0, partial(number, at_least=0),
+                                           "magnification of the displacement the fields are drawn on"),
+    }
 
     def start(self, run):
         self.snapshots: dict[str, dict[str, object]] = {}
@@ -233,6 +266,19 @@ class Summary(Output):
 @hookimpl
 def primordia_outputs():
     return [ResolvedConfig, FieldsXdmf, ScalarSeriesNetcdf, Pictures, Summary]
+
+
+def declared_options(outputs: Iterable[type[Output]]) -> dict[str, OutputOption]:
+    """Every ``[output]`` key the ``outputs`` declare; a key declared by two of them is one ConfigError."""
+    declared: dict[str, OutputOption] = {}
+    owner: dict[str, str] = {}
+    for output in outputs:
+        for key, option in output.options.items():
+            if key in owner:
+                raise ConfigError(f"output option {key!r} is declared by two outputs, {owner[key]!r} and "
+                                  f"{output.name!r}: one of them must rename it")
+            declared[key], owner[key] = option, output.name
+    return declared
 
 
 # -- a directory that already holds a run -----------------------------------------------------------

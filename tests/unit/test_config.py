@@ -113,7 +113,6 @@ def test_a_valid_structure_passes_with_open_sections_taking_any_key():
 @pytest.mark.parametrize("table, expected", [
     ({"nonsense": {}}, "unknown config section [nonsense] (known: model, kinetics, growth_law, physics"),
     ({"time": {"dt": 1, "nonsense": 2}}, "unknown key time.nonsense (known: adaptive, dt, dt_min, t_final, t_start)"),
-    ({"output": {"pictures": False, "format": "vtk"}}, "unknown key output.format"),
     ({"checkpoint": {"every_seconds": 1}}, "unknown key checkpoint.every_seconds"),
     ({"model": {"physic": ["chemotaxis"]}}, "unknown key model.physic"),
     ({"time": 3}, "config section [time] must be a table"),

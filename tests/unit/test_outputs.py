@@ -1,0 +1,217 @@
+"""What a run writes (primordia.core.outputs): the options outputs declare, series, atomic files."""
+
+from __future__ import annotations
+
+import json
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from file_writers import WriterDied, leftovers
+from primordia.core.errors import ConfigError
+from primordia.core.meshes import rectangle
+from primordia.core.outputs import (
+    FieldsXdmf,
+    Output,
+    OutputOption,
+    Pictures,
+    ScalarSeriesNetcdf,
+    Summary,
+    declared_options,
+)
+from primordia.core.plugins import hookimpl
+from primordia.core.validation import flag, number
+from primordia.model import Model
+from primordia.testing import registered
+
+MESH = rectangle((0, 0), (4, 4), (4, 4))
+
+
+def small_model(**output) -> Model:
+    return Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03}, mesh=MESH, dt=0.2, t_final=0.6,
+                 output={"times": [0.6], "pictures": False, **output})
+
+
+# ---------------------------------------------------------------------------
+# options an output declares
+# ---------------------------------------------------------------------------
+
+
+class CellCount(Output):
+    """A third party's output with an option of its own: how often it counts the cells."""
+
+    name = "cell_count"
+    options = {"count_every": OutputOption(2, partial(number, integer=True, at_least=1), "steps between counts")}
+
+    def start(self, run):
+        self.every = run.model.output["count_every"]
+        self.counted = []
+
+    def record(self, run):
+        if run.step_index % self.every == 0:
+            self.counted.append(run.step_index)
+        if run.is_root:
+            (Path(run.out_dir) / "counted.json").write_text(json.dumps(self.counted))
+
+
+class CellCountPlugin:
+    @hookimpl
+    def primordia_outputs(self):
+        return [CellCount]
+
+
+@pytest.fixture
+def cell_count():
+    with registered(CellCountPlugin()):
+        yield
+
+
+def test_a_plugin_output_option_is_accepted_with_its_default(cell_count):
+    assert small_model().output["count_every"] == 2
+    assert small_model(count_every=3).output["count_every"] == 3
+
+
+def test_a_plugin_output_option_is_checked_by_its_declaration(cell_count):
+    with pytest.raises(ConfigError) as caught:
+        small_model(count_every=0)
+    assert str(caught.value) == "output.count_every must be an integer >= 1, got 0"
+
+
+def test_an_unknown_output_key_is_one_error_listing_the_declared_ones(cell_count):
+    with pytest.raises(ConfigError) as caught:
+        small_model(count_evry=3)
+    message = str(caught.value)
+    assert message.startswith("unknown key output.count_evry (known: ") and "\n" not in message
+    assert all(key in message for key in ("times", "series_every", "pictures", "displacement_scale", "count_every"))
+
+
+def test_without_its_plugin_the_option_is_unknown():
+    with pytest.raises(ConfigError, match="unknown key output.count_every"):
+        small_model(count_every=3)
+
+
+def test_a_run_hands_the_option_to_its_output(cell_count, tmp_path):
+    small_model(count_every=3, series_every=1).run(backend="skfem", out=tmp_path)  # steps 1, 2, 3
+    assert json.loads((tmp_path / "counted.json").read_text()) == [3]  # by the default, 2: [2]
+
+
+def test_a_key_two_outputs_declare_is_refused():
+    class Thumbnails(Output):
+        name = "thumbnails"
+        options = {"pictures": OutputOption(False, flag)}
+
+    with pytest.raises(ConfigError, match="'pictures' is declared by two outputs, 'pictures' and 'thumbnails'"):
+        declared_options([Pictures, Thumbnails])
+
+
+@pytest.mark.parametrize("output, message", [
+    ({"pictures": "false"}, "output.pictures must be true or false, got 'false'"),
+    ({"displacement_scale": -1}, "output.displacement_scale must be a number >= 0, got -1"),
+    ({"series_every": 0}, "output.series_every must be an integer >= 1 (steps), got 0"),
+    ({"times": [0.6, "end"]}, "output.times[1] must be a number, got 'end'"),
+])
+def test_built_in_options_are_checked_in_one_line(output, message):
+    with pytest.raises(ConfigError) as caught:
+        small_model(**output)
+    assert str(caught.value) == message
+
+
+def test_the_resolved_output_table_holds_every_declared_default():
+    output = small_model().output
+    assert output["pictures"] is False and output["displacement_scale"] == 1.0 and output["series_every"] == 10
+
+
+# ---------------------------------------------------------------------------
+# series, through a stand-in for a run
+# ---------------------------------------------------------------------------
+
+
+class StandInRun:
+    """What outputs read of a run, without a finite element solve: m = t everywhere."""
+
+    def __init__(self, out_dir: Path):
+        self.out_dir, self.mesh_data, self.is_root = out_dir, MESH, True
+        self.time, self.step_index = 0.0, 0
+
+    def advance(self, dt: float = 0.2) -> None:
+        self.time, self.step_index = round(self.time + dt, 12), self.step_index + 1
+
+    def vertex_values(self):
+        return {"m": np.full(MESH.num_vertices, self.time)}
+
+    def field_statistics(self):
+        return {"m": {"integral": 16 * self.time, "min": self.time, "max": self.time}}
+
+    def diagnostic_values(self):
+        return {}
+
+    def iteration_counts(self):
+        return {"newton_iterations": 2}
+
+    def step_sizes(self):
+        return {"dt": 0.2}
+
+    def summary(self, status):
+        return {"status": status, "steps": self.step_index, "time": self.time}
+
+
+def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_path):
+    run, series = StandInRun(tmp_path), ScalarSeriesNetcdf()
+    series.start(run)
+    run.advance()
+    series.record(run)
+    state = series.state()
+    run.advance()
+    series.record(run)  # written after the checkpoint: gone when the run continues from it
+    with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
+        np.testing.assert_allclose(data["time"], [0.0, 0.2, 0.4])
+        np.testing.assert_allclose(data["m_integral"], [0.0, 3.2, 6.4])
+    resumed = ScalarSeriesNetcdf()
+    resumed.resume(run, state)
+    with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
+        np.testing.assert_allclose(data["time"], [0.0, 0.2])
+    assert leftovers(tmp_path) == []
+
+
+def test_the_fields_series_lists_every_snapshot(tmp_path):
+    import meshio
+
+    run, fields = StandInRun(tmp_path), FieldsXdmf()
+    fields.start(run)
+    for _ in range(2):
+        run.advance()
+        fields.snapshot(run)
+    with meshio.xdmf.TimeSeriesReader(tmp_path / "fields.xdmf") as reader:
+        reader.read_points_cells()
+        times = [reader.read_data(k)[0] for k in range(reader.num_steps)]
+    assert times == [0.2, 0.4]
+
+
+# ---------------------------------------------------------------------------
+# atomic files: a write that dies leaves the previous file
+# ---------------------------------------------------------------------------
+
+
+def test_an_interrupted_summary_write_leaves_the_previous_summary(tmp_path, monkeypatch):
+    run, summary = StandInRun(tmp_path), Summary()
+    summary.start(run)
+    before = (tmp_path / "summary.json").read_bytes()
+    assert json.loads(before)["status"] == "running"
+
+    def die_half_way(self, data):
+        with open(self, "wb") as partial_file:
+            partial_file.write(data[: len(data) // 2])
+        raise WriterDied("killed while writing summary.json")
+
+    monkeypatch.setattr(Path, "write_bytes", die_half_way)
+    run.advance()
+    with pytest.raises(WriterDied):
+        summary.finish(run, "completed")
+    monkeypatch.undo()
+    assert (tmp_path / "summary.json").read_bytes() == before
+    assert leftovers(tmp_path) == []
+    summary.finish(run, "completed")
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "completed"
