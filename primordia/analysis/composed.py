@@ -251,7 +251,7 @@ def _transport(module, context: _Context) -> SpeciesTransport:
 
 
 def _poroelastic(module, context: _Context) -> PoroelasticWaves:
-    if module.opts.get("conductivity") is not None:
+    if module.settings.get("conductivity") is not None:
         raise ConfigError("physics.poroelasticity.conductivity varies in space: the plane-wave analysis "
                           "needs a uniform hydraulic conductivity kappa")
     mu, lam = module.lame()

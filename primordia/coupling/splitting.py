@@ -37,13 +37,14 @@ from primordia.physics.base import Subproblem
 
 class SplittingScheme(ABC):
     name: str
-    #: Options of the ``[coupling]`` table this scheme reads (with defaults).
+    #: Options of the ``[coupling]`` table this scheme reads (with defaults); the values of a run are
+    #: ``self.settings`` (the table's values over these defaults).
     options: dict = {"inner_steps": 1}
 
-    def __init__(self, physics: list, **options):
+    def __init__(self, physics: list, **given):
         self.physics = physics
-        self.opts = merge_options(f"coupling scheme '{self.name}'", self.options, options)
-        number(self.opts.get("inner_steps", 1), "coupling.inner_steps", at_least=1, integer=True)
+        self.settings: dict = merge_options(f"coupling scheme '{self.name}'", self.options, given)
+        number(self.settings.get("inner_steps", 1), "coupling.inner_steps", at_least=1, integer=True)
 
     def field_groups(self, physics: list) -> dict[str, list]:
         """Which fields are solved together: by default, as each module groups its own."""
@@ -78,7 +79,7 @@ class Sequential(SplittingScheme):
     def advance(self, sim, t0, dt):
         stats = {}
         for flow in self.flows:
-            stats.update(sim.advance(flow, t0, dt, self.opts["inner_steps"]))
+            stats.update(sim.advance(flow, t0, dt, self.settings["inner_steps"]))
         return stats
 
 
@@ -95,7 +96,7 @@ class Strang(SplittingScheme):
         self.rest = [solver for flow in self.flows[1:] for solver in flow]
 
     def advance(self, sim, t0, dt):
-        inner = self.opts["inner_steps"]
+        inner = self.settings["inner_steps"]
         stats = sim.advance(self.first, t0, 0.5 * dt, inner)
         stats.update(sim.advance(self.rest, t0, dt, inner))
         for name, solve in sim.advance(self.first, t0 + 0.5 * dt, 0.5 * dt, inner).items():
@@ -109,10 +110,10 @@ class FixedPoint(SplittingScheme):
     name = "fixed_point"
     options = {"tolerance": 1e-8, "max_iterations": 50}
 
-    def __init__(self, physics, **options):
-        super().__init__(physics, **options)
-        number(self.opts["tolerance"], "coupling.tolerance", above=0)
-        number(self.opts["max_iterations"], "coupling.max_iterations", at_least=1, integer=True)
+    def __init__(self, physics, **given):
+        super().__init__(physics, **given)
+        number(self.settings["tolerance"], "coupling.tolerance", above=0)
+        number(self.settings["max_iterations"], "coupling.max_iterations", at_least=1, integer=True)
 
     def advance(self, sim, t0, dt):
         groups = sim.disc.groups()
@@ -122,17 +123,17 @@ class FixedPoint(SplittingScheme):
             self._work = {g: (vector.duplicate(), vector.duplicate()) for g, vector in vectors.items()}
         stats = {}
         with sim.substep(groups, t0 + dt, dt):
-            for iteration in range(1, self.opts["max_iterations"] + 1):
+            for iteration in range(1, self.settings["max_iterations"] + 1):
                 for g, vector in vectors.items():
                     vector.copy(self._work[g][0])
                 for solver in sim.solvers:
                     accumulate(stats, solver.sub.name, solver.solve())
                 change = max(_relative_change(*self._work[g], vectors[g]) for g in groups)
-                if change < self.opts["tolerance"]:
+                if change < self.settings["tolerance"]:
                     break
             else:
-                raise SolverError(f"fixed-point coupling did not converge in {self.opts['max_iterations']} "
-                                  f"iterations (relative change {change:.2e} > tolerance {self.opts['tolerance']:g})")
+                raise SolverError(f"fixed-point coupling did not converge in {self.settings['max_iterations']} "
+                                  f"iterations (relative change {change:.2e} > tolerance {self.settings['tolerance']:g})")
         sim.record_coupling_iterations(self.name, iteration)
         return stats
 

@@ -144,7 +144,8 @@ class Physics(ABC):
     name: ClassVar[str]
     #: Parameters read by this module (seed names and defaults).
     parameters: ClassVar[tuple[Parameter, ...]] = ()
-    #: Non-numeric options of the module's config table ``[physics.NAME]``, with defaults.
+    #: The options of the module's config table ``[physics.NAME]``, with their defaults; the values
+    #: of a run are ``self.settings`` (the table's values over these defaults).
     options: ClassVar[Mapping[str, Any]] = {}
     #: Fields this module reads but another module provides.
     requires: ClassVar[tuple[str, ...]] = ()
@@ -155,15 +156,15 @@ class Physics(ABC):
     #: Whether the module states its balance laws at finite strain on a reference configuration.
     finite_strain: ClassVar[bool] = False
 
-    def __init__(self, params: Mapping[str, float], kinetics=None, growth_law=None, **options):
+    def __init__(self, params: Mapping[str, float], kinetics=None, growth_law=None, **given):
         self.params = params
         self.kinetics = kinetics
         self.growth_law = growth_law
-        self.opts = merge_options(f"physics {self.name}", self.options, options)
+        self.settings: dict[str, Any] = merge_options(f"physics {self.name}", self.options, given)
         self.validate_options()
 
     def validate_options(self) -> None:
-        """Check ``self.opts``; raise :class:`ConfigError` naming a bad value."""
+        """Check ``self.settings``; raise :class:`ConfigError` naming a bad value."""
 
     def check_composition(self, modules: list["Physics"]) -> None:
         """Refuse, in one line (:class:`ConfigError`), a model this module cannot join."""
@@ -207,7 +208,7 @@ class Physics(ABC):
             return
         from primordia.physics.boundary_conditions import conditions_from_config
 
-        for condition in conditions_from_config(self.opts["boundary"], mesh_data, mesh_data.gdim):
+        for condition in conditions_from_config(self.settings["boundary"], mesh_data, mesh_data.gdim):
             vertices = mesh_data.points[np.unique(mesh_data.boundaries[condition.boundary])]
             condition.formula.check(vertices, times)
 

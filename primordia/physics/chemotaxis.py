@@ -135,12 +135,12 @@ class Chemotaxis(Physics):
         for key, allowed in (("flux_scheme", FLUX_SCHEMES), ("accumulation", ACCUMULATIONS),
                              ("perturbation_shape", PERTURBATION_SHAPES), ("solve", SOLVES),
                              ("preconditioner", COUPLED_PRECONDITIONERS)):
-            if self.opts[key] not in allowed:
-                raise ConfigError(f"{where}.{key} must be one of {', '.join(allowed)}, got {self.opts[key]!r}")
-        number(self.opts["perturbation"], f"{where}.perturbation", at_least=0, below=1)
-        number(self.opts["seed"], f"{where}.seed", integer=True)
-        numbers(self.opts["wavenumber"], f"{where}.wavenumber", length=(1, 2, 3))
-        if self.opts["solve"] == "coupled" and self.opts["flux_scheme"] == "exponential_fitting":
+            if self.settings[key] not in allowed:
+                raise ConfigError(f"{where}.{key} must be one of {', '.join(allowed)}, got {self.settings[key]!r}")
+        number(self.settings["perturbation"], f"{where}.perturbation", at_least=0, below=1)
+        number(self.settings["seed"], f"{where}.seed", integer=True)
+        numbers(self.settings["wavenumber"], f"{where}.wavenumber", length=(1, 2, 3))
+        if self.settings["solve"] == "coupled" and self.settings["flux_scheme"] == "exponential_fitting":
             raise ConfigError(f"{where}.solve = \"coupled\" needs flux_scheme = \"galerkin\" "
                               "(the exponentially fitted flux acts on the species as separate fields)")
 
@@ -150,7 +150,7 @@ class Chemotaxis(Physics):
         return self.kinetics.species
 
     def fields(self):
-        group = self.name if self.opts["solve"] == "coupled" else None  # coupled: one mixed function
+        group = self.name if self.settings["solve"] == "coupled" else None  # coupled: one mixed function
         return [FieldSpec(s.name, degree=1, description=s.description, group=group) for s in self.species]
 
     def sensitivity(self, species: Species, density, ops):
@@ -159,7 +159,7 @@ class Chemotaxis(Physics):
 
     def setup(self, disc):
         self.disc = disc
-        if self.opts["flux_scheme"] == "exponential_fitting":
+        if self.settings["flux_scheme"] == "exponential_fitting":
             for species in self.species:
                 if species.attractant and not (disc.is_alone(species.name) and disc.is_alone(species.attractant)):
                     raise ConfigError("flux_scheme = \"exponential_fitting\" needs the species as separate fields; "
@@ -173,17 +173,17 @@ class Chemotaxis(Physics):
                 points = disc.mesh_data.points
                 state = self.kinetics.initial_state(t0, NUMPY.at(tuple(points.T)))[species.name]
                 disc.set_vertex_values(species.name, np.broadcast_to(state, len(points))
-                                       * (1.0 + self.opts["perturbation"] * self._perturbation(points)))
+                                       * (1.0 + self.settings["perturbation"] * self._perturbation(points)))
             else:
                 disc.interpolate(species.name, lambda x, name=species.name: np.broadcast_to(
                     self.kinetics.initial_state(t0, NUMPY.at(x))[name], x.shape[1:]).copy())
 
     def _perturbation(self, points: np.ndarray) -> np.ndarray:
         """Relative perturbation of the perturbed species at the vertices: U(-1, 1) noise, or prod_i cos(k_i x_i)."""
-        if self.opts["perturbation_shape"] == "random":
-            return np.random.default_rng(self.opts["seed"]).uniform(-1.0, 1.0, len(points))
+        if self.settings["perturbation_shape"] == "random":
+            return np.random.default_rng(self.settings["seed"]).uniform(-1.0, 1.0, len(points))
         shape = np.ones(len(points))
-        for axis, k in enumerate(self.opts["wavenumber"][: points.shape[1]]):
+        for axis, k in enumerate(self.settings["wavenumber"][: points.shape[1]]):
             shape *= np.cos(k * points[:, axis])
         return shape
 
@@ -200,7 +200,7 @@ class Chemotaxis(Physics):
         disc, motion = self.disc, self.disc.kinematics
         dx = disc.dx_degree(motion.quadrature_degree) if motion.moves else disc.dx
         c, c_previous, test = disc.field(species.name), disc.previous(species.name), disc.test(species.name)
-        conservative = self.opts["accumulation"] == "conservative" and species.diffusivity is not None
+        conservative = self.settings["accumulation"] == "conservative" and species.diffusivity is not None
         residual = accumulation(c, c_previous, test, disc.dt, disc.dx_lumped, motion.volume_ratio,
                                 motion.volume_ratio_previous if conservative else None)  # (2.3a-d), (4.17a-d)
         production, loss_rate = reactions[species.name]
@@ -241,11 +241,11 @@ class Chemotaxis(Physics):
         return tuple(species.name for species in self.species if self._fitted(species))
 
     def _fitted(self, species: Species) -> bool:
-        return species.attractant is not None and self.opts["flux_scheme"] == "exponential_fitting"
+        return species.attractant is not None and self.settings["flux_scheme"] == "exponential_fitting"
 
     def subproblems(self):
         reactions = self._reactions()
-        if self.opts["solve"] == "coupled":
+        if self.settings["solve"] == "coupled":
             return [self._coupled(reactions)]
         problems = []
         for species in self.species:
@@ -279,7 +279,7 @@ class Chemotaxis(Physics):
         return Subproblem(name=self.name, unknown=unknown, residual=residual,
                           jacobian=ufl.derivative(residual, unknown), linear=False,
                           fields=self.disc.unknown_fields(first),
-                          petsc_options=_coupled_defaults(self.opts["preconditioner"], self.species))
+                          petsc_options=_coupled_defaults(self.settings["preconditioner"], self.species))
 
 
 def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict:

@@ -154,20 +154,20 @@ class PoroelasticGrowth(Physics):
     options = {"shear_modulus": 4.0, "quadrature_degree": 3, "initial_equilibrium": True, "initial_load_steps": 4,
                "boundary": [], "preconditioner": "auto", "stabilisation": [1.0, 0.1]}
 
-    def __init__(self, params, kinetics=None, growth_law=None, **options):
-        super().__init__(params, kinetics=kinetics, growth_law=growth_law, **options)
+    def __init__(self, params, kinetics=None, growth_law=None, **given):
+        super().__init__(params, kinetics=kinetics, growth_law=growth_law, **given)
         self.requires = tuple(growth_law.requires) if growth_law is not None else ()
 
     def validate_options(self):
         where = f"physics.{self.name}"
-        number(self.opts["shear_modulus"], f"{where}.shear_modulus", above=0)
+        number(self.settings["shear_modulus"], f"{where}.shear_modulus", above=0)
         for key in ("quadrature_degree", "initial_load_steps"):
-            number(self.opts[key], f"{where}.{key}", at_least=1, integer=True)
-        flag(self.opts["initial_equilibrium"], f"{where}.initial_equilibrium")
-        if self.opts["preconditioner"] not in PRECONDITIONERS:
+            number(self.settings[key], f"{where}.{key}", at_least=1, integer=True)
+        flag(self.settings["initial_equilibrium"], f"{where}.initial_equilibrium")
+        if self.settings["preconditioner"] not in PRECONDITIONERS:
             raise ConfigError(f"{where}.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
-                              f"got {self.opts['preconditioner']!r}")
-        numbers(self.opts["stabilisation"], f"{where}.stabilisation", length=2)  # [beta_s, beta_f]
+                              f"got {self.settings['preconditioner']!r}")
+        numbers(self.settings["stabilisation"], f"{where}.stabilisation", length=2)  # [beta_s, beta_f]
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
@@ -181,9 +181,9 @@ class PoroelasticGrowth(Physics):
     def setup(self, disc):
         self.disc = disc
         self.growth_law.check_dimension(disc.gdim)
-        self.dx = disc.dx_degree(self.opts["quadrature_degree"])
+        self.dx = disc.dx_degree(self.settings["quadrature_degree"])
         self.dx_inertia = disc.dx_degree(4)  # the P2 mass matrix, exactly
-        self.conditions = conditions_from_config(self.opts["boundary"], disc.mesh_data, disc.gdim)
+        self.conditions = conditions_from_config(self.settings["boundary"], disc.mesh_data, disc.gdim)
         self.velocity = disc.rate("u")
         u, u_previous = disc.field("u"), disc.previous("u")
         self.F, self.F_previous = deformation_gradient(u), deformation_gradient(u_previous)
@@ -195,7 +195,7 @@ class PoroelasticGrowth(Physics):
             metric=self.J * ufl.inv(self.C),                         # J C^-1 (4.17a)-(4.17d)
             volume_change=ufl.tr(self.C) - disc.gdim,                # tr C - d (4.17c)
             velocity=None, deformation_gradient=self.F,
-            quadrature_degree=self.opts["quadrature_degree"]), self.name)
+            quadrature_degree=self.settings["quadrature_degree"]), self.name)
 
     def growth_tensor(self, ramp=None, time=None):
         """F_g of the growth law at the current fields and time (or ``time``); I + s (F_g - I) with a ramp s."""
@@ -213,14 +213,14 @@ class PoroelasticGrowth(Physics):
 
     def initialise(self, disc):
         """psi = mu: the stress-free value when F_e = I; u, p start at 0 (seed eq. (2.6)), then the initial solve."""
-        disc.interpolate("psi", float(self.opts["shear_modulus"]))
+        disc.interpolate("psi", float(self.settings["shear_modulus"]))
 
     # -- the balance laws --------------------------------------------------------------------------
     def _stress_terms(self, F_g):
         """(P_e + P_f) : Grad w and the constraint, for a given growth tensor."""
         disc, prm = self.disc, self.params
         u_test, psi_test = disc.test("u"), disc.test("psi")
-        P = (elastic_stress(self.F, F_g, disc.field("psi"), self.opts["shear_modulus"])     # (4.11)
+        P = (elastic_stress(self.F, F_g, disc.field("psi"), self.settings["shear_modulus"])     # (4.11)
              + fluid_stress(self.F, disc.field("p"), prm["alpha_BW"]))                     # P_f
         return (stress_divergence(P, u_test, self.dx)                                      # (4.12a)
                 + incompressibility(self.J, ufl.det(F_g), psi_test, self.dx))              # (4.12c)
@@ -258,10 +258,10 @@ class PoroelasticGrowth(Physics):
     def _solver(self) -> dict:
         """Solver defaults, the fields of the unknown and the preconditioning form (seed section 5.2)."""
         disc = self.disc
-        beta_s, beta_f = self.opts["stabilisation"]
-        stabilisation = fixed_stress_stabilisation(beta_s, beta_f, self.opts["shear_modulus"], disc.trial("psi"),
+        beta_s, beta_f = self.settings["stabilisation"]
+        stabilisation = fixed_stress_stabilisation(beta_s, beta_f, self.settings["shear_modulus"], disc.trial("psi"),
                                                    disc.test("psi"), disc.trial("p"), disc.test("p"), self.dx)
-        return {"petsc_options": _solver_defaults(self.opts["preconditioner"], disc.gdim), "fields": disc.unknown_fields("u"),
+        return {"petsc_options": _solver_defaults(self.settings["preconditioner"], disc.gdim), "fields": disc.unknown_fields("u"),
                 "rigid_body": "u", "preconditioner": stabilisation}
 
     def _failure_hint(self) -> str | None:
@@ -278,14 +278,14 @@ class PoroelasticGrowth(Physics):
         None with ``initial_equilibrium = false``: the fields then start as initialised
         (u = 0, psi = mu, p = 0, or as another module set them, e.g. a manufactured solution).
         """
-        if not self.opts["initial_equilibrium"]:
+        if not self.settings["initial_equilibrium"]:
             return []
         disc = self.disc
         unknown = disc.unknown("u")
         static = self._static_residual(self.growth_tensor(self.ramp))
         equilibrium = Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
                                  jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
-                                 continuation=(self.ramp, self.opts["initial_load_steps"]),
+                                 continuation=(self.ramp, self.settings["initial_load_steps"]),
                                  **self._solver(), failure_hint=self._failure_hint())
         return [equilibrium, self._initial_velocity()]
 

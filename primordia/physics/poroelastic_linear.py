@@ -88,33 +88,33 @@ class LinearPoroelasticity(Physics):
                "conductivity": None, "boundary": [], "preconditioner": "lu"}
 
     def validate_options(self):
-        if self.opts["displacement_degree"] not in (1, 2):
+        if self.settings["displacement_degree"] not in (1, 2):
             raise ConfigError("physics.poroelasticity.displacement_degree must be 1 (P1-P1, the seed's) "
                               "or 2 (Taylor-Hood P2-P1)")
         for key in ("shear_modulus", "lame_lambda"):
-            if self.opts[key] is not None:
-                number(self.opts[key], f"physics.poroelasticity.{key}", above=0)
-        if self.opts["preconditioner"] not in PRECONDITIONERS:
+            if self.settings[key] is not None:
+                number(self.settings[key], f"physics.poroelasticity.{key}", above=0)
+        if self.settings["preconditioner"] not in PRECONDITIONERS:
             raise ConfigError(f"physics.poroelasticity.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
-                              f"got {self.opts['preconditioner']!r}")
-        if self.opts["conductivity"] is not None:
-            Formula(self.opts["conductivity"], dict(self.params), "physics.poroelasticity.conductivity")
+                              f"got {self.settings['preconditioner']!r}")
+        if self.settings["conductivity"] is not None:
+            Formula(self.settings["conductivity"], dict(self.params), "physics.poroelasticity.conductivity")
 
     def lame(self) -> tuple[float, float]:
         """(mu, lambda): given directly, or from E and nu."""
         mu, lmbda = lame(self.params)
-        mu = self.opts["shear_modulus"] if self.opts["shear_modulus"] is not None else mu
-        lmbda = self.opts["lame_lambda"] if self.opts["lame_lambda"] is not None else lmbda
+        mu = self.settings["shear_modulus"] if self.settings["shear_modulus"] is not None else mu
+        lmbda = self.settings["lame_lambda"] if self.settings["lame_lambda"] is not None else lmbda
         return mu, lmbda
 
     def fields(self):
-        return [FieldSpec("u", degree=self.opts["displacement_degree"], vector=True, group=GROUP, displacement=True,
+        return [FieldSpec("u", degree=self.settings["displacement_degree"], vector=True, group=GROUP, displacement=True,
                           description="skeleton displacement"),
                 FieldSpec("p", degree=1, group=GROUP, description="pore pressure")]
 
     def setup(self, disc):
         self.disc = disc
-        self.conditions = conditions_from_config(self.opts["boundary"], disc.mesh_data, disc.gdim)
+        self.conditions = conditions_from_config(self.settings["boundary"], disc.mesh_data, disc.gdim)
         self.velocity = disc.rate("u")
         disc.provide("lame_constants", self.lame(), self.name)
         # small strain: the species are advected by u_t and the FGF sink reads div u (seed (2.3a), (2.3c))
@@ -123,9 +123,9 @@ class LinearPoroelasticity(Physics):
 
     def conductivity(self):
         """kappa(x): the parameter, or the formula of option ``conductivity``."""
-        if self.opts["conductivity"] is None:
+        if self.settings["conductivity"] is None:
             return self.params["kappa"]
-        return Formula(self.opts["conductivity"], dict(self.params), "conductivity").ufl(self.disc.x, self.disc.t)
+        return Formula(self.settings["conductivity"], dict(self.params), "conductivity").ufl(self.disc.x, self.disc.t)
 
     def initialise(self, disc):
         """Seed eq. (2.6): u = 0, du/dt = 0, p = 0 (fields start at zero)."""
@@ -153,7 +153,7 @@ class LinearPoroelasticity(Physics):
         jacobian = ufl.derivative(residual, unknown)
         return [Subproblem(name=self.name, unknown=unknown, residual=residual, jacobian=jacobian, bcs=bcs,
                            linear=True, constant_jacobian=jacobian_is_constant(jacobian, disc),
-                           petsc_options=_solver_defaults(self.opts["preconditioner"]),
+                           petsc_options=_solver_defaults(self.settings["preconditioner"]),
                            fields=disc.unknown_fields("u"), rigid_body="u",
                            preconditioner=fixed_stress(prm["alpha_BW"] / (self.drained_bulk_modulus() * disc.dt),
                                                        disc.trial("p"), q, disc.dx))]

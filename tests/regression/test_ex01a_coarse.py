@@ -60,7 +60,7 @@ def test_the_run_reaches_t_200_on_the_coarse_mesh(fitted):
     assert sim.status == "completed"
     assert sim.step_index == 1000 and sim.time == pytest.approx(200.0)
     assert model.mesh_data.num_cells == 2 * 40 * 40
-    assert model.physics_objects[0].opts["flux_scheme"] == "exponential_fitting"
+    assert model.physics_objects[0].settings["flux_scheme"] == "exponential_fitting"
 
 
 def test_integral_of_m_is_conserved_to_round_off(fitted):
@@ -88,7 +88,7 @@ def test_galerkin_goes_negative_where_the_fitted_flux_does_not(fitted, galerkin)
     fitted_min = series(fitted[2])["m_min"].values.min()
     galerkin_series = series(galerkin[2])
     galerkin_min = galerkin_series["m_min"].values.min()
-    assert galerkin[0].physics_objects[0].opts["flux_scheme"] == "galerkin"
+    assert galerkin[0].physics_objects[0].settings["flux_scheme"] == "galerkin"
     assert galerkin_min < -0.1 < 0.0 <= fitted_min, (galerkin_min, fitted_min)
     # Galerkin conserves mass as well (test function 1): the difference is positivity only
     m_integral = galerkin_series["m_integral"].values

@@ -39,13 +39,13 @@ class Recorder(Physics):
 
     @property
     def requires(self):
-        return (self.opts["read"],)
+        return (self.settings["read"],)
 
     def fields(self):
         return []
 
     def setup(self, disc):
-        self.calls.append(("setup", disc.field(self.opts["read"]).ufl_shape))
+        self.calls.append(("setup", disc.field(self.settings["read"]).ufl_shape))
 
     def initialise(self, disc):
         self.calls.append(("initialise",))
@@ -55,7 +55,7 @@ class Recorder(Physics):
 
     def before_step(self, t, dt):
         self.calls.append(("before_step", t, dt))
-        if abs(t - self.opts["fail_at"]) < 1e-9 and self.opts["fail_dt"] in (0.0, dt):
+        if abs(t - self.settings["fail_at"]) < 1e-9 and self.settings["fail_dt"] in (0.0, dt):
             raise SolverError(f"recorder: injected failure at t = {t:g}")
 
 

@@ -165,9 +165,9 @@ def test_homogeneous_form_is_the_kinetics_behind_the_wave():
     """The analysis linearises the saturated wave, w = omega_1 (seed section 3); without a wave, itself."""
     with_wave = kinetics(priming_wave=True, omega_1=0.8)
     behind = with_wave.homogeneous()
-    assert behind.opts["priming_wave"] is False and type(behind) is Painter2018
+    assert behind.settings["priming_wave"] is False and type(behind) is Painter2018
     assert behind.priming_wave(0.0, NUMPY) == 0.8
-    assert with_wave.opts["priming_wave"] is True  # the run's kinetics is untouched
+    assert with_wave.settings["priming_wave"] is True  # the run's kinetics is untouched
     still = kinetics(priming_wave=False)
     assert still.homogeneous() is still
 

@@ -79,12 +79,13 @@ class Kinetics(ABC):
     species: ClassVar[tuple[Species, ...]] = ()
     #: Parameters the kinetics reads (reactions, diffusivities, sensitivities, initial data), with defaults.
     parameters: ClassVar[tuple[Parameter, ...]] = ()
-    #: Non-numeric options accepted in the ``[kinetics]`` table, with defaults.
+    #: Non-numeric options accepted in the ``[kinetics]`` table, with defaults; the values of a run
+    #: are ``self.settings`` (the table's values over these defaults).
     options: ClassVar[Mapping[str, Any]] = {}
 
-    def __init__(self, params: Mapping[str, float], **options):
+    def __init__(self, params: Mapping[str, float], **given):
         self.params = params
-        self.opts = merge_options(f"kinetics {self.name}", self.options, options)
+        self.settings: dict[str, Any] = merge_options(f"kinetics {self.name}", self.options, given)
         check_species(self)
 
     @property

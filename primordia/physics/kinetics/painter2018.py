@@ -104,7 +104,7 @@ class Painter2018(Kinetics):
     def priming_wave(self, t, ops):
         """w(x, t) of seed eq. (2.4); ``omega_1`` everywhere when the wave is off."""
         p = self.params
-        if not self.opts["priming_wave"]:
+        if not self.settings["priming_wave"]:
             return p["omega_1"]
         x2 = ops.x[1]
         return 0.5 * p["omega_1"] * (1.0 + ops.tanh(p["omega_2"] * (t - x2 / p["omega_3"])))
@@ -153,6 +153,6 @@ class Painter2018(Kinetics):
 
     def homogeneous(self):
         """The same kinetics behind the priming wave, w = omega_1 everywhere (seed section 3)."""
-        if not self.opts["priming_wave"]:
+        if not self.settings["priming_wave"]:
             return self
-        return type(self)(self.params, **{**self.opts, "priming_wave": False})
+        return type(self)(self.params, **{**self.settings, "priming_wave": False})
