@@ -56,7 +56,7 @@ def main(n: int, steps: int, dt: float = 0.2) -> float:
     x = ufl.SpatialCoordinate(domain)
     t = fem.Constant(domain, 0.0)
 
-    # initial data (2.5), perturbed m
+    # initial data (seed eq. (2.6)), perturbed m
     rng = np.random.default_rng(1)
     m.x.array[:] = P["m0"] * (1 + 0.01 * rng.uniform(-1, 1, m.x.array.size))
     b0 = hill(P["m0"], 3) * P["m0"]

@@ -1,4 +1,4 @@
-"""P1 convergence of the chemotaxis system (seed eqs. (2.2a)-(2.2d)) by manufactured solutions.
+"""P1 convergence of the chemotaxis system (seed eqs. (2.3a)-(2.3d)) by manufactured solutions.
 
 Both transport schemes of ``primordia.physics.chemotaxis`` (the exponentially
 fitted edge flux and plain Galerkin) on both backends: the L2 error of every

@@ -1,4 +1,4 @@
-r"""Convergence of the coupled poro-mechano-chemical model (seed eqs. (2.1)-(2.4)) by manufactured solutions.
+r"""Convergence of the coupled poro-mechano-chemical model (seed eqs. (2.1)-(2.5)) by manufactured solutions.
 
 The model of seed example 1b: ``chemotaxis`` + ``poroelasticity`` (P1-P1) +
 ``active_stress`` + ``mechanochemical``, on both backends.  The sources of all

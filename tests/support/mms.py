@@ -14,14 +14,14 @@ checked against the seed's formulas in ``tests/unit/test_painter2018.py``).
 
 Problems:
 
-* :class:`ChemotaxisProblem`: seed eqs. (2.2a)-(2.2d) without solid.  Every
+* :class:`ChemotaxisProblem`: seed eqs. (2.3a)-(2.3d) without solid.  Every
   species is a product of cosines cos(k pi x) cos(l pi y) with integer k, l
   around a positive mean, so on the unit square grad c . n = 0 for each of them:
-  the zero-flux conditions (2.6a), including the total cell flux
+  the zero-flux conditions (2.7a), including the total cell flux
   (D_m grad m - chi m grad f) . n, hold exactly and no boundary source is needed.
   m stays in [0.5, 1.5] and e in [0.25, 0.75].
 * :class:`PoroelasticProblem`: seed eqs. (2.1a)-(2.1c) (optionally with the
-  active stress (2.4) of a given cell density), the displacement and pressure
+  active stress (2.5) of a given cell density), the displacement and pressure
   given as config formula strings, so that the *same strings* are the
   Dirichlet data of the run's boundary conditions and, through
   :class:`~primordia.core.expressions.Formula`, the UFL / numpy exact solution.
@@ -56,7 +56,7 @@ from primordia.core.plugins import get_plugin_manager, hookimpl
 from primordia.physics.base import Physics
 
 SPECIES = ("m", "e", "f", "b")
-ADVECTED = ("m", "f", "b")  # seed eqs. (2.2a), (2.2c), (2.2d): e is not advected
+ADVECTED = ("m", "f", "b")  # seed eqs. (2.3a), (2.3c), (2.3d): e is not advected
 
 UFL_MATH = SimpleNamespace(cos=ufl.cos, exp=ufl.exp, pi=ufl.pi)
 NUMPY_MATH = SimpleNamespace(cos=np.cos, exp=np.exp, pi=np.pi)
@@ -95,9 +95,9 @@ def lame_constants(params) -> tuple[float, float]:
 
 # -- the balance laws, written from the seed ------------------------------------------------------
 def chemotaxis_residuals(params, kinetics, exact, time, x, velocity=None) -> dict:
-    """dc/dt [+ u_t . grad c] - div(flux_c) - R_c for each species (seed eqs. (2.2a)-(2.2d))."""
+    """dc/dt [+ u_t . grad c] - div(flux_c) - R_c for each species (seed eqs. (2.3a)-(2.3d))."""
     reactions = kinetics.rates({name: exact[name] for name in SPECIES}, time, ops_.UFL.at(x))
-    chi = params["alpha"] * ufl.exp(-params["gamma"] * exact["m"])  # seed eq. (2.2a)
+    chi = params["alpha"] * ufl.exp(-params["gamma"] * exact["m"])  # seed eq. (2.3a)
     fluxes = {  # dc/dt = div(flux) + R
         "m": params["D_m"] * ufl.grad(exact["m"]) - chi * exact["m"] * ufl.grad(exact["f"]),
         "e": None,
@@ -110,13 +110,13 @@ def chemotaxis_residuals(params, kinetics, exact, time, x, velocity=None) -> dic
         if fluxes[name] is not None:
             residual -= ufl.div(fluxes[name])
         if velocity is not None and name in ADVECTED:
-            residual += ufl.dot(velocity, ufl.grad(exact[name]))  # seed (2.2a), (2.2c), (2.2d)
+            residual += ufl.dot(velocity, ufl.grad(exact[name]))  # seed (2.3a), (2.3c), (2.3d)
         residuals[name] = residual
     return residuals
 
 
 def total_stress(params, u, p, m=None):
-    """lambda div u I + 2 mu eps(u) - p I [+ (lambda + 2 mu/3) tau m/(1 + zeta m^2) I] (seed (2.2), (2.4))."""
+    """lambda div u I + 2 mu eps(u) - p I [+ (lambda + 2 mu/3) tau m/(1 + zeta m^2) I] (seed (2.2), (2.5))."""
     mu, lmbda = lame_constants(params)
     identity = ufl.Identity(len(u))
     sigma = lmbda * ufl.div(u) * identity + mu * (ufl.grad(u) + ufl.grad(u).T) - p * identity
@@ -164,7 +164,7 @@ class ManufacturedProblem:
 
 
 class ChemotaxisProblem(ManufacturedProblem):
-    """Seed eqs. (2.2a)-(2.2d) on the unit square, every species decaying like exp(-t)."""
+    """Seed eqs. (2.3a)-(2.3d) on the unit square, every species decaying like exp(-t)."""
 
     fields = SPECIES
 
@@ -256,7 +256,7 @@ class _Sympy:
 
 
 class CoupledProblem(ManufacturedProblem):
-    """Chemotaxis + poroelasticity + active stress + mechano-chemical couplings (seed eqs. (2.1)-(2.4)).
+    """Chemotaxis + poroelasticity + active stress + mechano-chemical couplings (seed eqs. (2.1)-(2.5)).
 
     The species are the steady profiles of :func:`species_profiles`; u and p
     come from a :class:`PoroelasticProblem`.
@@ -273,7 +273,7 @@ class CoupledProblem(ManufacturedProblem):
     def residuals(self, params, kinetics, exact, time, x):
         velocity = ufl.diff(exact["u"], time)
         residuals = chemotaxis_residuals(params, kinetics, exact, time, x, velocity=velocity)
-        residuals["f"] += params["xi_f"] * ufl.div(exact["u"])  # seed eq. (2.2c): FGF sink
+        residuals["f"] += params["xi_f"] * ufl.div(exact["u"])  # seed eq. (2.3c): FGF sink
         residuals.update(poroelastic_residuals(params, exact, time, m=exact["m"]))
         return residuals
 

@@ -1,10 +1,10 @@
-"""Conditions (3.3)-(3.8), critical values, patterning spaces and the verdicts of seed sections 3.2-3.6.
+"""Conditions (3.6)-(3.9), critical values, patterning spaces and the verdicts of seed sections 3.2-3.6.
 
 What is asserted is what the theory guarantees:
 * a_0 (d_0) < 0 at some k  =>  a real positive growth rate (P has positive leading coefficient), so the
   region from the conditions lies inside the region from the eigenvalues, cell by cell;
-* Routh-Hurwitz (3.3) fails at k  <=>  P_2 has a root with Re >= 0 at k (exact, both directions);
-* the seed's (3.4)-(3.6) are necessary, not sufficient: their region contains the exact one, strictly.
+* Routh-Hurwitz (3.6) fails at k  <=>  P_2 has a root with Re >= 0 at k (exact, both directions);
+* the seed's (3.7a)-(3.7c) are necessary, not sufficient: their region contains the exact one, strictly.
 The converse of the first point (no other stationary instability) is not a theorem; for the seed's
 three parameter planes it is checked to hold up to one grid cell along the boundary.
 """
@@ -49,7 +49,7 @@ def test_patterning_space_from_conditions_matches_the_eigenvalues(x, y, coupled,
 
 
 def test_seed_conditions_are_necessary_not_sufficient():
-    """((3.4) or (3.5)) and (3.6) contains {a_0 < 0 somewhere}; between X^2 = 3 alpha Y and 4 alpha Y it is wrong."""
+    """((3.7a) or (3.7b)) and (3.7c) contains {a_0 < 0 somewhere}; between X^2 = 3 alpha Y and 4 alpha Y it is wrong."""
     ds = patterning_space("m0:0.05:6:41", "alpha:0:12:41", coupled=False, nk=24)
     exact = ds["unstable_conditions"].values.astype(bool)
     seed = ds["seed_conditions"].values.astype(bool)
@@ -104,7 +104,7 @@ def test_coupled_conditions_seed_theta_degenerate_once_corrected():
     printed = coupled_conditions(params, "seed")
     for name in ("3.7:theta_1", "3.7c", "3.8"):
         assert corrected.values[name] == 0.0 and printed.values[name] != 0.0
-    # with theta_1 = 0 the d_0 criterion is the uncoupled one on (X_c, Y_c): the corrected (3.7) curves are its
+    # with theta_1 = 0 the d_0 criterion is the uncoupled one on (X_c, Y_c): the corrected (3.8a)-(3.8c) curves are its
     alpha, Xc, Yc = d0_quadratic(linearise(params))
     assert corrected.values["3.7:theta_3"] == pytest.approx(4 * linearise(params).p_wave_modulus * Xc)
     assert corrected.values["3.7:theta_2"] == pytest.approx(3 * linearise(params).p_wave_modulus * Yc)

@@ -1,4 +1,4 @@
-"""Closed-form dispersion relation vs the numerical determinant of M (seed eq. (3.2), Def. 3.1-3.2).
+"""Closed-form dispersion relation vs the numerical determinant of M (seed eqs. (3.3)-(3.4), Definitions 3.1-3.2).
 
 Each correction to the seed's printed coefficients is checked where the printed
 and corrected forms differ, so each test fails if the correction is undone.
