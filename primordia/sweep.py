@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core.errors import ConfigError
+from primordia.core.validation import is_number
 
 #: The option that seeds the random initial perturbation (``--seeds``).
 SEED_KEY = "physics.chemotaxis.seed"
@@ -136,7 +137,7 @@ class Sweep:
                 model.parameters.declaration(key.split(".", 1)[1])  # unknown parameter, with suggestions
                 continue
             value = _lookup(resolved, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
+            if not is_number(value):
                 raise ConfigError(f"--vary {key}: not a number of the resolved configuration of {self.config}"
                                   + (" (--seeds needs physics = [\"chemotaxis\", ...])" if key == SEED_KEY else ""))
         self.config_text = self.config.read_text()

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core.errors import ConfigError
+from primordia.core.validation import number
 
 DEFAULT_OUT = Path("out") / "stability"
 
@@ -173,8 +174,7 @@ def _run_map(args, config, stem) -> int:
 
     if not args.x or not args.y:
         raise ConfigError("stability map needs --x NAME:LO:HI:N and --y NAME:LO:HI:N")
-    if args.nk < 2:
-        raise ConfigError(f"--nk must be >= 2, got {args.nk}")
+    number(args.nk, "--nk", integer=True, at_least=2)
     params, coupled = _seed_map_parameters(args, config)
     x, y = ParameterRange.parse(args.x), ParameterRange.parse(args.y)
     if args.critical is not None:

@@ -16,6 +16,7 @@ from collections.abc import Iterable
 from primordia.core.config import apply_overrides, load_config, parse_assignment
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import ParameterSet
+from primordia.core.validation import number
 from primordia.physics.seed_parameters import seed_parameters
 
 
@@ -32,9 +33,7 @@ def parse_parameter_assignment(text: str) -> tuple[str, float]:
     keys, value = parse_assignment(str(text))
     if keys[0] != "parameters" or len(keys) != 2:
         raise ConfigError(f"--set expects parameters.NAME=VALUE, got {text!r}")
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"--set {'.'.join(keys)}: value must be a number, got {value!r}")
-    return keys[1], float(value)
+    return keys[1], float(number(value, f"--set {'.'.join(keys)}: the value"))
 
 
 def read_parameters(config=None, assignments: Iterable[str] = ()) -> ParameterSet:

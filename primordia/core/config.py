@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from primordia.core.errors import ConfigError
+from primordia.core.validation import is_number
 
 SECTIONS = {
     "model": {"physics", "backend", "name", "description"},
@@ -133,23 +134,6 @@ def check_structure(config: dict) -> None:
                 raise ConfigError(f"unknown key {section}.{key} (known: {', '.join(sorted(allowed))})")
 
 
-def require(config: dict, section: str, key: str, kind=(int, float)):
-    """``config[section][key]``, checked for presence and type."""
-    try:
-        value = config[section][key]
-    except KeyError:
-        raise ConfigError(f"missing {section}.{key} in the configuration") from None
-    if not isinstance(value, kind) or isinstance(value, bool):
-        raise ConfigError(f"{section}.{key} must be a {_kind_name(kind)}, got {value!r}")
-    return value
-
-
-def _kind_name(kind) -> str:
-    if kind == (int, float):
-        return "number"
-    return getattr(kind, "__name__", str(kind))
-
-
 def merge_options(where: str, defaults, given) -> dict:
     """``defaults`` updated with ``given``; an unknown option, or one of the wrong type, is one error naming it.
 
@@ -191,7 +175,7 @@ def _is_kind(value, kind: str) -> bool:
     checks = {
         "true or false": lambda v: isinstance(v, bool),
         "an integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
-        "a number": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
+        "a number": is_number,
         "a string": lambda v: isinstance(v, str),
         "a list": lambda v: isinstance(v, list),
         "a table": lambda v: isinstance(v, dict),

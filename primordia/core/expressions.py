@@ -26,6 +26,7 @@ import numpy as np
 import ufl
 
 from primordia.core.errors import ConfigError
+from primordia.core.validation import is_number, number
 
 _UFL_FUNCTIONS = {"sin": ufl.sin, "cos": ufl.cos, "tan": ufl.tan, "exp": ufl.exp, "ln": ufl.ln, "log": ufl.ln,
                   "sqrt": ufl.sqrt, "tanh": ufl.tanh, "atan": ufl.atan, "abs": abs}
@@ -41,7 +42,7 @@ class Formula:
     def __init__(self, text, constants: Mapping[str, float] | None = None, where: str = "formula"):
         self.where = where
         self.constants = {"pi": math.pi, **_checked_constants(constants, where)}
-        if isinstance(text, (int, float)) and not isinstance(text, bool):
+        if is_number(text):
             text = repr(float(text))
         if not isinstance(text, str):
             raise ConfigError(f"{where} must be a number or a formula string, got {text!r}")
@@ -196,10 +197,7 @@ def _checked_constants(constants, where: str) -> dict[str, float]:
         if name in ("x", "t") or name in _UFL_FUNCTIONS:
             what = "the coordinates" if name == "x" else "the time" if name == "t" else "a function"
             raise ConfigError(f"{where}: constant '{name}' would shadow {name}, {what} (choose another name)")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where}: constant '{name}' must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{where}: constant '{name}' must be finite, got {value!r}")
+        number(value, f"{where}: constant '{name}'")
     return dict(constants)
 
 

@@ -16,11 +16,11 @@ declaration says otherwise.
 from __future__ import annotations
 
 import difflib
-import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 from primordia.core.errors import ConfigError
+from primordia.core.validation import number
 
 #: Sign constraints a parameter can carry, with the phrase used in messages.
 CONSTRAINTS = {
@@ -51,11 +51,7 @@ class Parameter:
 
     def check(self, value) -> float:
         """Return ``value`` as a float, or raise a one-line :class:`ConfigError`."""
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"parameter {self.name} must be a number, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise ConfigError(f"parameter {self.name} must be finite, got {value}")
+        value = float(number(value, f"parameter {self.name}"))
         phrase, ok = CONSTRAINTS[self.constraint]
         if not ok(value):
             raise ConfigError(f"parameter {self.name} {phrase} ({self.description}), got {value:g}")

@@ -124,23 +124,6 @@ def test_unknown_and_misshapen_tables_are_named(table, expected):
 
 
 # -- types of values and options ---------------------------------------------------------------------------
-def test_require_returns_the_value_of_the_right_kind():
-    assert config.require({"time": {"dt": 0.2}}, "time", "dt") == 0.2
-    assert config.require({"time": {"dt": 1}}, "time", "dt") == 1
-    assert config.require({"mesh": {"type": "box"}}, "mesh", "type", str) == "box"
-
-
-@pytest.mark.parametrize("table, kind, expected", [
-    ({}, (int, float), "missing time.dt in the configuration"),
-    ({"time": {}}, (int, float), "missing time.dt in the configuration"),
-    ({"time": {"dt": True}}, (int, float), "time.dt must be a number, got True"),
-    ({"time": {"dt": "0.2"}}, (int, float), "time.dt must be a number, got '0.2'"),
-    ({"time": {"dt": 0.2}}, str, "time.dt must be a str, got 0.2"),
-])
-def test_require_names_a_missing_or_mistyped_value(table, kind, expected):
-    assert one_line_error(config.require, table, "time", "dt", kind) == expected
-
-
 DEFAULTS = {"flag": False, "count": 2, "scale": 1.0, "scheme": "fitted", "names": ["m"], "table": {}, "free": None}
 
 

@@ -128,8 +128,8 @@ def test_a_value_that_is_neither_number_nor_string(value):
     ({"sin": 1.0}, "constant 'sin' would shadow sin, a function"),
     ({"a": "1"}, "constant 'a' must be a number"),
     ({"a": True}, "constant 'a' must be a number"),
-    ({"a": math.inf}, "constant 'a' must be finite"),
-    ({"a": math.nan}, "constant 'a' must be finite"),
+    ({"a": math.inf}, "constant 'a' must be a number, got inf"),
+    ({"a": math.nan}, "constant 'a' must be a number, got nan"),
     ([("a", 1.0)], "constants must be a table"),
 ])
 def test_bad_constants(constants, fragment):
