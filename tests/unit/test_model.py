@@ -103,7 +103,7 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
 
 
 # -- what a model refuses, in one line -----------------------------------------------------------------
-@pytest.mark.parametrize("changes, fragment", [
+@pytest.mark.parametrize("changes, fragments", [
     ({"physics": ["chemotaxis", "chemotaxis"]}, "model.physics lists 'chemotaxis' twice"),
     ({"physics": []}, "model.physics must be a non-empty list of names, got []"),
     ({"physics": ["chemotaxis", ""]}, "model.physics must be a non-empty list of names"),
@@ -119,20 +119,20 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"physics_options": {"chemotaxis": {"nope": 1}}}, "physics chemotaxis: unknown option 'nope'"),
     ({"physics_options": {"chemotaxis": 3}}, "physics.chemotaxis must be a table of options"),
     ({"physics_options": {"chemotaxis": {"flux_scheme": "upwind"}}}, "physics.chemotaxis.flux_scheme must be one of"),
-    ({"dt": 0.0}, "time.dt must be > 0, got 0"),
-    ({"dt": True}, "time.dt must be a number, got True"),
-    ({"dt": float("nan")}, "time.dt must be a number, got nan"),
+    ({"dt": 0.0}, ("time.dt must be", "> 0, got 0")),
+    ({"dt": True}, ("time.dt must be a number", "got True")),
+    ({"dt": float("nan")}, ("time.dt must be a number", "got nan")),
     ({"dt": 0.3}, "time.t_final - time.t_start = 1 is not a multiple of dt = 0.3"),
     ({"dt": 1e-9}, "more than 10,000,000: is dt in the model's (dimensionless) time units?"),
     ({"t_final": 0.0}, "time.t_final (0) must be greater than time.t_start (0)"),
     ({"adaptive": 1}, "time.adaptive must be true or false, got 1"),
-    ({"dt_min": 0.5}, "time.dt_min must be a number in (0, dt = 0.2], got 0.5"),
-    ({"dt_min": 0.0}, "time.dt_min must be a number in (0, dt = 0.2]"),
+    ({"dt_min": 0.5}, ("time.dt_min must be a number in (0, ", "0.2]", "got 0.5")),
+    ({"dt_min": 0.0}, ("time.dt_min must be a number in (0, ", "got 0")),
     ({"output": {"times": [0.5]}}, "output time 0.5 is not a multiple of dt = 0.2 after t_start"),
     ({"output": {"times": [1.2]}}, "output time 1.2 lies outside (t_start, t_final] = (0, 1]"),
     ({"output": {"times": [0.0]}}, "output time 0 lies outside (t_start, t_final]"),
     ({"output": {"times": "1"}}, "output.times must be a list of numbers, got '1'"),
-    ({"output": {"series_every": 0}}, "output.series_every must be a positive integer (steps), got 0"),
+    ({"output": {"series_every": 0}}, ("output.series_every must be", "(steps), got 0")),
     ({"output": {"pictures": "no"}}, "output.pictures must be true or false, got 'no'"),
     ({"output": {"snapshot_fields": ["u"]}}, "output.snapshot_fields names 'u', which is not a field of this model "
                                              "(m, e, f, b)"),
@@ -153,8 +153,10 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"mesh": None}, "a model needs a mesh (a MeshData or a [mesh] table)"),
     ({"mesh": {"type": "disc"}}, "[mesh] type must be one of 'rectangle', 'box', 'file', got 'disc'"),
 ])
-def test_a_bad_input_is_one_config_error_naming_it(changes, fragment):
-    assert fragment in one_line_error(ConfigError, **changes)
+def test_a_bad_input_is_one_config_error_naming_it(changes, fragments):
+    message = one_line_error(ConfigError, **changes)
+    for fragment in [fragments] if isinstance(fragments, str) else fragments:
+        assert fragment in message, message
 
 
 @pytest.mark.parametrize("changes, fragment", [
