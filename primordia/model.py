@@ -23,7 +23,7 @@ import numpy as np
 
 from primordia.core import config as config_
 from primordia.core.errors import ConfigError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.parameters import ParameterSet
 from primordia.core.plugins import lookup, registry
 from primordia.core.validation import flag, number, numbers
@@ -228,7 +228,7 @@ class Model:
         if self.kinetics_object is not None:
             resolved["kinetics"] = {"name": self.kinetics_object.name, **self.kinetics_object.settings}
         if self.growth_law_object is not None:
-            resolved["growth_law"] = {"name": self.growth_law_object.name, **self.growth_law_object.opts}
+            resolved["growth_law"] = {"name": self.growth_law_object.name, **self.growth_law_object.settings}
         if self.solver:
             resolved["solver"] = copy.deepcopy(self.solver)
         return _without_none(resolved)

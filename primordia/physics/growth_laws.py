@@ -72,15 +72,16 @@ class GrowthLaw(ABC):
     requires: ClassVar[tuple[str, ...]] = ()
     #: Spatial dimensions the law is written for.
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
-    #: Options of the ``[growth_law]`` table, with defaults.
+    #: Options of the ``[growth_law]`` table, with defaults; the values of a run are ``self.settings``
+    #: (the table's values over these defaults).
     options: ClassVar[Mapping[str, Any]] = {"directions": None}
 
-    def __init__(self, params: Mapping[str, float], **options):
+    def __init__(self, params: Mapping[str, float], **given):
         self.params = params
-        self.opts = merge_options(f"growth law {self.name}", self.options, options)
-        given = self.opts["directions"]
-        if given is not None:  # validate now, one line; the mesh's dimension is checked by frame()
-            size = len(given) if isinstance(given, (list, tuple)) else 0
+        self.settings: dict[str, Any] = merge_options(f"growth law {self.name}", self.options, given)
+        directions = self.settings["directions"]
+        if directions is not None:  # validate now, one line; the mesh's dimension is checked by frame()
+            size = len(directions) if isinstance(directions, (list, tuple)) else 0
             self.frame(size if size in (2, 3) else 3)
 
     @abstractmethod
@@ -94,7 +95,7 @@ class GrowthLaw(ABC):
 
     def frame(self, dimension: int) -> np.ndarray:
         """The directions k_1, ..., k_d as rows (default: the coordinate axes), checked orthonormal."""
-        given = self.opts["directions"]
+        given = self.settings["directions"]
         if given is None:
             return np.eye(dimension)
         try:

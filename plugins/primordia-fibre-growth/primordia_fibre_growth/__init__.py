@@ -55,18 +55,18 @@ class FibreGrowth(GrowthLaw):
     parameters = Seed2D.parameters  # delta_2, delta_3 of (4.14), with the seed's values (section 5.4)
     options = {"directions": None, "fibre": ["1", "0"], "constants": {}, "along": 1.0, "across": 0.25}
 
-    def __init__(self, params, **options):
-        super().__init__(params, **options)
-        if self.opts["directions"] is not None:
+    def __init__(self, params, **given):
+        super().__init__(params, **given)
+        if self.settings["directions"] is not None:
             raise ConfigError("growth_law.directions does not apply to the fibre law: its frame is the fibre "
                               "and the direction across it (give growth_law.fibre)")
         for key in ("along", "across"):
-            number(self.opts[key], f"growth_law.{key}", at_least=0,
+            number(self.settings[key], f"growth_law.{key}", at_least=0,
                    hint=f"growth {key} the fibre as a multiple of seed (4.14)")
-        given = self.opts["fibre"]
+        given = self.settings["fibre"]
         if len(given) != 2:
             raise ConfigError(f"growth_law.fibre must be 2 formulas of x (the fibre direction a0 in 2D), got {given!r}")
-        self.fibre = VectorFormula(given, self.opts["constants"], where="growth_law.fibre")
+        self.fibre = VectorFormula(given, self.settings["constants"], where="growth_law.fibre")
         if self.fibre.depends_on_time():
             raise ConfigError("growth_law.fibre is a direction of the reference configuration: "
                               "formulas of x and constants, not of t")
@@ -84,7 +84,7 @@ class FibreGrowth(GrowthLaw):
     def factors(self, fields, t, X, dimension):
         p = self.params
         gamma = p["delta_2"] * t + p["delta_3"] * saturating(fields["m"])  # seed eq. (4.14)
-        return [self.opts["along"] * gamma, self.opts["across"] * gamma]
+        return [self.settings["along"] * gamma, self.settings["across"] * gamma]
 
 
 @hookimpl
