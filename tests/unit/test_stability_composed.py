@@ -30,6 +30,7 @@ from primordia.core.ops import NUMPY
 from primordia.model import Model
 from primordia.physics.kinetics.painter2018 import Painter2018
 from primordia.physics.seed_parameters import lame, seed_parameters
+
 from stability_support import random_parameters
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

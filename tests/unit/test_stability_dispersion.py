@@ -14,7 +14,9 @@ from primordia.analysis.polynomials import dispersion_coefficients
 from primordia.core.ops import NUMPY
 from primordia.physics.kinetics.painter2018 import Painter2018
 from primordia.physics.seed_parameters import seed_parameters
+
 from stability_support import random_parameters
+
 try:
     import mpmath
 except ImportError:  # pragma: no cover - mpmath comes with sympy; without it the check is in double precision

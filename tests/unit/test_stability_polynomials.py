@@ -22,6 +22,7 @@ from primordia.analysis.polynomials import (
     transverse_coefficients,
 )
 from primordia.physics.seed_parameters import seed_parameters
+
 from stability_support import random_parameters
 
 
