@@ -15,7 +15,7 @@ import numpy as np
 import ufl
 
 from primordia.core.backend import Backend, BoundaryCondition, index_set, sub_elements
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
 import dolfinx.fem.petsc as fem_petsc

@@ -50,7 +50,7 @@ from primordia.backends.ufl_numpy import (
 )
 from primordia.core.backend import Backend, BoundaryCondition, index_set, sub_elements
 from primordia.core.errors import MeshError, PrimordiaError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 
 CELL_NAMES = {2: "triangle", 3: "tetrahedron"}
 FACET_NAMES = {"triangle": "interval", "tetrahedron": "triangle"}

@@ -23,7 +23,7 @@ Conventions shared by all backends
   ``assemble_residual`` applies lifting so that the Newton update
   ``x <- x - J^{-1} F`` lands exactly on the prescribed values.
 * ``vertex_values`` returns, on rank 0, values at the vertices of the
-  :class:`~primordia.core.mesh.MeshData` the mesh was built from, in its vertex
+  :class:`~primordia.core.mesh_data.MeshData` the mesh was built from, in its vertex
   order (``None`` on other ranks), so outputs do not depend on the backend.
 """
 
@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 import ufl
 
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 
 #: A callable giving values at points: ``values = fn(x)`` with ``x`` of shape
 #: (gdim, n_points) and values of shape (n_points,) or (value_size, n_points).

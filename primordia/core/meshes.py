@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core.errors import ConfigError, MeshError
-from primordia.core.mesh import CELL_TYPES, FACET_TYPES, MeshData
+from primordia.core.mesh_data import CELL_TYPES, FACET_TYPES, MeshData
 
 #: Ways of splitting each square of :func:`rectangle` (dolfinx's ``DiagonalType`` names).
 DIAGONALS = ("right", "left", "crossed")

@@ -14,7 +14,7 @@ import numpy as np
 
 from primordia.core.atomic_files import atomic_path, writable_target
 from primordia.core.errors import PrimordiaError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import exterior_facets
 
 

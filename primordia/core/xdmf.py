@@ -1,7 +1,7 @@
 """Vertex fields over time as XDMF + HDF5, for ParaView and meshio (:class:`XdmfSeries`).
 
 Serial: write on one MPI rank (rank 0, where backends gather vertex values in
-:class:`~primordia.core.mesh.MeshData` vertex order).  Every file is written
+:class:`~primordia.core.mesh_data.MeshData` vertex order).  Every file is written
 atomically (:mod:`primordia.core.atomic_files`).
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from primordia.core.atomic_files import atomic_path, atomic_write_bytes, make_directory
 from primordia.core.errors import PrimordiaError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 
 
 _XDMF_TOPOLOGY = {"triangle": "Triangle", "tetra": "Tetrahedron"}

@@ -34,7 +34,7 @@ import ufl
 
 from primordia.core.backend import Backend, BoundaryCondition, PointFunction
 from primordia.core.errors import ConfigError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.physics.kinematics import MOTIONLESS, Kinematics
 
 if TYPE_CHECKING:

@@ -33,7 +33,7 @@ import pytest
 import scipy.sparse
 import ufl
 
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import rectangle
 from primordia.core.plugins import registry
 from primordia.coupling.orchestrator import Simulation

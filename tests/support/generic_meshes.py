@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 
 
 def perturbed(data: MeshData, amplitude: float, seed: int = 1) -> MeshData:

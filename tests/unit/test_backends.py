@@ -21,7 +21,7 @@ from petsc4py import PETSc
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.backends.skfem import SkfemBackend
 from primordia.core.errors import PrimordiaError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import box, rectangle
 
 BACKENDS = {"fenicsx": lambda: FenicsxBackend(MPI.COMM_WORLD), "skfem": lambda: SkfemBackend()}
@@ -370,7 +370,7 @@ for name in ("dolfinx", "basix", "ffcx", "mpi4py"):
 import numpy as np
 import ufl
 from primordia.backends.skfem import SkfemBackend
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 
 backend = SkfemBackend()
 points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])

@@ -12,7 +12,7 @@ import ufl
 
 from primordia.backends.skfem import SkfemBackend
 from primordia.core.errors import ConfigError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import rectangle
 from primordia.physics.discretisation import Discretisation
 from primordia.physics.base import FieldSpec

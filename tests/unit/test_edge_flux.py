@@ -15,7 +15,7 @@ import pytest
 import scipy.sparse
 import ufl
 
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import rectangle
 from primordia.core.plugins import get_plugin_manager, registry
 from primordia.physics.discretisation import Discretisation

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from primordia.core.errors import ConfigError, MeshError
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import (
     box,
     exterior_facets,

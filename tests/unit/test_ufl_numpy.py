@@ -29,7 +29,7 @@ from primordia.backends.ufl_numpy import (
     preprocess_form,
     reference_quadrature,
 )
-from primordia.core.mesh import MeshData
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import box, rectangle
 from dof_keys import dolfinx_dof_keys, skfem_dof_keys
 from generic_meshes import perturbed
