@@ -144,10 +144,10 @@ def _report_dry_run(model, out: Path) -> int:
 
 
 def command_plugins(args) -> int:
-    from primordia.core.plugins import KINDS, get_plugin_manager, registry
+    from primordia.core.plugins import HOOK_BY_KIND, get_plugin_manager, registry
 
     pm = get_plugin_manager()
-    for kind in KINDS:
+    for kind in HOOK_BY_KIND:
         table = registry(kind, pm)
         print(f"{kind}:")
         for name, (piece, origin) in sorted(table.items()):

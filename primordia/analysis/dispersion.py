@@ -308,7 +308,8 @@ def default_wavenumbers(params_or_coefficients, n: int = 241, coupled: bool = Tr
 GROWTH_TOLERANCE = 1e-11
 #: |Im phi| <= REAL_TOLERANCE (1 + |phi|): a real root, i.e. a stationary (Turing) mode.
 REAL_TOLERANCE = 1e-7
-KINDS = ("any", "stationary", "oscillatory")
+#: What a growth rate may be asked of: every root, the real (stationary, Turing) ones, the complex (oscillatory) ones.
+GROWTH_KINDS = ("any", "stationary", "oscillatory")
 
 
 def growth_of_kind(rates, kind: str = "any"):
@@ -316,8 +317,8 @@ def growth_of_kind(rates, kind: str = "any"):
 
     Roots whose real part is within rounding of zero are set to 0 (neutral).
     """
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    if kind not in GROWTH_KINDS:
+        raise ValueError(f"kind must be one of {', '.join(GROWTH_KINDS)}, got {kind!r}")
     rates = np.asarray(rates, dtype=complex)
     size = 1.0 + np.abs(rates)
     growth = np.where(np.abs(rates.real) <= GROWTH_TOLERANCE * size, 0.0, rates.real)

@@ -49,8 +49,8 @@ PIECE_TYPES = {
     "outputs": "primordia.core.outputs:Output",
 }
 
-#: The contribute hooks and the name of the kind of piece each yields.
-KINDS = {
+#: The hook that contributes each kind of piece: kind name -> hook name.
+HOOK_BY_KIND = {
     "physics": "primordia_physics",
     "kinetics": "primordia_kinetics",
     "growth_laws": "primordia_growth_laws",
@@ -158,14 +158,14 @@ def _origin(pm, plugin_name: str) -> str:
 
 
 def registry(kind: str, pm: pluggy.PluginManager | None = None) -> dict[str, tuple[object, str]]:
-    """name -> (piece, origin) for one kind of contribution (see :data:`KINDS`).
+    """name -> (piece, origin) for one kind of contribution (see :data:`HOOK_BY_KIND`).
 
     Built-ins are registered first, so their names are taken first; a broken
     contribution is reported (:meth:`LoadReport.report`) and skipped.  The table
     is computed once per set of registered plugins.
     """
     pm = pm or get_plugin_manager()
-    impls = getattr(pm.hook, KINDS[kind]).get_hookimpls()
+    impls = getattr(pm.hook, HOOK_BY_KIND[kind]).get_hookimpls()
     key = (kind, tuple((impl.plugin_name, id(impl.function)) for impl in impls))
     cache = pm.__dict__.setdefault("_primordia_registries", {})
     if key not in cache:
@@ -180,7 +180,7 @@ def registry(kind: str, pm: pluggy.PluginManager | None = None) -> dict[str, tup
 def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
     """The named pieces one plugin's hook contributes; all of them or, if anything is wrong, none."""
     plugin, origin = impl.plugin_name, _origin(pm, impl.plugin_name)
-    where = f"plugin '{plugin}' ({origin}): hook {KINDS[kind]}"
+    where = f"plugin '{plugin}' ({origin}): hook {HOOK_BY_KIND[kind]}"
     try:
         pieces = impl.function()
     except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest

@@ -24,11 +24,11 @@ RUNNABLE = [(index, code) for index, code in enumerate(BLOCKS) if "def test_" in
 
 def test_the_guide_covers_every_contributing_hook():
     text = GUIDE.read_text()
-    from primordia.core.plugins import KINDS
+    from primordia.core.plugins import HOOK_BY_KIND
 
-    for hook in KINDS.values():
+    for hook in HOOK_BY_KIND.values():
         assert f"`{hook}`" in text, f"docs/plugins.md has no section on {hook}"
-    assert len(RUNNABLE) >= len(KINDS), "each hook's section needs a worked, tested example"
+    assert len(RUNNABLE) >= len(HOOK_BY_KIND), "each hook's section needs a worked, tested example"
 
 
 @pytest.mark.parametrize("index, code", RUNNABLE, ids=[f"block{index}" for index, _ in RUNNABLE])
