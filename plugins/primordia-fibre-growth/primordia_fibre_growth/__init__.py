@@ -63,10 +63,11 @@ class FibreGrowth(GrowthLaw):
         for key in ("along", "across"):
             number(self.settings[key], f"growth_law.{key}", at_least=0,
                    hint=f"growth {key} the fibre as a multiple of seed (4.14)")
-        given = self.settings["fibre"]
-        if len(given) != 2:
-            raise ConfigError(f"growth_law.fibre must be 2 formulas of x (the fibre direction a0 in 2D), got {given!r}")
-        self.fibre = VectorFormula(given, self.settings["constants"], where="growth_law.fibre")
+        formulas = self.settings["fibre"]
+        if len(formulas) != 2:
+            raise ConfigError(f"growth_law.fibre must be 2 formulas of x (the fibre direction a0 in 2D), "
+                              f"got {formulas!r}")
+        self.fibre = VectorFormula(formulas, self.settings["constants"], where="growth_law.fibre")
         if self.fibre.depends_on_time():
             raise ConfigError("growth_law.fibre is a direction of the reference configuration: "
                               "formulas of x and constants, not of t")
