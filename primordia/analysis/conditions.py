@@ -17,21 +17,21 @@ P(phi) = P_1 + P_2 P_3 has a positive leading coefficient (rho C_0, or
   (alpha K^2 + X_c K + Y_c).  With alpha > 0 the quadratic is negative for
   some K > 0 exactly when ``Y < 0  or  (X < 0 and X^2 > 4 alpha Y)``.
 
-The seed's conditions (3.4)-(3.6) are ``X < 0``, ``Y < 0`` and ``4X^2 - 12 alpha Y > 0``
+The seed's conditions (3.7a)-(3.7c) are ``X < 0``, ``Y < 0`` and ``4X^2 - 12 alpha Y > 0``
 (the discriminant of a_0'(K), i.e. a_0 has a local minimum at real K).  Read
-as "((3.4) or (3.5)) and (3.6)" they are necessary for a_0 < 0 but not
+as "((3.7a) or (3.7b)) and (3.7c)" they are necessary for a_0 < 0 but not
 sufficient: between X^2 = 3 alpha Y and X^2 = 4 alpha Y (X < 0 < Y) a_0 has a
 positive local minimum.  The region they bound (:attr:`Conditions.seed_region`)
 therefore contains the true one (:attr:`Conditions.region`) with a thin band to
 spare; the tests assert both facts.
 
-For the coupled system the seed applies the Routh-Hurwitz conditions (3.7)
-and a discriminant (3.8) to the cubic d_0'(K)/K = theta_4 K^3 + theta_3 K^2 +
+For the coupled system the seed applies the Routh-Hurwitz conditions (3.8a)-(3.8c)
+and a discriminant (3.9) to the cubic d_0'(K)/K = theta_4 K^3 + theta_3 K^2 +
 theta_2 K + theta_1.  All roots of that cubic in the left half plane means
-d_0' > 0 for K > 0, so d_0 > 0: a violated (3.7) is necessary for d_0 < 0; that
+d_0' > 0 for K > 0, so d_0 > 0: a violated (3.8a)-(3.8c) is necessary for d_0 < 0; that
 is how :attr:`Conditions.seed_region` reads it.  With the corrected theta_1 = 0
 those conditions degenerate (see correction 4), and the conditions that do
-describe d_0 are (3.4)-(3.6) with X, Y replaced by X_c, Y_c (equivalently
+describe d_0 are (3.7a)-(3.7c) with X, Y replaced by X_c, Y_c (equivalently
 theta_3 < 0, theta_2 < 0 and theta_3^2 - 4 theta_4 theta_2 > 0, the
 discriminant of d_0'/K^2).
 """
@@ -65,7 +65,7 @@ from primordia.core.parameters import CONSTRAINTS
 
 # -- Routh-Hurwitz -------------------------------------------------------------------
 def routh_hurwitz_cubic(coefficients):
-    """Seed eq. (3.2): for alpha_3 phi^3 + ... + alpha_0 with alpha_i > 0, alpha_2 alpha_1 - alpha_3 alpha_0 > 0.
+    """Seed eq. (3.5): for alpha_3 phi^3 + ... + alpha_0 with alpha_i > 0, alpha_2 alpha_1 - alpha_3 alpha_0 > 0.
 
     Returns ``(holds, alpha_2 alpha_1 - alpha_3 alpha_0)``; ``coefficients`` ascending.
     """
@@ -76,7 +76,7 @@ def routh_hurwitz_cubic(coefficients):
 
 
 def routh_hurwitz_quartic(coefficients) -> dict:
-    """Seed eq. (3.3) for a_4 phi^4 + ... + a_0: every expression > 0 <=> all roots have Re < 0.
+    """Seed eq. (3.6) for a_4 phi^4 + ... + a_0: every expression > 0 <=> all roots have Re < 0.
 
     Returns the expressions by name (``a_0`` ... ``a_4``, ``a2a3-a1a4``,
     ``a1a2a3-a0a3^2-a1^2a4``) and ``holds``, their conjunction.
@@ -147,23 +147,23 @@ class Conditions:
 
 
 def uncoupled_conditions(params) -> Conditions:
-    """Seed conditions (3.4)-(3.6) on a_0 (corrected: delta_F where printed delta_B)."""
+    """Seed conditions (3.7a)-(3.7c) on a_0 (corrected: delta_F where printed delta_B)."""
     alpha, X, Y = a0_quadratic(_as_coefficients(params))
-    values = {"3.4": X, "3.5": Y, "3.6": 4.0 * X**2 - 12.0 * alpha * Y}
-    satisfied = {"3.4": X < 0, "3.5": Y < 0, "3.6": values["3.6"] > 0}
+    values = {"3.7a": X, "3.7b": Y, "3.7c": 4.0 * X**2 - 12.0 * alpha * Y}
+    satisfied = {"3.7a": X < 0, "3.7b": Y < 0, "3.7c": values["3.7c"] > 0}
     return Conditions(
         coupled=False,
         values=values,
         satisfied=satisfied,
         region=_negative_somewhere(alpha, X, Y),
-        seed_region=(satisfied["3.4"] | satisfied["3.5"]) & satisfied["3.6"],
-        notes={"3.4": "X < 0 (k^4 coefficient of a_0/k^2)", "3.5": "Y < 0 (k^2 coefficient of a_0/k^2)",
-               "3.6": "4X^2 - 12 alpha Y > 0 (a_0' has real roots)"},
+        seed_region=(satisfied["3.7a"] | satisfied["3.7b"]) & satisfied["3.7c"],
+        notes={"3.7a": "X < 0 (k^4 coefficient of a_0/k^2)", "3.7b": "Y < 0 (k^2 coefficient of a_0/k^2)",
+               "3.7c": "4X^2 - 12 alpha Y > 0 (a_0' has real roots)"},
     )
 
 
 def seed_discriminant_as_printed(t1, t2, t3, t4):
-    """The left side of seed (3.8) exactly as printed (see correction 5)."""
+    """The left side of seed (3.9) exactly as printed (see correction 5)."""
     return (-27 * t4**2 * t1**4 + 18 * t4 * t3 * t2 * t1**3 - 4 * t4 * t2**3 * t1**3
             - 4 * t3**3 * t1**3 + t3**2 * t2**2 * t1**2)
 
@@ -174,43 +174,44 @@ def cubic_discriminant(t1, t2, t3, t4):
 
 
 def coupled_conditions(params, theta_variant: str = "corrected") -> Conditions:
-    """Seed conditions (3.7)-(3.8) on the theta_i, and the d_0 analogues of (3.4)-(3.6).
+    """Seed conditions (3.8a)-(3.8c) and (3.9) on the theta_i, and the d_0 analogues of (3.7a)-(3.7c).
 
     ``theta_variant`` selects the corrected theta_i or the seed's printed ones
-    (to draw the seed's boundary curves).  Keys: ``3.7:theta_1``,
-    ``3.7:theta_2``, ``3.7:theta_3``, ``3.7b``, ``3.7c``, ``3.8`` (as printed),
-    ``discriminant`` (of the cubic), and ``3.4c``, ``3.5c``, ``3.6c`` (X_c < 0,
-    Y_c < 0, 16 X_c^2 - 60 alpha Y_c > 0: the discriminant of d_0'/K^2).
+    (to draw the seed's boundary curves).  Keys, by the seed's printed numbers:
+    ``3.8a:theta_1``, ``3.8a:theta_2``, ``3.8a:theta_3``, ``3.8b``, ``3.8c``, ``3.9``
+    (as printed), ``discriminant`` (of the cubic), and ``3.7a:d0``, ``3.7b:d0``,
+    ``3.7c:d0``, the uncoupled conditions read on d_0 (X_c < 0, Y_c < 0,
+    16 X_c^2 - 60 alpha Y_c > 0: the discriminant of d_0'/K^2).
 
-    ``seed_region``: with the seed's theta, "(3.7) violated" (the cubic
+    ``seed_region``: with the seed's theta, "(3.8a)-(3.8c) violated" (the cubic
     d_0'/K has a root with Re >= 0, necessary for d_0 < 0); with the corrected
     theta (theta_1 = 0, so the cubic always has the root 0), the same reading
     of d_0'/K^2: "(theta_3 < 0 or theta_2 < 0) and theta_3^2 > 4 theta_4 theta_2",
-    i.e. ((3.4c) or (3.5c)) and (3.6c), necessary like (3.4)-(3.6).
+    i.e. ((3.7a) or (3.7b)) and (3.7c) on d_0, necessary like (3.7a)-(3.7c).
     """
     c = _as_coefficients(params)
     t1, t2, t3, t4 = theta(c, theta_variant)
     alpha, Xc, Yc = d0_quadratic(c)
     values = {
-        "3.7:theta_1": t1,
-        "3.7:theta_2": t2,
-        "3.7:theta_3": t3,
-        "3.7b": t2 * t3 - t1 * t4,
-        "3.7c": t1 * t2 * t3 - t1**2 * t4,
-        "3.8": seed_discriminant_as_printed(t1, t2, t3, t4),
+        "3.8a:theta_1": t1,
+        "3.8a:theta_2": t2,
+        "3.8a:theta_3": t3,
+        "3.8b": t2 * t3 - t1 * t4,
+        "3.8c": t1 * t2 * t3 - t1**2 * t4,
+        "3.9": seed_discriminant_as_printed(t1, t2, t3, t4),
         "discriminant": cubic_discriminant(t1, t2, t3, t4),
-        "3.4c": Xc,
-        "3.5c": Yc,
-        "3.6c": 16.0 * Xc**2 - 60.0 * alpha * Yc,
+        "3.7a:d0": Xc,
+        "3.7b:d0": Yc,
+        "3.7c:d0": 16.0 * Xc**2 - 60.0 * alpha * Yc,
     }
     satisfied = {name: value > 0 for name, value in values.items()}
-    for name in ("3.4c", "3.5c"):
+    for name in ("3.7a:d0", "3.7b:d0"):
         satisfied[name] = values[name] < 0
-    if theta_variant == "seed":  # (3.7) violated: d_0'(K)/K has a root outside the left half plane
-        seed_region = ~(satisfied["3.7:theta_1"] & satisfied["3.7:theta_2"] & satisfied["3.7:theta_3"]
-                        & satisfied["3.7b"] & satisfied["3.7c"])
+    if theta_variant == "seed":  # (3.8a)-(3.8c) violated: d_0'(K)/K has a root outside the left half plane
+        seed_region = ~(satisfied["3.8a:theta_1"] & satisfied["3.8a:theta_2"] & satisfied["3.8a:theta_3"]
+                        & satisfied["3.8b"] & satisfied["3.8c"])
     else:  # theta_1 = 0: the same logic on d_0'/K^2 = theta_4 K^2 + theta_3 K + theta_2
-        seed_region = (satisfied["3.4c"] | satisfied["3.5c"]) & satisfied["3.6c"]
+        seed_region = (satisfied["3.7a:d0"] | satisfied["3.7b:d0"]) & satisfied["3.7c:d0"]
     return Conditions(
         coupled=True,
         values=values,
@@ -341,7 +342,7 @@ def homogeneous_verdict(params) -> Verdict:
         case="homogeneous perturbations (k = 0, seed section 3.2)",
         patterns=not stable,
         statement=(f"{'stable' if stable else 'NOT stable'}: rates {listing} (-A_e, -delta_F, -delta_B) "
-                   f"and phi = 0 (conserved cells, rigid motion); Routh-Hurwitz (3.2) "
+                   f"and phi = 0 (conserved cells, rigid motion); Routh-Hurwitz (3.5) "
                    f"{'holds' if holds else 'fails'} ({float(determinant):.4g})"),
         details={"rates": rates, "routh_hurwitz": float(determinant)},
     )
@@ -351,7 +352,7 @@ def zero_chemotaxis_verdict(params, k=None) -> Verdict:
     """Seed section 3.3: with alpha = 0 every rate has Re < 0 (P_1 = 0, P_2 factorises).
 
     The chemical rates are -D_m K, -A_e, -(D_f K + delta_F), -(D_b K + delta_B)
-    (real, negative); P_3 satisfies Routh-Hurwitz (3.2) since c_2 c_1 - c_3 c_0
+    (real, negative); P_3 satisfies Routh-Hurwitz (3.5) since c_2 c_1 - c_3 c_0
     = rho (kappa/eta) alpha_BW K^2 > 0, so the poroelastic waves are damped
     (neutral if alpha_BW = 0).  ``params`` is evaluated with alpha set to 0.
     """
@@ -379,7 +380,10 @@ def zero_chemotaxis_verdict(params, k=None) -> Verdict:
 
 
 def uncoupled_verdict(params, k=None) -> Verdict:
-    """Seed section 3.4: tau = 0 or xi_f = 0, P_1 = 0; instability only from P_2 (conditions (3.3)-(3.6))."""
+    """Seed section 3.4: tau = 0 or xi_f = 0, P_1 = 0; instability only from P_2.
+
+    Its Routh-Hurwitz conditions are (3.6); the seed's conditions for a_0 < 0, (3.7a)-(3.7c).
+    """
     base = dict(params)
     base["xi_f"] = 0.0
     c = linearise(base)
@@ -393,10 +397,10 @@ def uncoupled_verdict(params, k=None) -> Verdict:
     return Verdict(
         case="uncoupled (xi_f = 0 or tau = 0, seed section 3.4)",
         patterns=bool(mode.unstable),
-        statement=(f"{'patterns' if mode.unstable else 'no patterns'}: Routh-Hurwitz (3.3) fails for {band}; "
+        statement=(f"{'patterns' if mode.unstable else 'no patterns'}: Routh-Hurwitz (3.6) fails for {band}; "
                    f"a_0 < 0 somewhere: {'yes' if predicted else 'no'} "
-                   f"((3.4) {_yes(found.satisfied['3.4'])}, (3.5) {_yes(found.satisfied['3.5'])}, "
-                   f"(3.6) {_yes(found.satisfied['3.6'])}); "
+                   f"((3.7a) {_yes(found.satisfied['3.7a'])}, (3.7b) {_yes(found.satisfied['3.7b'])}, "
+                   f"(3.7c) {_yes(found.satisfied['3.7c'])}); "
                    + (f"k_max = {mode.k_max:.4g}, wavelength {mode.wavelength:.4g}" if mode.unstable else "")),
         details={"conditions": found, "fastest_mode": mode, "routh_hurwitz_fails_for": violated},
     )
@@ -448,7 +452,7 @@ def epithelium_verdict(params, case: str = "no_activation", k=None) -> Verdict:
 
 
 def coupled_verdict(params, k=None, theta_variant: str = "corrected") -> Verdict:
-    """Seed section 3.6: the full system; d_0 criterion, conditions (3.7)-(3.8), numerical rates."""
+    """Seed section 3.6: the full system; d_0 criterion, conditions (3.8a)-(3.8c) and (3.9), numerical rates."""
     c = _as_coefficients(params)
     found = coupled_conditions(c, theta_variant)
     k = default_wavenumbers(c, 241) if k is None else np.asarray(k, dtype=float)

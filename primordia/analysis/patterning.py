@@ -1,12 +1,12 @@
 """Patterning spaces (seed Figures 3.1-3.3) and dispersion curves as xarray Datasets / NetCDF.
 
 A patterning space maps, over a grid of two parameters (the others fixed),
-where the steady state (2.5) is Turing-unstable, computed two independent ways:
+where the steady state (2.6) is Turing-unstable, computed two independent ways:
 
 * from the conditions: ``unstable_conditions`` is the exact "a_0 (uncoupled) or
   d_0 (coupled) < 0 for some k" criterion, ``seed_conditions`` the region the
   seed's inequalities describe, and one variable per seed condition whose zero
-  level is its boundary curve (``condition_3_4`` ...);
+  level is its boundary curve (``condition_3_7a`` ..., by the seed's printed numbers);
 * from the growth rates: ``turing_growth_rate`` = max over k and over real
   roots of phi (the eigenvalue solver of :mod:`primordia.analysis.dispersion`),
   ``unstable_numerical`` = it is > 0; oscillatory growth is kept apart
@@ -46,23 +46,23 @@ CRITICAL_SCALES = (0.5, 0.75, 1.0, 1.25, 1.5)
 
 #: The seed's boundary curves: variable, label, matplotlib style (Figures 3.1, 3.2 captions).
 UNCOUPLED_CURVES = (
-    ("condition_3_4", "(3.4)", {"color": "green", "linestyle": "-"}),
-    ("condition_3_5", "(3.5)", {"color": "red", "linestyle": "--"}),
-    ("condition_3_6", "(3.6)", {"color": "blue", "linestyle": "-."}),
+    ("condition_3_7a", "(3.7a)", {"color": "green", "linestyle": "-"}),
+    ("condition_3_7b", "(3.7b)", {"color": "red", "linestyle": "--"}),
+    ("condition_3_7c", "(3.7c)", {"color": "blue", "linestyle": "-."}),
 )
 COUPLED_CURVES = (
-    ("condition_3_7_theta_1", "(3.7) theta_1", {"color": "black", "linestyle": "-"}),
-    ("condition_3_7_theta_2", "(3.7) theta_2", {"color": "green", "linestyle": "--"}),
-    ("condition_3_7_theta_3", "(3.7) theta_3", {"color": "orange", "linestyle": "--"}),
-    ("condition_3_7b", "(3.7b)", {"color": "red", "linestyle": ":"}),
-    ("condition_3_7c", "(3.7c)", {"color": "blue", "linestyle": "-."}),
-    ("condition_3_8", "(3.8) as printed", {"color": "magenta", "linestyle": (0, (3, 1, 1, 1, 1, 1))}),
+    ("condition_3_8a_theta_1", "(3.8a) theta_1", {"color": "black", "linestyle": "-"}),
+    ("condition_3_8a_theta_2", "(3.8a) theta_2", {"color": "green", "linestyle": "--"}),
+    ("condition_3_8a_theta_3", "(3.8a) theta_3", {"color": "orange", "linestyle": "--"}),
+    ("condition_3_8b", "(3.8b)", {"color": "red", "linestyle": ":"}),
+    ("condition_3_8c", "(3.8c)", {"color": "blue", "linestyle": "-."}),
+    ("condition_3_9", "(3.9) as printed", {"color": "magenta", "linestyle": (0, (3, 1, 1, 1, 1, 1))}),
 )
-#: With the corrected theta_1 = 0 the theta_1, (3.7c) and (3.8) curves vanish; these describe d_0.
+#: With the corrected theta_1 = 0 the theta_1, (3.8c) and (3.9) curves vanish; these describe d_0.
 COUPLED_CORRECTED_CURVES = (
-    ("condition_3_4c", "theta_3 = 0 (X_c = 0)", {"color": "green", "linestyle": "-"}),
-    ("condition_3_5c", "theta_2 = 0 (Y_c = 0)", {"color": "red", "linestyle": "--"}),
-    ("condition_3_6c", "theta_3^2 = 4 theta_4 theta_2", {"color": "blue", "linestyle": "-."}),
+    ("condition_3_7a_d0", "theta_3 = 0 (X_c = 0)", {"color": "green", "linestyle": "-"}),
+    ("condition_3_7b_d0", "theta_2 = 0 (Y_c = 0)", {"color": "red", "linestyle": "--"}),
+    ("condition_3_7c_d0", "theta_3^2 = 4 theta_4 theta_2", {"color": "blue", "linestyle": "-."}),
 )
 
 
@@ -231,10 +231,10 @@ def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 
 
 def _seed_region_text(coupled: bool, theta_variant: str) -> str:
     if not coupled:
-        return "((3.4) or (3.5)) and (3.6)"
+        return "((3.7a) or (3.7b)) and (3.7c)"
     if theta_variant == "seed":
-        return "(3.7) violated, printed theta"
-    return "((3.4c) or (3.5c)) and (3.6c), i.e. (3.7)-(3.8) on d_0'/k^2 with theta_1 = 0"
+        return "(3.8a)-(3.8c) violated, printed theta"
+    return "((3.7a) or (3.7b)) and (3.7c) on d_0, i.e. (3.8a)-(3.9) on d_0'/k^2 with theta_1 = 0"
 
 
 def _add_critical_curves(ds: xr.Dataset, base, name: str, coupled: bool) -> None:

@@ -2,7 +2,7 @@
 
 With ``K = |k|^2`` (every coefficient below is a polynomial in K)::
 
-    det M(phi, k) = B(phi)^(d-1) [P_1(phi) + P_2(phi) P_3(phi)]                  seed eq. (3.2)
+    det M(phi, k) = B(phi)^(d-1) [P_1(phi) + P_2(phi) P_3(phi)]                  seed eq. (3.3)
 
     B   = rho phi^2 + mu K                        transverse (shear) waves: roots +-i k sqrt(mu/rho)
     P_2 = sum a_i phi^i = det M_22                the chemotaxis block (m, e, f, b)
@@ -38,7 +38,7 @@ corrected forms differ.
    (e.g. a_0 = ... + (D_m delta_F A_e + E H_3 A_b - E A_m) k^2).  Invisible at
    Table 3.1 (delta_F = delta_B = 1), visible at delta_F = 2: the printed a_0
    then differs from det M's by D_m A_e (k^4 + k^2) (delta_F - 1).
-   The same holds for conditions (3.4)-(3.5), the theta_i and the k = 0 cubic
+   The same holds for conditions (3.7a)-(3.7b), the theta_i and the k = 0 cubic
    of section 3.2, whose constant term ``delta (k_on + k_off)`` is
    ``delta_F delta_B A_e``: that cubic is (phi + A_e)(phi + delta_F)(phi + delta_B).
 3. **b_i carry k^4, not k^2.**  Printed ``b_i = -(xi_f s E k^2) b^_i``; the
@@ -59,12 +59,12 @@ corrected forms differ.
    where ``a_0 = K (alpha K^2 + X K + Y)`` (:func:`a0_quadratic`).  The coupled
    problem's d_0 criterion is therefore the uncoupled one with X and Y shifted
    by ``xi_f s E A_e / (2mu + lambda)`` times D_b and delta_B respectively.
-5. **The printed discriminant (3.8)** is not the discriminant of the cubic
+5. **The printed discriminant (3.9)** is not the discriminant of the cubic
    d_0'(K)/K = theta_4 K^3 + theta_3 K^2 + theta_2 K + theta_1 (that is
    18 t4 t3 t2 t1 - 4 t3^3 t1 + t3^2 t2^2 - 4 t4 t2^3 - 27 t4^2 t1^2); its terms
    carry extra powers of theta_1.  Both are provided
    (:mod:`primordia.analysis.conditions`); with theta_1 = 0 both conditions
-   (3.7) on theta_1, (3.7c) and the printed (3.8) vanish identically.
+   (3.8a) on theta_1, (3.8c) and the printed (3.9) vanish identically.
 
 Everything broadcasts over arrays of K and of parameter values; coefficient
 tuples are in ascending powers of phi.
@@ -111,8 +111,8 @@ def chemotaxis_coefficients(params_or_coefficients, k):
 def a0_quadratic(params_or_coefficients):
     """(alpha, X, Y) with a_0 = K (alpha K^2 + X K + Y) (Definition 3.2, corrected).
 
-    ``X`` is the left side of seed condition (3.4), ``Y`` that of (3.5), and
-    ``4 X^2 - 12 alpha Y`` that of (3.6); with the seed's scaling
+    ``X`` is the left side of seed condition (3.7a), ``Y`` that of (3.7b), and
+    ``4 X^2 - 12 alpha Y`` that of (3.7c); with the seed's scaling
     alpha = D_m D_f A_e, X = (D_m delta_F + D_m D_f) A_e - E A_m,
     Y = D_m delta_F A_e + E H_3 A_b - E A_m.
     """
@@ -186,7 +186,7 @@ def evaluate(coefficients, phi):
 
 
 def characteristic_determinant(params_or_coefficients, phi, k, d: int):
-    """The closed form of det M: B^(d-1) (P_1 + P_2 P_3) at (phi, |k| = k) (seed eq. (3.2))."""
+    """The closed form of det M: B^(d-1) (P_1 + P_2 P_3) at (phi, |k| = k) (seed eq. (3.3))."""
     c = _as_coefficients(params_or_coefficients)
     B = evaluate(transverse_coefficients(c, k), phi)
     return B ** (d - 1) * evaluate(dispersion_coefficients(c, k), phi)

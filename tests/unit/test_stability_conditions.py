@@ -102,12 +102,12 @@ def test_coupled_conditions_seed_theta_degenerate_once_corrected():
     params = seed_parameters(m0=0.9)
     corrected = coupled_conditions(params, "corrected")
     printed = coupled_conditions(params, "seed")
-    for name in ("3.7:theta_1", "3.7c", "3.8"):
+    for name in ("3.8a:theta_1", "3.8c", "3.9"):
         assert corrected.values[name] == 0.0 and printed.values[name] != 0.0
     # with theta_1 = 0 the d_0 criterion is the uncoupled one on (X_c, Y_c): the corrected (3.8a)-(3.8c) curves are its
     alpha, Xc, Yc = d0_quadratic(linearise(params))
-    assert corrected.values["3.7:theta_3"] == pytest.approx(4 * linearise(params).p_wave_modulus * Xc)
-    assert corrected.values["3.7:theta_2"] == pytest.approx(3 * linearise(params).p_wave_modulus * Yc)
+    assert corrected.values["3.8a:theta_3"] == pytest.approx(4 * linearise(params).p_wave_modulus * Xc)
+    assert corrected.values["3.8a:theta_2"] == pytest.approx(3 * linearise(params).p_wave_modulus * Yc)
 
 
 def test_verdicts_of_the_special_cases():
