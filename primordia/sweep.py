@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core.errors import ConfigError
-from primordia.core.validation import is_number
+from primordia.core.validation import is_number, number
 
 #: The option that seeds the random initial perturbation (``--seeds``).
 SEED_KEY = "physics.chemotaxis.seed"
@@ -465,12 +465,13 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def command_sweep(args) -> int:
     """Entry point of ``primordia sweep``; returns the exit code."""
-    if args.seeds < 0:
-        raise ConfigError(f"--seeds must be >= 0, got {args.seeds}")
-    if args.workers is not None and (args.workers < 1 or args.scheduler):
-        raise ConfigError("--workers must be >= 1, and applies to the local cluster only (not with --scheduler)")
-    if args.timeout is not None and not args.timeout > 0:
-        raise ConfigError(f"--timeout must be > 0 seconds, got {args.timeout:g}")
+    number(args.seeds, "--seeds", integer=True, at_least=0)
+    if args.workers is not None:
+        number(args.workers, "--workers", integer=True, at_least=1)
+        if args.scheduler:
+            raise ConfigError("--workers applies to the local cluster only (not with --scheduler)")
+    if args.timeout is not None:
+        number(args.timeout, "--timeout", above=0, hint="seconds")
     config = Path(args.config)
     sweep = Sweep(config, tuple(Axis.parse(text) for text in args.vary), tuple(range(1, args.seeds + 1)),
                   tuple(args.overrides), Path(args.out) if args.out else Path("out") / f"sweep_{config.stem}")

@@ -104,7 +104,8 @@ def test_integer_and_float_axes():
     (["--vary", "parameters.alpah=2:8:3"], "unknown parameter 'alpah' (did you mean alpha"),
     (["--vary", "physics.chemotaxis.nope=1:2:2"], "--vary physics.chemotaxis.nope: not a number"),
     (["--vary", "parameters.alpha=2:8:3", "--vary", "parameters.alpha=1:2:2"], "a key is varied twice"),
-    (["--vary", "parameters.alpha=2:8:3", "--workers", "0"], "--workers must be >= 1"),
+    (["--vary", "parameters.alpha=2:8:3", "--workers", "0"], "--workers must be an integer >= 1, got 0"),
+    (["--vary", "parameters.alpha=2:8:3", "--seeds", "-1"], "--seeds must be an integer >= 0, got -1"),
     ([], "sweep needs at least one --vary"),
 ])
 def test_sweep_bad_input_is_one_line(small_config, primordia_cli, tmp_path, arguments, message):
