@@ -149,7 +149,7 @@ class Traction(Condition):
 
     def terms(self, disc):
         traction = self.formula.ufl(disc.x, disc.t)
-        return {"u": [-ufl.inner(traction, disc.test("u")) * disc.ds(self.boundary)]}
+        return {"u": [-ufl.inner(traction, disc.test("u")) * disc.ds(self.boundary)]}  # (2.7c)
 
 
 class Robin(Condition):
@@ -167,7 +167,8 @@ class Robin(Condition):
         spring = u
         if motion.deformation_gradient is not None:
             spring = motion.volume_ratio * ufl.dot(ufl.inv(motion.deformation_gradient).T, u)
-        return {"u": [stiffness * ufl.inner(spring, w) * disc.ds_degree(motion.quadrature_degree, self.boundary)]}
+        measure = disc.ds_degree(motion.quadrature_degree, self.boundary)
+        return {"u": [stiffness * ufl.inner(spring, w) * measure]}  # (4.16a)
 
 
 class FluidFlux(Condition):
@@ -175,7 +176,7 @@ class FluidFlux(Condition):
 
     def terms(self, disc):
         flux = self.formula.ufl(disc.x, disc.t)
-        return {"p": [-flux * disc.test("p") * disc.ds(self.boundary)]}
+        return {"p": [-flux * disc.test("p") * disc.ds(self.boundary)]}  # (2.7b), (4.16b) with flux 0
 
 
 class FluidPressure(_Dirichlet):

@@ -1,4 +1,4 @@
-r"""Finite-strain poroelasticity with growth (seed section 4, eqs. (4.5), (4.11), (4.12a)-(4.12c), (4.16)).
+r"""Finite-strain poroelasticity with growth (seed section 4, eqs. (4.5), (4.11), (4.12a)-(4.12c), (4.16a)-(4.16b)).
 
 Unknowns on the reference configuration Omega_0 (Taylor-Hood, seed section 5.1):
 the displacement u (P2 vector), the solid pressure psi (P1, the Lagrange
@@ -221,7 +221,7 @@ class PoroelasticGrowth(Physics):
         disc, prm = self.disc, self.params
         u_test, psi_test = disc.test("u"), disc.test("psi")
         P = (elastic_stress(self.F, F_g, disc.field("psi"), self.settings["shear_modulus"])     # (4.11)
-             + fluid_stress(self.F, disc.field("p"), prm["alpha_BW"]))                     # P_f
+             + fluid_stress(self.F, disc.field("p"), prm["alpha_BW"]))                     # P_f of (4.12a)
         return (stress_divergence(P, u_test, self.dx)                                      # (4.12a)
                 + incompressibility(self.J, ufl.det(F_g), psi_test, self.dx))              # (4.12c)
 
@@ -244,8 +244,8 @@ class PoroelasticGrowth(Physics):
         content = fluid_content(prm["C_0"], prm["alpha_BW"], p, self.C)
         content_previous = fluid_content(prm["C_0"], prm["alpha_BW"], disc.previous("p"), self.C_previous)
         mass = (storage(content, content_previous, self.J, p_test, disc.dt, self.dx)               # (4.12b)
-                + darcy_flux(prm["kappa"], prm["eta"], self.J, self.C, p, p_test, self.dx)
-                + growth_source(self.fluid_source(), self.J, p_test, self.dx))
+                + darcy_flux(prm["kappa"], prm["eta"], self.J, self.C, p, p_test, self.dx)          # (4.12b)
+                + growth_source(self.fluid_source(), self.J, p_test, self.dx))                   # (4.12b), (4.15)
         residual = momentum + self._stress_terms(self.growth_tensor()) + mass + self._boundary_terms()
         for name in ("u", "psi", "p"):
             for term in disc.contributions(name, disc.test(name)):
