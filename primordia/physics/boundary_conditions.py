@@ -199,13 +199,34 @@ def condition_kinds() -> dict[str, type]:
     return {name: cls for name, (cls, _) in registry("boundary_conditions").items()}
 
 
-def conditions_from_config(tables, mesh_data, gdim: int) -> list[Condition]:
+class Conditions(list):
+    """The conditions of one physics module: what they contribute together, each contributing its own."""
+
+    def terms(self, disc):
+        """The sum of every condition's weak-form terms (0 when none adds any)."""
+        return sum((term for condition in self for terms in condition.terms(disc).values() for term in terms), 0)
+
+    def dirichlet(self, disc) -> list:
+        """Every condition's Dirichlet constraints."""
+        return [bc for condition in self for bc in condition.dirichlet(disc)]
+
+    def homogeneous(self, disc) -> list:
+        """The same constraints with zero values (for increments and rates)."""
+        return [bc for condition in self for bc in condition.homogeneous(disc)]
+
+    def update(self, disc, t: float) -> None:
+        """Refresh every time-dependent prescribed value for time ``t``."""
+        for condition in self:
+            condition.update(disc, t)
+
+
+def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:
     """Build the conditions of a ``boundary`` list of tables, validating each."""
     if tables is None:
-        return []
+        return Conditions()
     if not isinstance(tables, list):
         raise ConfigError("boundary conditions must be a list of tables ([[physics.NAME.boundary]])")
-    conditions = []
+    conditions = Conditions()
     for table in tables:
         if not isinstance(table, dict):
             raise ConfigError("each boundary condition must be a table with boundary and type")

@@ -225,17 +225,6 @@ class PoroelasticGrowth(Physics):
         return (stress_divergence(P, u_test, self.dx)                                      # (4.12a)
                 + incompressibility(self.J, ufl.det(F_g), psi_test, self.dx))              # (4.12c)
 
-    def _boundary_terms(self):
-        terms = 0
-        for condition in self.conditions:
-            for field_terms in condition.terms(self.disc).values():
-                for term in field_terms:
-                    terms = terms + term
-        return terms
-
-    def _dirichlet(self):
-        return [bc for condition in self.conditions for bc in condition.dirichlet(self.disc)]
-
     def subproblems(self):
         disc, prm = self.disc, self.params
         u, p = disc.field("u"), disc.field("p")
@@ -246,13 +235,13 @@ class PoroelasticGrowth(Physics):
         mass = (storage(content, content_previous, self.J, p_test, disc.dt, self.dx)               # (4.12b)
                 + darcy_flux(prm["kappa"], prm["eta"], self.J, self.C, p, p_test, self.dx)          # (4.12b)
                 + growth_source(self.fluid_source(), self.J, p_test, self.dx))                   # (4.12b), (4.15)
-        residual = momentum + self._stress_terms(self.growth_tensor()) + mass + self._boundary_terms()
+        residual = momentum + self._stress_terms(self.growth_tensor()) + mass + self.conditions.terms(disc)
         for name in ("u", "psi", "p"):
             for term in disc.contributions(name, disc.test(name)):
                 residual += term
         unknown = disc.unknown("u")
         return [Subproblem(name=self.name, unknown=unknown, residual=residual,
-                           jacobian=ufl.derivative(residual, unknown), bcs=self._dirichlet(), linear=False,
+                           jacobian=ufl.derivative(residual, unknown), bcs=self.conditions.dirichlet(disc), linear=False,
                            **self._solver(), failure_hint=self._failure_hint())]
 
     def _solver(self) -> dict:
@@ -284,7 +273,7 @@ class PoroelasticGrowth(Physics):
         unknown = disc.unknown("u")
         static = self._static_residual(self.growth_tensor(self.ramp))
         equilibrium = Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
-                                 jacobian=ufl.derivative(static, unknown), bcs=self._dirichlet(), linear=False,
+                                 jacobian=ufl.derivative(static, unknown), bcs=self.conditions.dirichlet(disc), linear=False,
                                  continuation=(self.ramp, self.settings["initial_load_steps"]),
                                  **self._solver(), failure_hint=self._failure_hint())
         return [equilibrium, self._initial_velocity()]
@@ -294,7 +283,7 @@ class PoroelasticGrowth(Physics):
         disc = self.disc
         return (self._stress_terms(F_g)
                 + disc.field("p") * disc.test("p") * self.dx                                 # p(0) = 0 (2.6)
-                + self._boundary_terms())
+                + self.conditions.terms(disc))
 
     def _initial_velocity(self) -> Subproblem:
         """The velocity with which the initial equilibrium follows the growth over the first step.
@@ -320,12 +309,11 @@ class PoroelasticGrowth(Physics):
         solver["petsc_options"].update(ksp_rtol=1e-10, ksp_atol=1e-14, ksp_max_it=2000)
         return Subproblem(name=f"{self.name}.initial_velocity", unknown=rate, residual=residual,
                           jacobian=ufl.derivative(residual, rate), linear=True,
-                          bcs=[bc for condition in self.conditions for bc in condition.homogeneous(disc)],
+                          bcs=self.conditions.homogeneous(disc),
                           **solver)
 
     def before_step(self, t, dt):
-        for condition in self.conditions:
-            condition.update(self.disc, t)
+        self.conditions.update(self.disc, t)
 
     def diagnostics(self):
         """Current area/volume, the range of J and the constraint residual J_e - 1 (seed (4.12c))."""

@@ -140,15 +140,11 @@ class LinearPoroelasticity(Physics):
                     + stress_divergence(poroelastic_stress(u, p, mu, lmbda), w, disc.dx))       # (2.1c), (2.2)
         mass = (storage(prm["C_0"], prm["alpha_BW"], p, p_n, u, u_n, q, disc.dt, disc.dx)         # (2.1a)
                 + darcy_flux(self.conductivity(), prm["eta"], p, q, disc.dx))                   # (2.1a)
-        residual = momentum + mass
-        for condition in self.conditions:
-            for field_terms in condition.terms(disc).values():
-                for term in field_terms:
-                    residual += term
+        residual = momentum + mass + self.conditions.terms(disc)                                # (2.7b), (2.7c)
         for name, test in (("u", w), ("p", q)):
             for term in disc.contributions(name, test):
                 residual += term
-        bcs = [bc for condition in self.conditions for bc in condition.dirichlet(disc)]
+        bcs = self.conditions.dirichlet(disc)
         unknown = disc.unknown("u")
         jacobian = ufl.derivative(residual, unknown)
         return [Subproblem(name=self.name, unknown=unknown, residual=residual, jacobian=jacobian, bcs=bcs,
@@ -164,8 +160,7 @@ class LinearPoroelasticity(Physics):
         return lmbda + 2.0 * mu / self.disc.gdim
 
     def before_step(self, t, dt):
-        for condition in self.conditions:
-            condition.update(self.disc, t)
+        self.conditions.update(self.disc, t)
 
 
 #: Values of option ``preconditioner``.

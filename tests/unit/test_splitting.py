@@ -29,6 +29,7 @@ def test_the_fixed_point_iteration_records_its_iterations_and_reaches_its_tolera
     (count,) = sim.coupling_iterations["fixed_point"]
     assert 2 <= count <= 50
     assert sim.iteration_counts()["fixed_point_iterations"] == count
+    assert sim.summary("running")["mean_coupling_iterations"] == {"fixed_point": count}  # no scheme named there
 
 
 def test_a_fixed_point_step_leaves_no_petsc_garbage(tmp_path, monkeypatch, capfd):
