@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import ufl
+from ufl.core.expr import Expr
 
 from primordia.core.backend import Backend, BoundaryCondition, PointFunction
 from primordia.core.errors import ConfigError
@@ -41,7 +42,7 @@ if TYPE_CHECKING:
     from primordia.physics.base import FieldSpec
 
 #: A term one module adds to another's balance law: the test function in, a UFL form (or None) out.
-Term = Callable[[Any], "ufl.Form | None"]
+Term = Callable[[Expr], "ufl.Form | None"]
 
 
 @dataclass
@@ -120,7 +121,7 @@ class Discretisation:
                               f"(provided: {provided})")
         return self._groups[self._group_of[name]]
 
-    def _component(self, name: str, function, kind: str):
+    def _component(self, name: str, function, kind: str) -> Expr:
         group = self._group(name)
         index = group.index(name)
         if index is None:
@@ -130,26 +131,26 @@ class Discretisation:
             self._splits[key] = ufl.split(function)
         return self._splits[key][index]
 
-    def field(self, name: str):
-        """The current value of a field (or a quantity another module provides)."""
+    def field(self, name: str) -> Any:
+        """The current value of a field (a UFL expression), or what another module provides under ``name``."""
         if name in self._provided:
             return self._provided[name][0]
         group = self._group(name)
         return self._component(name, group.current, "current")
 
-    def previous(self, name: str):
+    def previous(self, name: str) -> Expr:
         """The value of a field at the start of the step."""
         group = self._group(name)
         return self._component(name, group.previous, "previous")
 
-    def rate(self, name: str):
+    def rate(self, name: str) -> Expr:
         """(field at the end - at the start of the last completed step) / dt: e.g. the solid velocity."""
         group = self._group(name)
         if group.rate is None:
             group.rate = self.backend.function(group.space, f"{group.name}_rate")
         return self._component(name, group.rate, "rate")
 
-    def rate_function(self, name: str):
+    def rate_function(self, name: str) -> ufl.Coefficient:
         """The backend function holding the rate of ``name``'s group (e.g. for an initial-rate solve)."""
         self.rate(name)
         return self._group(name).rate
@@ -159,11 +160,11 @@ class Discretisation:
         self.rate(name)
         self._interpolate_into(self._group(name).rate, name, values)
 
-    def test(self, name: str):
+    def test(self, name: str) -> Expr:
         """The test function of a field's balance law."""
         return self._argument(name, "test", ufl.TestFunction)
 
-    def unknown(self, name: str):
+    def unknown(self, name: str) -> ufl.Coefficient:
         """The backend function solved for when ``name``'s balance law is solved."""
         return self._group(name).current
 
@@ -171,11 +172,11 @@ class Discretisation:
         """The fields solved together with ``name`` (its group), in the order of the unknown's sub-spaces."""
         return tuple(self._group(name).fields)
 
-    def trial(self, name: str):
+    def trial(self, name: str) -> Expr:
         """The trial function of a field in its group's space (for bilinear forms such as preconditioners)."""
         return self._argument(name, "trial", ufl.TrialFunction)
 
-    def _argument(self, name: str, kind: str, make):
+    def _argument(self, name: str, kind: str, make) -> Expr:
         """The test or trial function of the group holding ``name``, split into its fields, at ``name``."""
         group = self._group(name)
         key = (group.name, kind)
@@ -185,7 +186,7 @@ class Discretisation:
         index = group.index(name)
         return self._splits[key][0 if index is None else index]
 
-    def constant(self, value: float):
+    def constant(self, value: float) -> ufl.Constant:
         """A UFL constant on the mesh whose value can be changed between solves (``.value = ...``)."""
         return self.backend.constant(self.mesh, value)
 
@@ -213,7 +214,7 @@ class Discretisation:
     def groups(self) -> list[str]:
         return list(self._groups)
 
-    def group_function(self, group: str):
+    def group_function(self, group: str) -> ufl.Coefficient:
         return self._groups[group].current
 
     def group_fields(self, group: str) -> list[str]:
@@ -231,7 +232,7 @@ class Discretisation:
             return self._provided[name][1]
         return self._owner[name]
 
-    def provide(self, name: str, expression, owner: str) -> None:
+    def provide(self, name: str, expression: Any, owner: str) -> None:
         """Offer a derived quantity (a UFL expression) to other modules under ``name``."""
         if name in self._group_of or name in self._provided:
             raise ConfigError(f"'{name}' is provided by both {self.owner(name)} and {owner}")
@@ -308,7 +309,7 @@ class Discretisation:
         self._group(field_name)  # a field no module provides is named now
         self._contributions[field_name].append((term, by))
 
-    def contributions(self, field_name: str, test) -> list[ufl.Form]:
+    def contributions(self, field_name: str, test: Expr) -> list[ufl.Form]:
         """The terms contributed to ``field_name``'s balance law: what its owner adds to the residual."""
         self._consumed.add(field_name)
         return [form for form in (term(test) for term, _ in self._contributions[field_name]) if form is not None]
