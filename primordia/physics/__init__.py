@@ -8,9 +8,8 @@ def primordia_physics():
     from primordia.physics.active_stress import ActiveStress
     from primordia.physics.chemotaxis import Chemotaxis
     from primordia.physics.mechanochemical import MechanoChemical
-    from primordia.physics.poroelastic_linear import LinearPoroelasticity
-
     from primordia.physics.poroelastic_growth import PoroelasticGrowth
+    from primordia.physics.poroelastic_linear import LinearPoroelasticity
 
     return [Chemotaxis, LinearPoroelasticity, PoroelasticGrowth, ActiveStress, MechanoChemical]
 

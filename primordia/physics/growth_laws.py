@@ -111,7 +111,7 @@ class GrowthLaw(ABC):
 
     def stretches(self, gammas: Sequence) -> list:
         """The coefficients of k_i (x) k_i in F_g - I, as printed after (4.12): roots in-plane, gamma_3 as is."""
-        return [positive_sqrt(g) if i < 2 else g for i, g in enumerate(gammas)]
+        return [positive_sqrt(g) if i < 2 else g for i, g in enumerate(gammas)]  # after (4.12c), as printed
 
     def directions_at(self, X, dimension: int) -> list:
         """k_1, ..., k_d at the reference point ``X`` as UFL vectors: the constant :meth:`frame` here.
@@ -125,7 +125,7 @@ class GrowthLaw(ABC):
         """F_g = I + sum_i s_i k_i (x) k_i (the unnumbered equation after seed (4.12)), a UFL tensor."""
         tensor = ufl.Identity(dimension)
         for stretch, k in zip(self.stretches(self.factors(fields, t, X, dimension)), self.directions_at(X, dimension)):
-            tensor = tensor + stretch * ufl.outer(k, k)
+            tensor = tensor + stretch * ufl.outer(k, k)  # F_g, after (4.12c)
         return tensor
 
 
@@ -151,7 +151,7 @@ class Seed3D(GrowthLaw):
     def factors(self, fields, t, X, dimension):
         p = self.params
         in_plane = p["delta_1"] * t
-        return [in_plane, in_plane, p["delta_2"] * t + p["delta_3"] * saturating(fields["m"])]
+        return [in_plane, in_plane, p["delta_2"] * t + p["delta_3"] * saturating(fields["m"])]  # (4.13)
 
 
 class Seed2D(GrowthLaw):
@@ -170,7 +170,7 @@ class Seed2D(GrowthLaw):
     def factors(self, fields, t, X, dimension):
         p = self.params
         gamma = p["delta_2"] * t + p["delta_3"] * saturating(fields["m"])
-        return [gamma, gamma]
+        return [gamma, gamma]  # (4.14)
 
 
 def fluid_source(law: GrowthLaw, ell_0: float, fields: Mapping[str, Any], rates: Mapping[str, Any], t, X,
@@ -187,4 +187,4 @@ def fluid_source(law: GrowthLaw, ell_0: float, fields: Mapping[str, Any], rates:
         total = total + ufl.diff(gamma, time)
         for name, variable in variables.items():
             total = total + ufl.diff(gamma, variable) * rates[name]
-    return ell_0 * total
+    return ell_0 * total  # (4.15), general form
