@@ -33,7 +33,7 @@ from primordia.analysis.patterning import (
     CRITICAL_SCALES,
     UNCOUPLED_CURVES,
 )
-from primordia.core.atomic_files import atomic_path
+from primordia.core.atomic_files import atomic_path, make_directory
 
 #: Colours of the curves at 50%, 75%, 100% (critical, green as in the seed), 125%, 150%.
 SCALE_COLOURS = ("tab:blue", "tab:cyan", "tab:green", "tab:orange", "tab:red")
@@ -197,7 +197,7 @@ def _finish(fig, path):
     """Save to ``path`` atomically (never a half-written picture) when given; return the figure."""
     if path is not None:
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        make_directory(path.parent)
         with atomic_path(path) as temporary:
             fig.savefig(temporary, dpi=130, format=path.suffix.lstrip(".") or "png")
     return fig

@@ -37,7 +37,7 @@ from primordia.analysis.dispersion import (
 )
 from primordia.analysis.linearisation import linearise, wave_vectors
 from primordia.analysis.polynomials import a0, a0_quadratic, d0, d0_quadratic
-from primordia.core.atomic_files import atomic_path
+from primordia.core.atomic_files import atomic_path, make_directory
 from primordia.core.errors import ConfigError
 from primordia.physics.seed_parameters import seed_parameters
 
@@ -376,7 +376,7 @@ def boundary_agreement(ds: xr.Dataset, numerical: str = "unstable_numerical",
 def save_dataset(ds: xr.Dataset, path) -> Path:
     """Write ``ds`` as NetCDF (scipy engine), atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_directory(path.parent)
     clean = ds.copy()
     for name, var in clean.variables.items():  # NetCDF3 has no +-inf-safe bool; inf is fine, bool is not
         if var.dtype == bool:
