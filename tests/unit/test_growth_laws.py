@@ -115,7 +115,7 @@ GROWTH_MODEL = dict(physics=["poroelastic_growth"], mesh=box((0, 0, 0), (1, 1, 1
 
 @pytest.mark.parametrize("growth_law, error, message", [
     (None, ConfigError, "needs a growth law: add [growth_law] name"),
-    ("seed4d", PluginError, "unknown growth law 'seed4d' (registered: seed2d, seed3d"),
+    ("seed4d", PluginError, "unknown growth law 'seed4d' (registered: "),  # installed plugins add theirs
     ({"name": "seed2d", "rate": 2.0}, ConfigError, "growth law seed2d: unknown option 'rate'"),
     ({"directions": [[1, 0], [0, 1]]}, ConfigError, "[growth_law] must be a table with a name"),
 ])

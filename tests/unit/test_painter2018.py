@@ -9,13 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primordia.core import ops as ops_
 from primordia.core.errors import ConfigError, PluginError
+from primordia.core.ops import NUMPY
 from primordia.physics.kinetics.base import Species
 from primordia.physics.kinetics.painter2018 import Painter2018, hill
 from primordia.physics.seed_parameters import seed_parameters
-
-NUMPY = ops_.NUMPY
 
 
 def kinetics(priming_wave: bool = True, **overrides) -> Painter2018:
