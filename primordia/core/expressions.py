@@ -57,8 +57,8 @@ class Formula:
             raise ConfigError(f"{where}: formula {text[:40]!r}... is nested too deeply to evaluate") from None
 
     def _check(self, node):
-        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
-            return
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            return  # True and False are ints to Python, not numbers to a formula
         if isinstance(node, ast.Name):
             if node.id == "x":  # a Subscript x[i] returns before reaching its Name
                 raise ConfigError(f"{self.where}: {self.text!r} uses the point x as a number; "

@@ -111,8 +111,6 @@ def test_bad_formulas_are_refused_when_read(text, fragments):
         assert fragment in message, message
 
 
-@pytest.mark.xfail(strict=True, reason="bug: the string 'True' parses as the number 1 (a bool is an int to ast); "
-                                       "a boolean formula value is refused, its spelling as a formula is not")
 def test_a_boolean_is_not_a_number_in_a_formula_either():
     one_line_error(Formula, "True")
 
