@@ -28,7 +28,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, warn
 from primordia.core.validation import is_number
 
 SECTIONS = {
@@ -132,6 +132,27 @@ def check_structure(config: dict) -> None:
         for key in value:
             if key not in allowed:
                 raise ConfigError(f"unknown key {section}.{key} (known: {', '.join(sorted(allowed))})")
+
+
+class Configured:
+    """A configured plugin object: ``self.settings`` holds its run's option values.
+
+    Contract 1.1 called them ``self.opts``; that name still reads the settings (with one
+    warning per class), so plugins written against 1.1 keep working under 1.2.
+    """
+
+    settings: dict
+
+    @property
+    def opts(self) -> dict:
+        cls = type(self)
+        if cls not in _WARNED_OPTS:
+            _WARNED_OPTS.add(cls)
+            warn(f"{cls.__module__}.{cls.__name__} reads self.opts, renamed self.settings in contract 1.2")
+        return self.settings
+
+
+_WARNED_OPTS: set[type] = set()
 
 
 def merge_options(where: str, defaults, given) -> dict:

@@ -35,8 +35,10 @@ import pluggy
 
 hookspec = pluggy.HookspecMarker("primordia")
 
-#: (major, minor) of this hook contract.  1.1: growth laws and boundary-condition kinds.
-CONTRACT_VERSION = (1, 1)
+#: (major, minor) of this hook contract.  1.1: growth laws and boundary-condition kinds.  1.2: self.settings
+#: (self.opts still reads them), GrowthLaw.directions_at, Output.options, the Coupling base, Discretisation
+#: in primordia.physics.discretisation.
+CONTRACT_VERSION = (1, 2)
 
 
 @hookspec

@@ -26,7 +26,7 @@ from abc import ABC, abstractmethod
 
 import ufl
 
-from primordia.core.config import merge_options
+from primordia.core.config import Configured, merge_options
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
 from primordia.core.validation import number
@@ -35,7 +35,7 @@ from primordia.coupling.solvers import accumulate
 from primordia.physics.base import Subproblem
 
 
-class SplittingScheme(ABC):
+class SplittingScheme(Configured, ABC):
     name: str
     #: Options of the ``[coupling]`` table this scheme reads (with defaults); the values of a run are
     #: ``self.settings`` (the table's values over these defaults).

@@ -31,7 +31,7 @@ import numpy as np
 import ufl
 from ufl.algorithms import expand_derivatives
 
-from primordia.core.config import merge_options
+from primordia.core.config import Configured, merge_options
 from primordia.core.parameters import Parameter
 
 if TYPE_CHECKING:
@@ -137,7 +137,7 @@ class AlgebraicOperator(ABC):
         self.matrix().multAdd(x, residual, residual)
 
 
-class Physics(ABC):
+class Physics(Configured, ABC):
     """A balance law or constitutive piece, contributed through ``primordia_physics``."""
 
     #: Name used in ``[model] physics = [...]``.

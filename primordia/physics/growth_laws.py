@@ -48,7 +48,7 @@ from typing import Any, ClassVar
 import numpy as np
 import ufl
 
-from primordia.core.config import merge_options
+from primordia.core.config import Configured, merge_options
 from primordia.core.errors import ConfigError
 from primordia.core.parameters import Parameter
 
@@ -61,7 +61,7 @@ def positive_sqrt(gamma, ops=ufl):
     return ops.sqrt(0.5 * (gamma + ops.sqrt(gamma * gamma + SQRT_EPSILON**2)))
 
 
-class GrowthLaw(ABC):
+class GrowthLaw(Configured, ABC):
     """Growth factors gamma_i(fields, t, X) on orthonormal directions k_i (seed section 4)."""
 
     #: Name under which the law is selected in a config (``[growth_law] name``).

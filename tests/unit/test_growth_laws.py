@@ -149,3 +149,14 @@ def test_the_growth_law_parameters_join_the_models_parameters():
     with pytest.raises(ConfigError, match="parameter delta_3 must be >= 0"):
         Model(physics=["chemotaxis", "poroelastic_growth"], growth_law="seed2d", parameters={"delta_3": -1.0},
               mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2)
+
+
+def test_a_plugin_written_for_contract_1_1_still_reads_its_options_as_opts(capsys):
+    """Contract 1.2 renamed ``self.opts`` to ``self.settings``; the old name reads the same dict, with a warning."""
+    from primordia.core.hookspecs import CONTRACT_VERSION
+    from primordia.physics.growth_laws import Seed2D
+
+    law = Seed2D({}, directions=[[0.0, 1.0], [-1.0, 0.0]])
+    assert CONTRACT_VERSION == (1, 2)
+    assert law.opts is law.settings and law.opts["directions"] == [[0.0, 1.0], [-1.0, 0.0]]
+    assert capsys.readouterr().err.count("renamed self.settings") == 1

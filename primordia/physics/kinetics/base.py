@@ -36,7 +36,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from primordia.core.config import merge_options
+from primordia.core.config import Configured, merge_options
 from primordia.core.errors import PluginError
 from primordia.core.parameters import Parameter
 
@@ -70,7 +70,7 @@ class Species:
         return self.diffusivity is not None
 
 
-class Kinetics(ABC):
+class Kinetics(Configured, ABC):
     """The species of a model and their reactions."""
 
     #: Name under which the kinetics is selected in a config (``[kinetics] name``).
