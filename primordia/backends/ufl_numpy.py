@@ -375,7 +375,11 @@ class _Analysis:
     """
 
     def __init__(self, root):
-        self.root = root  # keeps the node ids unique
+        self.root = root
+        # every node analysed, kept alive: UFL may rewire the tree in place (see _analysis), and a node
+        # dropped from it could otherwise be freed and its id reused by an unrelated node, which would
+        # then inherit its mask and memo (a wrong value, not an error)
+        self.nodes: list = []
         self.masks: dict[int, int] = {}
         self.arguments: dict[int, uc.Argument] = {}
         self.orders: dict[tuple[int, int | None], set[int]] = {}
@@ -392,6 +396,7 @@ class _Analysis:
                 stack.extend(pending)
                 continue
             stack.pop()
+            self.nodes.append(node)
             self.masks[id(node)] = mask = self._mask(node)
             for op in node.ufl_operands:
                 uses[id(op)] = uses.get(id(op), 0) + 1
