@@ -27,6 +27,7 @@ import numpy as np
 
 from primordia.core.errors import ConfigError, MeshError
 from primordia.core.mesh_data import CELL_TYPES, FACET_TYPES, MeshData
+from primordia.core.validation import is_integer, is_number
 
 #: Ways of splitting each square of :func:`rectangle` (dolfinx's ``DiagonalType`` names).
 DIAGONALS = ("right", "left", "crossed")
@@ -174,12 +175,17 @@ def _real_vector(values, length: int, what: str) -> np.ndarray:
     """``values`` as a finite float array of ``length`` entries, else MeshError."""
     if isinstance(values, (str, bytes)) or not isinstance(values, (Sequence, np.ndarray)):
         raise MeshError(f"mesh {what} must be a list of {length} numbers, got {values!r}")
-    if len(values) != length or any(isinstance(v, bool) or not isinstance(v, (int, float, np.number)) for v in values):
+    if len(values) != length or any(not is_number(v) and not _non_finite(v) for v in values):
         raise MeshError(f"mesh {what} must be a list of {length} numbers, got {list(values)!r}")
     vector = np.asarray(values, dtype=np.float64)
     if not np.all(np.isfinite(vector)):
         raise MeshError(f"mesh {what} must be finite, got {list(values)!r}")
     return vector
+
+
+def _non_finite(value) -> bool:
+    """inf or NaN (a number, reported as not finite rather than as not a number)."""
+    return isinstance(value, (float, np.floating)) and not math.isfinite(value)
 
 
 def _check_cell_counts(cells, gdim: int) -> tuple[int, ...]:
@@ -188,7 +194,7 @@ def _check_cell_counts(cells, gdim: int) -> tuple[int, ...]:
         raise MeshError(f"mesh cells must be a list of {gdim} positive integers, got {cells!r}")
     counts = []
     for count in cells:
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count <= 0:
+        if not is_integer(count) or count <= 0:
             raise MeshError(f"mesh cells must be a list of {gdim} positive integers, got {list(cells)!r}")
         counts.append(int(count))
     return tuple(counts)

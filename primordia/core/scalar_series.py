@@ -15,6 +15,7 @@ import numpy as np
 
 from primordia.core.atomic_files import atomic_path, writable_target
 from primordia.core.errors import PrimordiaError
+from primordia.core.validation import is_number
 
 #: netCDF variable names primordia writes: letters, digits and a few safe signs.
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.+-]*$")
@@ -109,7 +110,7 @@ class ScalarSeries:
             dataset.to_netcdf(temporary, engine="scipy")
 
     def _check_time(self, t) -> float:
-        if isinstance(t, bool) or not isinstance(t, (int, float, np.number)) or not math.isfinite(t):
+        if not is_number(t):
             raise PrimordiaError(f"scalar series {self.path}: time must be a finite number, got {t!r}")
         t = float(t)
         if self._times and t <= self._times[-1]:

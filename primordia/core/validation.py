@@ -16,14 +16,21 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from primordia.core.errors import ConfigError
 
-__all__ = ["number", "flag", "numbers", "is_number"]
+__all__ = ["number", "flag", "numbers", "is_number", "is_integer"]
 
 
 def is_number(value: Any) -> bool:
-    """A finite int or float, not a bool."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """A finite int or float (numpy's too), not a bool."""
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def is_integer(value: Any) -> bool:
+    """An int (numpy's too), not a bool."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
 def number(value: Any, where: str, *, above: float | None = None, at_least: float | None = None,
@@ -35,7 +42,7 @@ def number(value: Any, where: str, *, above: float | None = None, at_least: floa
     asks for an int (a float such as 2.0 is refused: a count is written as a count).  ``hint``
     is appended to the message in parentheses (e.g. the unit, or what 0 means).
     """
-    valid = (isinstance(value, int) and not isinstance(value, bool)) if integer else is_number(value)
+    valid = is_integer(value) if integer else is_number(value)
     valid = valid and (above is None or value > above) and (at_least is None or value >= at_least) \
         and (below is None or value < below) and (at_most is None or value <= at_most)
     if not valid:

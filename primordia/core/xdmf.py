@@ -8,7 +8,6 @@ atomically (:mod:`primordia.core.atomic_files`).
 from __future__ import annotations
 
 import contextlib
-import math
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
@@ -19,6 +18,7 @@ import numpy as np
 from primordia.core.atomic_files import atomic_path, atomic_write_bytes, make_directory
 from primordia.core.errors import PrimordiaError
 from primordia.core.mesh_data import MeshData
+from primordia.core.validation import is_number
 
 
 _XDMF_TOPOLOGY = {"triangle": "Triangle", "tetra": "Tetrahedron"}
@@ -105,7 +105,7 @@ class XdmfSeries:
         atomic_write_bytes(self.path, self._xdmf_document())
 
     def _check_time(self, t) -> float:
-        if isinstance(t, bool) or not isinstance(t, (int, float, np.number)) or not math.isfinite(t):
+        if not is_number(t):
             raise PrimordiaError(f"XDMF series {self.path}: time must be a finite number, got {t!r}")
         t = float(t)
         if self._steps and t <= self._steps[-1][0]:
