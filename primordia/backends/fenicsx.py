@@ -311,6 +311,19 @@ class FenicsxBackend(Backend):
     def num_dofs(self, space) -> int:
         return space.dofmap.index_map.size_global * space.dofmap.index_map_bs
 
+    # -- DOF layout -----------------------------------------------------------------------
+    def owned_dof_coordinates(self, space) -> np.ndarray:
+        owned = space.dofmap.index_map.size_local
+        return space.tabulate_dof_coordinates()[:owned, : space.mesh.geometry.dim].T.copy()
+
+    def shares_dofs(self, space, other) -> bool:
+        if space is other:
+            return True
+        if space.mesh is not other.mesh or space.ufl_element() != other.ufl_element():
+            return False
+        return (space.dofmap.index_map.size_local == other.dofmap.index_map.size_local
+                and np.array_equal(space.dofmap.list.array, other.dofmap.list.array))
+
     # -- field splits ---------------------------------------------------------------------
     def field_index_sets(self, space):
         index_map, bs = space.dofmap.index_map, space.dofmap.index_map_bs

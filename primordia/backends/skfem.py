@@ -964,6 +964,14 @@ class SkfemBackend(Backend):
     def num_dofs(self, space) -> int:
         return space.num_dofs
 
+    # -- DOF layout -----------------------------------------------------------------------
+    def owned_dof_coordinates(self, space) -> np.ndarray:
+        return space.dof_coordinates
+
+    def shares_dofs(self, space, other) -> bool:
+        # a space's DOFs are numbered from its mesh and element alone (SkfemFunctionSpace)
+        return space is other or (space.mesh is other.mesh and space.ufl_element() == other.ufl_element())
+
     # -- field splits ---------------------------------------------------------------------
     def field_index_sets(self, space):
         fields = sub_elements(space.ufl_element())

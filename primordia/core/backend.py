@@ -178,6 +178,18 @@ class Backend(ABC):
     def num_dofs(self, space) -> int:
         """Global number of DOFs of ``space`` (all components)."""
 
+    # -- DOF layout -----------------------------------------------------------------------
+    @abstractmethod
+    def owned_dof_coordinates(self, space) -> np.ndarray:
+        """Coordinates (gdim, n_owned) of the nodes of the DOFs this rank owns, in ``petsc_vector`` order.
+
+        For a scalar Lagrange space (what nodal evaluation of lumped forms reads).
+        """
+
+    @abstractmethod
+    def shares_dofs(self, space, other) -> bool:
+        """Whether the DOFs of two spaces are the same nodes in the same order (DOF arrays align)."""
+
     # -- field splits ---------------------------------------------------------------------
     @abstractmethod
     def field_index_sets(self, space) -> list:

@@ -13,7 +13,10 @@ or never when nothing is left.  Each B_c is assembled once, and again only when 
 constant it reads changes value (dt in an adaptive run); a diagonal one (lumped, vertex
 quadrature) is kept as a vector and applied pointwise.  A Jacobian that reads fields but is
 diagonal (a lumped reaction) is assembled as a vector, never as a matrix: the solve is then a
-division.  The physics is still stated once, in UFL: these are its own derivatives.
+division.  A lumped remainder or diagonal whose integrand is continuous at the vertices (the
+explicit reactions) is not assembled at all but evaluated at the nodes
+(:mod:`primordia.coupling.nodal`).  The physics is still stated once, in UFL: these are its
+own derivatives.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ import numpy as np
 import ufl
 from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
+
+from primordia.coupling.nodal import nodal_form
 
 
 def _constants_state(constants) -> tuple:
@@ -60,6 +65,7 @@ class _Matrix:
         self._diagonal_matrix = None  # whether an assembled matrix is diagonal (checked once)
         self._state = None
         self._ones = None
+        self._nodal = None  # the row sums evaluated at the nodes, when they can be (vector_only)
 
     def invalidate(self) -> None:
         """Assemble at the next refresh, whatever the constants say."""
@@ -72,7 +78,12 @@ class _Matrix:
             return False
         self._state = state
         if self.vector_only:
-            self.diagonal = self.backend.assemble_vector(self._row_sums(), b=self.diagonal)
+            if self._nodal is None:
+                self._nodal = nodal_form(self.backend, self._row_sums()) or False
+            if self._nodal:
+                self.diagonal = self._nodal.assemble(b=self.diagonal)
+            else:
+                self.diagonal = self.backend.assemble_vector(self._row_sums(), b=self.diagonal)
             return True
         self.matrix = self.backend.assemble_matrix(self.form, self.bcs, A=self.matrix)
         if self._diagonal_matrix is None:
@@ -141,6 +152,7 @@ class AffineResidual:
         self.constant_jacobian = unknown in constant_fields
         remainder = ufl.replace(residual, {c: ufl.zero(*c.ufl_shape) for c in constant_fields})
         self.remainder = remainder if remainder.integrals() else None
+        self._nodal_remainder = nodal_form(backend, remainder) if self.remainder is not None else None
         self.available = (bool(self.parts) or self.constant_jacobian) and (self.constant_jacobian or not subproblem.bcs)
         self.jacobian = _Matrix(backend, subproblem.jacobian, subproblem.bcs)
         # the Jacobian without Dirichlet rows, for F(x) = J x + ... (only with conditions)
@@ -154,12 +166,18 @@ class AffineResidual:
         self.jacobian.invalidate()
         self.full_jacobian.invalidate()
 
-    def residual(self, x, b):
-        """b = F(x) with the backend's Dirichlet convention (lifted, x - g on fixed rows); returns b."""
+    def residual(self, x, b, unknown: bool = True):
+        """b = F(x) with the backend's Dirichlet convention (lifted, x - g on fixed rows); returns b.
+
+        ``unknown=False`` leaves out J x, i.e. gives F(0) = F(x) - J x, for a constant Jacobian
+        without Dirichlet conditions (the right-hand side of J x = -F(0)).
+        """
         backend, sub = self.backend, self.sub
         for _, part in self.parts:
             part.refresh()
-        if self.remainder is not None:
+        if self._nodal_remainder is not None:
+            b = self._nodal_remainder.assemble(b=b)
+        elif self.remainder is not None:
             b = backend.assemble_vector(self.remainder, b=b)
         elif b is None:
             b = x.duplicate()
@@ -170,7 +188,10 @@ class AffineResidual:
             self._scratch = x.duplicate()
         for coefficient, part in self.parts:
             part.apply_add(backend.petsc_vector(coefficient), b, self._scratch)
-        if self.constant_jacobian:
+        if self.constant_jacobian and not unknown:
+            if sub.bcs:
+                raise ValueError("F(0) is only split off without Dirichlet conditions")
+        elif self.constant_jacobian:
             self.full_jacobian.refresh()
             shifted = x
             if sub.bcs:  # F(x~) with x~ = x but for the prescribed values (the lifting of the Newton residual)

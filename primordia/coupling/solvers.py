@@ -319,6 +319,10 @@ class LinearSolver(_Solver):
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
                            and self.options.get("pc_type") == "jacobi")
         self._operators = None  # what the KSP was last given
+        # a constant Jacobian, no conditions, no operator: solve J x = -F(0) for x itself, which
+        # spares the product J x of the residual and the update x - dx (f and b of the seed's IMEX)
+        self._for_unknown = (self._affine.available and self._affine.constant_jacobian and not subproblem.bcs
+                             and subproblem.operator is None)
 
     def step_size_changed(self) -> None:
         super().step_size_changed()
@@ -329,7 +333,10 @@ class LinearSolver(_Solver):
         x = backend.petsc_vector(sub.unknown)
         if sub.operator is not None:
             sub.operator.update()
-        if self._affine.available:
+        if self._for_unknown:
+            b = self._residual = self._affine.residual(x, self._residual, unknown=False)
+            b.scale(-1.0)  # J x = -F(0)
+        elif self._affine.available:
             b = self._residual = self._affine.residual(x, self._residual)
             if sub.operator is not None:
                 sub.operator.apply(x, b)
@@ -339,26 +346,27 @@ class LinearSolver(_Solver):
             raise SolverError(f"{sub.name}: the residual is not finite")
         if self._increment is None:
             self._increment = b.duplicate()
-        if self._affine.available and self._solve_diagonal(b):
+        if self._affine.available and self._solve_diagonal(b, x if self._for_unknown else self._increment):
             iterations, reason = 1, PETSc.KSP.ConvergedReason.CONVERGED_ITS
         else:
             A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
             if changed or self._operators is not A:
                 self.ksp.setOperators(A, self._assemble_preconditioner(A))
                 self._operators = A
-            self._solve_linear(b)
+            self._solve_linear(b, x if self._for_unknown else self._increment)
             iterations, reason = max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason()
         if reason < 0:
             raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {KSP_REASONS.get(reason, reason)}); "
                               f"try other options under -{sub.prefix}")
-        x.axpy(-1.0, self._increment)
+        if not self._for_unknown:
+            x.axpy(-1.0, self._increment)
         backend.update_ghosts(sub.unknown)
         if not np.isfinite(x.norm()):
             raise SolverError(f"{sub.name}: the solution is not finite")
         return SolveStats(newton_iterations=1, linear_iterations=iterations, reason=reason)
 
-    def _solve_diagonal(self, b) -> bool:
-        """A diagonal system under the default options: the increment by a division; False otherwise."""
+    def _solve_diagonal(self, b, solution) -> bool:
+        """A diagonal system under the default options: ``solution`` by a division; False otherwise."""
         if not self._pointwise:
             return False
         jacobian = self._affine.jacobian
@@ -367,7 +375,7 @@ class LinearSolver(_Solver):
             self._pointwise = False
             return False
         start = time.process_time()
-        self._increment.pointwiseDivide(b, jacobian.diagonal)
+        solution.pointwiseDivide(b, jacobian.diagonal)
         self.linear_solve_seconds += time.process_time() - start
         return True
 
@@ -389,25 +397,25 @@ class LinearSolver(_Solver):
             self._combined.axpy(1.0, jacobian.as_matrix(), structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         return self._combined, True
 
-    def _solve_linear(self, b):
-        """KSP solve; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
+    def _solve_linear(self, b, solution):
+        """KSP solve into ``solution``; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
         start = time.process_time()
         try:
-            self._solve_linear_once(b)
+            self._solve_linear_once(b, solution)
         finally:
             self.linear_solve_seconds += time.process_time() - start
         self._check_options_used()
 
-    def _solve_linear_once(self, b):
+    def _solve_linear_once(self, b, solution):
         try:
-            self.ksp.solve(b, self._increment)
+            self.ksp.solve(b, solution)
             failed = self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
         except PETSc.Error as error:
             failed, raised = True, error
         else:
             raised = None
         if failed and self._switch_to_mumps(self.ksp):
-            self.ksp.solve(b, self._increment)
+            self.ksp.solve(b, solution)
         elif raised is not None:
             raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}); "
                               f"try other options under -{self.sub.prefix}") from None

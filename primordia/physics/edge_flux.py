@@ -28,6 +28,7 @@ from collections.abc import Callable
 import numpy as np
 import ufl
 from petsc4py import PETSc
+from scipy.sparse import csr_matrix as _csr
 
 from primordia.physics.base import AlgebraicOperator
 from primordia.physics.discretisation import Discretisation
@@ -71,6 +72,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._prepare_edges(stiffness)
         self._prepare_gather(disc.previous_vector(species))
         self._prepare_pairs()
+        self._in_place = self._share_values(stiffness)
         if self.negative_weights and not self._moving:
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
                           "the exponentially fitted flux no longer guarantees a non-negative density",
@@ -96,9 +98,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self.negative_weights = comm.allreduce(int((weights < -1e-12 * scale).sum())) // 2  # each edge twice
         largest = comm.allreduce(float(weights.max(initial=0.0)), op=_max_op())
         self.most_negative_weight = -comm.allreduce(float(-weights.min(initial=0.0)), op=_max_op()) / largest
-        self._scaled_weights = weights * self.diffusivity  # w_ij D
-        if hasattr(self, "_off"):
-            self._off_weights = self._scaled_weights[self._off]
+        self._scaled_weights = weights * self.diffusivity  # w_ij D (0 on the diagonal)
 
     def _prepare_gather(self, template):
         """A scatter bringing the values at every column of the local rows to this rank.
@@ -114,23 +114,62 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._entry_row = self._entry_column[self._diag_positions][self._row]
 
     def _prepare_pairs(self):
-        """The edge of each off-diagonal entry, so that the costly functions are evaluated once per edge.
+        """The edge of each entry, so that the costly functions are evaluated once per edge.
 
         An edge {i, j} appears as the entries (i, j) and (j, i), whose Peclet numbers are
         opposite: both B(Pe_ij) and B(-Pe_ij) follow from B at the edge's Peclet number by
-        B(-x) = B(x) + x.  Gathered positions are ordered like global indices.
+        B(-x) = B(x) + x.  An update is then sparse products with matrices fixed by the mesh:
+        the edge midpoints and differences of the gathered vertex values (``_midpoint``,
+        ``_difference``), and the entries of A from the per-edge table [B(Pe), B(Pe) + Pe]
+        (``_entries``: -w_ij D at B(Pe_ij) for an off-diagonal entry, w_ij D at each B(-Pe_ij)
+        of its row for a diagonal one).  Gathered positions are ordered like global indices.
         """
-        self._off = np.flatnonzero(~self._diagonal)
-        self._off_row = self._row[self._off]
-        self._off_weights = self._scaled_weights[self._off]
-        i, j = self._entry_row[self._off], self._entry_column[self._off]
+        off = ~self._diagonal
+        i, j = self._entry_row[off], self._entry_column[off]
         size = max(len(self._gathered.getArray(readonly=True)), 1)
         low, high = np.minimum(i, j), np.maximum(i, j)
-        edges, self._edge_of = np.unique(low.astype(np.int64) * size + high, return_inverse=True)
-        self._edge_low, self._edge_high = edges // size, edges % size
+        edges, edge_of = np.unique(low.astype(np.int64) * size + high, return_inverse=True)
+        edge_low, edge_high = edges // size, edges % size
+        n_edges, n_entries = len(edges), len(self._columns)
+        rows, ones = np.arange(n_edges), np.ones(n_edges)
+        self._midpoint = _csr((np.r_[ones, ones] / 2, (np.r_[rows, rows], np.r_[edge_low, edge_high])), (n_edges, size))
+        self._difference = _csr((np.r_[ones, -ones], (np.r_[rows, rows], np.r_[edge_high, edge_low])), (n_edges, size))
         forward = i < j  # entry (i, j) runs from the edge's low end to its high end
-        self._forward, self._backward = forward.astype(float), (~forward).astype(float)
-        self._values = np.zeros(len(self._columns))
+        toward = edge_of + n_edges * ~forward  # B(Pe_ij) in the table
+        away = edge_of + n_edges * forward  # B(-Pe_ij) in the table
+        entries = np.flatnonzero(off)
+        self._entry_pattern = (np.r_[entries, self._diag_positions[self._row[entries]]], np.r_[toward, away])
+        self._entries = None
+        self._table = np.zeros(2 * n_edges)
+        self._values = np.zeros(n_entries)
+
+    def _entry_matrix(self):
+        """``_entries`` for the current weights (module docstring of :meth:`_prepare_pairs`)."""
+        weights = self._scaled_weights[self._entry_pattern[0][: len(self._entry_pattern[0]) // 2]]
+        return _csr((np.r_[-weights, weights], self._entry_pattern), (len(self._values), len(self._table)))
+
+    def _share_values(self, stiffness) -> bool:
+        """On one process, make the operator a matrix over this object's own CSR arrays.
+
+        An update then writes the entries where PETSc reads them, without a copy
+        (``setValuesCSR`` costs as much as the rest of an update); several processes
+        keep ``setValuesCSR``, as PETSc copies arrays into a parallel matrix.
+        """
+        if stiffness.getComm().getSize() != 1 or self._moving:
+            return False
+        self._indptr = self._indptr.astype(PETSc.IntType)
+        self._columns = self._columns.astype(PETSc.IntType)
+        size = stiffness.getSizes()
+        self._A = PETSc.Mat().createAIJWithArrays(size, (self._indptr, self._columns, self._values),
+                                                  comm=stiffness.getComm())
+        self._A.assemble()
+        self._values[0] = 1.0  # check the sharing once: PETSc copies arrays of another type
+        shared = self._A.getValuesCSR()[2][0] == 1.0
+        self._values[0] = 0.0
+        if not shared:
+            self._A.setValuesCSR(self._indptr, self._columns, self._values)
+            self._A.assemble()
+        return shared
 
     def _gather(self, name: str) -> np.ndarray:
         vector = self.disc.previous_vector(name)
@@ -142,20 +181,20 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         if self._moving:
             self.disc.assemble_matrix(self._stiffness_form, A=self._stiffness)
             self._set_weights(self._stiffness.getValuesCSR()[2])
+        if self._entries is None or self._moving:
+            self._entries = self._entry_matrix()
         c, a = self._gather(self.species), self._gather(self.attractant)
-        low, high = self._edge_low, self._edge_high
-        chi = self.sensitivity(0.5 * (c[low] + c[high]))  # at the edge midpoint, as quadrature would
-        peclet = chi * (a[high] - a[low]) / self.diffusivity  # from the low end to the high end
-        fitted = bernoulli(peclet)
-        peclet, fitted = peclet[self._edge_of], fitted[self._edge_of]
-        toward = fitted + self._backward * peclet  # B(Pe_ij) of each off-diagonal entry (i, j)
-        away = fitted + self._forward * peclet  # B(-Pe_ij) = B(Pe_ij) + Pe_ij
-        values = self._values
-        values[self._off] = -self._off_weights * toward  # A_ij
-        values[self._diag_positions] = np.bincount(self._off_row, weights=self._off_weights * away,
-                                                   minlength=len(self._indptr) - 1)  # A_ii = sum_j w_ij D B(-Pe_ij)
-        self._A.setValuesCSR(self._indptr, self._columns, values)
-        self._A.assemble()
+        chi = self.sensitivity(self._midpoint @ c)  # at the edge midpoint, as quadrature would
+        peclet = chi * (self._difference @ a)
+        peclet /= self.diffusivity  # Pe from the low end to the high end
+        n_edges = len(peclet)
+        table = self._table
+        table[:n_edges] = bernoulli(peclet)
+        np.add(table[:n_edges], peclet, out=table[n_edges:])  # B(-x) = B(x) + x
+        self._values[:] = self._entries @ table  # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
+        if not self._in_place:
+            self._A.setValuesCSR(self._indptr, self._columns, self._values)
+        self._A.assemble()  # also marks the matrix changed, for the solver's preconditioner
 
     def matrix(self):
         return self._A

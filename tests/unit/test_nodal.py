@@ -1,0 +1,97 @@
+"""Lumped forms evaluated at the nodes (coupling/nodal.py) equal their cell-by-cell assembly."""
+
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+from primordia.backends.fenicsx import FenicsxBackend
+from primordia.backends.skfem import SkfemBackend
+from primordia.core.meshes import box, rectangle
+from primordia.coupling.nodal import nodal_form
+
+BACKENDS = {"fenicsx": lambda: FenicsxBackend(MPI.COMM_WORLD), "skfem": lambda: SkfemBackend()}
+
+
+@pytest.fixture(params=list(BACKENDS))
+def backend(request):
+    return BACKENDS[request.param]()
+
+
+def _p1_fields(backend, mesh, names, seed=3):
+    """P1 fields with random positive vertex values, each in its own space (as the species are)."""
+    rng = np.random.default_rng(seed)
+    fields = []
+    for name in names:
+        space = backend.function_space(mesh, ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1))
+        field = backend.function(space, name)
+        backend.local_array(field)[:] = rng.uniform(0.1, 2.0, backend.local_array(field).shape)
+        fields.append(field)
+    return fields
+
+
+def _reaction_form(backend, mesh):
+    """The shape of the seed's explicit reactions (2.3b)-(2.3d): rational, exponential, a
+    conditional on time and position, constants, several species, and two measures."""
+    m, b, e = _p1_fields(backend, mesh, "mbe")
+    v = ufl.TestFunction(e.ufl_function_space())
+    x = ufl.SpatialCoordinate(mesh)
+    t = backend.constant(mesh, 3.0)
+    k = backend.constant(mesh, 0.05)
+    dx_lumped = backend.lumped_dx(mesh)
+    wave = ufl.conditional(ufl.lt(x[0], 0.4 * t), 1.0, 0.0)
+    production = k * m * m / (1 + b ** 2) + wave * ufl.exp(-m) + 0.3 * x[1] ** 2
+    form = -(production - 2.0 * e) * v * dx_lumped - e * m * v * backend.lumped_dx(mesh)
+    other_measure = backend.measure("dx", mesh, metadata={"quadrature_rule": "vertex", "quadrature_degree": 2})
+    return form + abs(b - 1.0) * v * other_measure, t
+
+
+@pytest.mark.filterwarnings("ignore:Explicitly selected vertex quadrature")  # FFCx on the second measure
+@pytest.mark.parametrize("make_mesh", [lambda: rectangle((0, 0), (2, 1), (7, 5)),
+                                       lambda: box((0, 0, 0), (1, 1, 1), (3, 3, 2))], ids=["2d", "3d"])
+def test_a_lumped_reaction_at_the_nodes_is_its_assembly(backend, make_mesh):
+    mesh = backend.create_mesh(make_mesh())
+    form, time = _reaction_form(backend, mesh)
+    nodal = nodal_form(backend, form)
+    assert nodal is not None
+    for t in (3.0, 6.0):  # a changed constant is read at the next evaluation
+        time.value = t
+        expected = backend.assemble_vector(form).getArray()
+        got = nodal.assemble().getArray()
+        assert np.abs(expected).max() > 1e-3
+        assert np.allclose(got, expected, rtol=1e-13, atol=1e-15)
+
+
+def test_a_form_that_is_not_nodal_is_left_to_assembly(backend):
+    mesh = backend.create_mesh(rectangle((0, 0), (1, 1), (4, 4)))
+    cell = mesh.ufl_cell()
+    (m,) = _p1_fields(backend, mesh, "m")
+    v = ufl.TestFunction(m.ufl_function_space())
+    lumped, exact = backend.lumped_dx(mesh), backend.measure("dx", mesh)
+    p2 = backend.function(backend.function_space(mesh, ufl.FiniteElement("Lagrange", cell, 2)), "q")
+    vector = backend.function(backend.function_space(mesh, ufl.VectorElement("Lagrange", cell, 1)), "w")
+    refused = {
+        "a gradient of a field (discontinuous at the vertices)": ufl.grad(m)[0] * v * lumped,
+        "a gradient of the test function": ufl.grad(v)[0] * m * lumped,
+        "a P2 field": p2 * v * lumped,
+        "a vector field": vector[0] * v * lumped,
+        "Gauss quadrature (not lumped)": m * v * exact,
+        "a boundary integral": m * v * backend.measure("ds", mesh),
+        "a cell quantity": ufl.CellVolume(mesh) * v * lumped,
+        "a bilinear form": m * v * ufl.TrialFunction(m.ufl_function_space()) * lumped,
+    }
+    for what, form in refused.items():
+        assert nodal_form(backend, form) is None, what
+    assert nodal_form(backend, m * v * lumped + m * m * v * lumped) is not None
+
+
+def test_a_field_on_a_space_with_other_dofs_is_refused():
+    """Nodal values line up only when every field numbers its DOFs as the test space does."""
+    backend = FenicsxBackend(MPI.COMM_WORLD)
+    mesh = backend.create_mesh(rectangle((0, 0), (1, 1), (4, 4)))
+    other = backend.create_mesh(rectangle((0, 0), (1, 1), (4, 4)))
+    (m,) = _p1_fields(backend, mesh, "m")
+    (n,) = _p1_fields(backend, other, "n")
+    assert not backend.shares_dofs(m.ufl_function_space(), n.ufl_function_space())
+    v = ufl.TestFunction(m.ufl_function_space())
+    assert nodal_form(backend, n * v * backend.lumped_dx(mesh)) is None
