@@ -35,11 +35,14 @@ def run(example: str, ranks: int, steps: int | None, extra: list[str], out: Path
     steps = steps or default_steps
     command = [sys.executable, "-m", "primordia.cli", "run", str(ROOT / f"examples/{example}.toml"), "--out", str(out),
                "--set", f"mesh.cells={cells}", "--set", f"time.t_final={steps * dt}",
-               "--set", f"output.times=[{steps * dt}]", "--set", "output.pictures=false", "--no-progress", *extra]
+               "--set", f"output.times=[{steps * dt}]", "--set", "output.pictures=false", "--no-progress", "--overwrite", *extra]
     if ranks > 1:
         command = ["mpirun", "-n", str(ranks), *command]
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-    subprocess.run(command, check=True, env=env, capture_output=True)
+    done = subprocess.run(command, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        reason = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        sys.exit(f"bench_scaling: {example} on {ranks} rank(s) failed: {reason}")
     return json.loads((out / "summary.json").read_text())
 
 

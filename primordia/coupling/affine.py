@@ -166,13 +166,52 @@ class AffineResidual:
         self.jacobian.invalidate()
         self.full_jacobian.invalidate()
 
-    def residual(self, x, b, unknown: bool = True):
-        """b = F(x) with the backend's Dirichlet convention (lifted, x - g on fixed rows); returns b.
+    def residual(self, x, b):
+        """b = F(x) with the backend's Dirichlet convention (lifted, x - g on fixed rows); returns b."""
+        backend, sub = self.backend, self.sub
+        b = self._without_unknown(x, b)
+        if self.constant_jacobian:
+            self.full_jacobian.refresh()
+            shifted = x
+            if sub.bcs:  # F(x~) with x~ = x but for the prescribed values (the lifting of the Newton residual)
+                if self._shifted is None:
+                    self._shifted = x.duplicate()
+                x.copy(self._shifted)
+                backend.set_dirichlet(self._shifted, sub.bcs)
+                shifted = self._shifted
+            self.full_jacobian.apply_add(shifted, b, self._scratch)
+            if sub.bcs:
+                backend.set_dirichlet(b, sub.bcs, x0=x, scale=-1.0)
+        return b
 
-        ``unknown=False`` leaves out J x, i.e. gives F(0) = F(x) - J x, for a constant Jacobian
-        without Dirichlet conditions (the right-hand side of J x = -F(0)).
+    def right_hand_side(self, x, b):
+        """For a constant Jacobian: b with J x_new = b, the solution itself rather than a Newton increment.
+
+        F(x) = J_full x + F(0), so b = -F(0) - J_full g on the free rows (the lifting of the
+        prescribed values g, left out when they are all zero) and g on the fixed ones: with
+        J's fixed rows and columns the identity, this is the step's exact solution.  It spares
+        the product J x of :meth:`residual` and the update x - dx.
         """
         backend, sub = self.backend, self.sub
+        if not self.constant_jacobian:
+            raise ValueError(f"{sub.name}: the Jacobian reads fields, so the residual is not split as J x + F(0)")
+        b = self._without_unknown(x, b)
+        if sub.bcs:
+            if self._shifted is None:
+                self._shifted = x.duplicate()
+            self._shifted.zeroEntries()
+            backend.set_dirichlet(self._shifted, sub.bcs)  # g on the fixed rows, 0 elsewhere
+            if self._shifted.norm(PETSc.NormType.NORM_INFINITY) > 0:
+                self.full_jacobian.refresh()
+                self.full_jacobian.apply_add(self._shifted, b, self._scratch)
+        b.scale(-1.0)
+        if sub.bcs:
+            backend.set_dirichlet(b, sub.bcs)
+        return b
+
+    def _without_unknown(self, x, b):
+        """b = F(x) - J x: the remainder and the parts that read other fields (``F(0)`` for a constant J)."""
+        backend = self.backend
         for _, part in self.parts:
             part.refresh()
         if self._nodal_remainder is not None:
@@ -188,21 +227,6 @@ class AffineResidual:
             self._scratch = x.duplicate()
         for coefficient, part in self.parts:
             part.apply_add(backend.petsc_vector(coefficient), b, self._scratch)
-        if self.constant_jacobian and not unknown:
-            if sub.bcs:
-                raise ValueError("F(0) is only split off without Dirichlet conditions")
-        elif self.constant_jacobian:
-            self.full_jacobian.refresh()
-            shifted = x
-            if sub.bcs:  # F(x~) with x~ = x but for the prescribed values (the lifting of the Newton residual)
-                if self._shifted is None:
-                    self._shifted = x.duplicate()
-                x.copy(self._shifted)
-                backend.set_dirichlet(self._shifted, sub.bcs)
-                shifted = self._shifted
-            self.full_jacobian.apply_add(shifted, b, self._scratch)
-            if sub.bcs:
-                backend.set_dirichlet(b, sub.bcs, x0=x, scale=-1.0)
         return b
 
 

@@ -319,9 +319,9 @@ class LinearSolver(_Solver):
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
                            and self.options.get("pc_type") == "jacobi")
         self._operators = None  # what the KSP was last given
-        # a constant Jacobian, no conditions, no operator: solve J x = -F(0) for x itself, which
-        # spares the product J x of the residual and the update x - dx (f and b of the seed's IMEX)
-        self._for_unknown = (self._affine.available and self._affine.constant_jacobian and not subproblem.bcs
+        # a constant Jacobian and no operator: solve for x itself (AffineResidual.right_hand_side), which
+        # spares the product J x of the residual and the update x - dx (f, b and the linear Biot system)
+        self._for_unknown = (self._affine.available and self._affine.constant_jacobian
                              and subproblem.operator is None)
 
     def step_size_changed(self) -> None:
@@ -334,8 +334,7 @@ class LinearSolver(_Solver):
         if sub.operator is not None:
             sub.operator.update()
         if self._for_unknown:
-            b = self._residual = self._affine.residual(x, self._residual, unknown=False)
-            b.scale(-1.0)  # J x = -F(0)
+            b = self._residual = self._affine.right_hand_side(x, self._residual)
         elif self._affine.available:
             b = self._residual = self._affine.residual(x, self._residual)
             if sub.operator is not None:

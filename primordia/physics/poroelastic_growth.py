@@ -338,9 +338,12 @@ SCHUR_FIELDSPLIT = {
     "fieldsplit_psi_p": {"ksp_type": "preonly", "pc_type": "hypre"},
 }
 
-#: GMRES preconditioned by a MUMPS LU factorisation reused over Newton iterations and steps.
+#: GMRES preconditioned by a MUMPS LU factorisation reused over Newton iterations and steps.  Each
+#: Newton step is solved inexactly (rtol 1e-3): the lagged factorisation is close to the tangent, so
+#: Newton still converges in a few iterations, and the SNES tolerances (1e-7 on the residual) decide the
+#: accuracy.  Example 2a at 86 x 86: 1.64 s/step against 2.15 s with rtol 1e-8 (1e-2: 2.02, 1e-4: 1.75).
 REUSED_LU = {
-    "ksp_type": "gmres", "ksp_rtol": 1e-8, "ksp_atol": 1e-14, "ksp_max_it": 300, "ksp_gmres_restart": 100,
+    "ksp_type": "gmres", "ksp_rtol": 1e-3, "ksp_atol": 1e-14, "ksp_max_it": 300, "ksp_gmres_restart": 100,
     "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
     "snes_lag_preconditioner": 10, "snes_lag_preconditioner_persists": True,
 }
