@@ -173,8 +173,10 @@ def registry(kind: str, pm: pluggy.PluginManager | None = None) -> dict[str, tup
         for impl in impls:
             for name, piece in _contribution(pm, kind, impl, table).items():
                 table[name] = (piece, _origin(pm, impl.plugin_name))
-        cache[key] = table
-    return dict(cache[key])
+        # the entry keeps the hook functions of its key alive: an unregistered plugin's function could
+        # otherwise be freed and its id taken by a newly registered one, which would get the old table
+        cache[key] = (tuple(impl.function for impl in impls), table)
+    return dict(cache[key][1])
 
 
 def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:

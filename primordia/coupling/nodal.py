@@ -132,17 +132,19 @@ class NodalForm:
 
     def __init__(self, backend, space, terms):
         self.backend = backend
-        self._terms = [(backend.assemble_vector(ufl.Form([mass])), value) for mass, value in terms]
+        masses = [backend.assemble_vector(ufl.Form([mass])) for mass, _ in terms]
+        self._template = masses[0]
+        self._terms = [(mass.getArray(readonly=True).copy(), value) for mass, (_, value) in zip(masses, terms)]
         self._context = _NodeContext(backend, space)
 
     def assemble(self, b=None):
         """The assembled vector (PETSc Vec of the owned DOFs; ``b`` is filled when given)."""
-        total = np.zeros(self._context.size)
         with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
+            total = None
             for lumped_mass, value in self._terms:
-                total += lumped_mass.getArray(readonly=True) * np.reshape(
-                    evaluate_integrand(value, self._context), -1)
+                term = lumped_mass * np.reshape(evaluate_integrand(value, self._context), -1)
+                total = term if total is None else total + term
         if b is None:
-            b = self._terms[0][0].duplicate()
-        b.setArray(total)
+            b = self._template.duplicate()
+        b.setArray(np.broadcast_to(total, lumped_mass.shape))
         return b

@@ -319,10 +319,12 @@ class LinearSolver(_Solver):
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
                            and self.options.get("pc_type") == "jacobi")
         self._operators = None  # what the KSP was last given
-        # a constant Jacobian and no operator: solve for x itself (AffineResidual.right_hand_side), which
-        # spares the product J x of the residual and the update x - dx (f, b and the linear Biot system)
+        # a constant Jacobian, no operator and a direct solve: solve for x itself
+        # (AffineResidual.right_hand_side), which spares the product J x of the residual and the update
+        # x - dx (f, b and the linear Biot system in serial).  A Krylov solve keeps the increment: its
+        # tolerance is then relative to the step's change, not to the whole solution
         self._for_unknown = (self._affine.available and self._affine.constant_jacobian
-                             and subproblem.operator is None)
+                             and subproblem.operator is None and self.options.get("ksp_type") == "preonly")
 
     def step_size_changed(self) -> None:
         super().step_size_changed()

@@ -229,3 +229,27 @@ def test_unknown_splitting_scheme_raises_plugin_error(tmp_path):
 def test_plugin_errors_are_user_errors():
     """The CLI prints any PrimordiaError as one line; PluginError must be one."""
     assert issubclass(PluginError, PrimordiaError)
+
+
+class _OnePhysics:
+    def __init__(self, physics):
+        self.physics = physics
+
+    @hookimpl
+    def primordia_physics(self):
+        return [self.physics]
+
+
+def test_a_plugin_registered_after_another_was_unregistered_is_the_one_looked_up():
+    """The registry's cache is keyed by the hook functions' ids: an unregistered plugin's function
+    must not be freed and its id reused by the next one (which would then get the old contributions)."""
+    from primordia.physics.base import Physics
+
+    pm = get_plugin_manager()
+    for generation in range(40):
+        physics = type("Probe", (Physics,), {"name": "registry_probe", "generation": generation})
+        pm.register(_OnePhysics(physics), name="tests.registry_probe")
+        try:
+            assert registry("physics", pm)["registry_probe"][0].generation == generation
+        finally:
+            pm.unregister(name="tests.registry_probe")
