@@ -30,7 +30,7 @@ from primordia.core.validation import flag, number, numbers
 
 #: The keys of ``[output]`` that say when the run writes (read by the run itself); every other key
 #: is an option one registered output declares (:attr:`primordia.core.outputs.Output.options`).
-OUTPUT_SCHEDULE = {"times": None, "snapshot_fields": None, "series_every": 10}
+OUTPUT_SCHEDULE = {"times": None, "series_every": 10}
 #: Checkpoints: every N steps (0: never by steps) and every M minutes of wall time (0: never by time).
 #: A run shorter than ``every_minutes`` writes none but its last, at the end or when stopped.
 DEFAULT_CHECKPOINT = {"every_steps": 0, "every_minutes": 10.0}
@@ -145,6 +145,7 @@ class Model:
         if unknown:
             raise ConfigError(f"unknown key output.{sorted(unknown)[0]} "
                               f"(known: {', '.join([*OUTPUT_SCHEDULE, *declared])})")
+        self._field_options = [key for key, option in declared.items() if option.names_fields]
         output = {**OUTPUT_SCHEDULE, **{key: option.default for key, option in declared.items()}, **table}
         for key in declared.keys() & table.keys():
             output[key] = declared[key].check(table[key], f"output.{key}")
@@ -156,9 +157,6 @@ class Model:
             if abs(round((t - self.t_start) / self.dt) * self.dt - (t - self.t_start)) > 1e-9 * max(1.0, t):
                 raise ConfigError(f"output time {t:g} is not a multiple of dt = {self.dt:g} after t_start")
         output["times"] = sorted(float(t) for t in times)
-        fields = output["snapshot_fields"]
-        if fields is not None and (not isinstance(fields, list) or not all(isinstance(f, str) for f in fields)):
-            raise ConfigError(f"output.snapshot_fields must be a list of field names, got {fields!r}")
         number(output["series_every"], "output.series_every", integer=True, at_least=1, hint="steps")
         return output
 
@@ -177,13 +175,12 @@ class Model:
         for module in self.physics_objects:
             module.check_composition(self.physics_objects)
         fields = [f.name for p in self.physics_objects for f in p.fields()]
-        snapshot = self.output["snapshot_fields"]
-        if snapshot is None:
-            self.output["snapshot_fields"] = fields[:1]
-        else:
-            for name in snapshot:
+        for key in self._field_options:  # output options that name fields (OutputOption.names_fields)
+            if self.output[key] is None:
+                self.output[key] = fields[:1]
+            for name in self.output[key]:
                 if name not in fields:
-                    raise ConfigError(f"output.snapshot_fields names '{name}', which is not a field of this model "
+                    raise ConfigError(f"output.{key} names '{name}', which is not a field of this model "
                                       f"({', '.join(fields)})")
 
     def _mesh(self) -> MeshData:

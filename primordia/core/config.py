@@ -10,7 +10,7 @@ A configuration is a nested mapping with these tables (all optional but
     [parameters]   model constants by their seed names (Table 3.1)
     [mesh]         type = "rectangle" | "box" | "file", ...
     [time]         dt, t_final, t_start, adaptive, dt_min
-    [output]       times, snapshot_fields, series_every, and the options the outputs declare
+    [output]       times, series_every, and the options the outputs declare (snapshot_fields: pictures)
                    (built in: pictures, displacement_scale)
     [checkpoint]   every_steps, every_minutes
     [coupling]     scheme = "sequential" | "strang" | "fixed_point" | "monolithic", and its options

@@ -56,6 +56,16 @@ class OutputOption:
     default: Any
     check: Callable[[Any, str], Any]
     help: str = ""
+    #: The value names fields of the model: the model checks each name once its fields are known,
+    #: and a ``None`` value becomes its first field.
+    names_fields: bool = False
+
+
+def field_names(value, where: str) -> list[str]:
+    """The check of an option that lists field names (their existence is the model's check)."""
+    if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
+        raise ConfigError(f"{where} must be a list of field names, got {value!r}")
+    return value
 
 
 class Output:
@@ -179,6 +189,8 @@ class Pictures(Output):
         "pictures": OutputOption(True, flag, "draw the PNGs (false: none)"),
         "displacement_scale": OutputOption(1.0, partial(number, at_least=0),
                                            "magnification of the displacement the fields are drawn on"),
+        "snapshot_fields": OutputOption(None, field_names, "the fields drawn at each output time "
+                                        "(default: the first field)", names_fields=True),
     }
 
     def start(self, run):

@@ -137,7 +137,7 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"output": {"snapshot_fields": ["u"]}}, "output.snapshot_fields names 'u', which is not a field of this model "
                                              "(m, e, f, b)"),
     ({"output": {"displacement_scale": -1}}, "output.displacement_scale must be a number >= 0, got -1"),
-    ({"output": {"format": "vtk"}}, "unknown key output.format (known: times, snapshot_fields"),
+    ({"output": {"format": "vtk"}}, "unknown key output.format (known: times, series_every, pictures, displacement_scale, snapshot_fields"),
     ({"checkpoint": {"every_steps": -1}}, "checkpoint.every_steps must be an integer >= 0"),
     ({"checkpoint": {"every_minutes": "x"}}, "checkpoint.every_minutes must be a number >= 0"),
     ({"checkpoint": {"every_hours": 1}}, "unknown key checkpoint.every_hours"),
