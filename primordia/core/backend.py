@@ -178,17 +178,22 @@ class Backend(ABC):
     def num_dofs(self, space) -> int:
         """Global number of DOFs of ``space`` (all components)."""
 
-    # -- DOF layout -----------------------------------------------------------------------
-    @abstractmethod
+    # -- DOF layout (optional: contract 1.3) ------------------------------------------------
     def owned_dof_coordinates(self, space) -> np.ndarray:
         """Coordinates (gdim, n_owned) of the nodes of the DOFs this rank owns, in ``petsc_vector`` order.
 
-        For a scalar Lagrange space (what nodal evaluation of lumped forms reads).
+        For a scalar Lagrange space (what nodal evaluation of lumped forms reads,
+        :mod:`primordia.coupling.nodal`); only asked for when :meth:`shares_dofs` says True.
         """
+        raise NotImplementedError(f"backend {self.name!r} gives no DOF coordinates")
 
-    @abstractmethod
     def shares_dofs(self, space, other) -> bool:
-        """Whether the DOFs of two spaces are the same nodes in the same order (DOF arrays align)."""
+        """Whether the DOFs of two spaces are the same nodes in the same order (DOF arrays align).
+
+        The default, False, is always safe: lumped reactions are then assembled cell by cell
+        instead of evaluated at the nodes.
+        """
+        return False
 
     # -- field splits ---------------------------------------------------------------------
     @abstractmethod

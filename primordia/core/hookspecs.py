@@ -37,8 +37,9 @@ hookspec = pluggy.HookspecMarker("primordia")
 
 #: (major, minor) of this hook contract.  1.1: growth laws and boundary-condition kinds.  1.2: self.settings
 #: (self.opts still reads them), GrowthLaw.directions_at, Output.options, the Coupling base, Discretisation
-#: in primordia.physics.discretisation.
-CONTRACT_VERSION = (1, 2)
+#: in primordia.physics.discretisation.  1.3: the optional Backend.shares_dofs / owned_dof_coordinates,
+#: OutputOption.names_fields.
+CONTRACT_VERSION = (1, 3)
 
 
 @hookspec

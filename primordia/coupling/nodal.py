@@ -60,6 +60,8 @@ def nodal_form(backend, form) -> NodalForm | None:
         return None
     test = arguments[0]
     space = test.ufl_function_space()
+    if not backend.shares_dofs(space, space):  # a backend that cannot tell (Backend.shares_dofs)
+        return None
     terms: dict[tuple, tuple[object, object]] = {}  # by measure: (an integral of it, the sum of its values)
     for integral in form.integrals():
         integrand = apply_derivatives(apply_algebra_lowering(integral.integrand()))

@@ -95,3 +95,28 @@ def test_a_field_on_a_space_with_other_dofs_is_refused():
     assert not backend.shares_dofs(m.ufl_function_space(), n.ufl_function_space())
     v = ufl.TestFunction(m.ufl_function_space())
     assert nodal_form(backend, n * v * backend.lumped_dx(mesh)) is None
+
+
+def test_a_backend_without_the_optional_dof_layout_assembles_and_agrees(tmp_path):
+    """Contract 1.3: ``shares_dofs`` / ``owned_dof_coordinates`` are optional. A backend written for 1.2
+    (without them) assembles the lumped reactions, and its run equals the nodal evaluation's."""
+    from contract_backends import Contract12Plugin
+    from primordia.coupling.orchestrator import Simulation
+    from primordia.model import Model
+    from primordia.testing import registered
+
+    def run(backend):
+        model = Model.from_file("examples/ex01a.toml", ["mesh.cells=[6,6]", "time.t_final=1.0",
+                                                        "output.times=[1.0]", "output.pictures=false"])
+        sim = Simulation(model, backend=backend, out_dir=tmp_path / backend).setup()
+        while sim.step_index < model.num_steps:
+            sim.step()
+        nodal = [solver._affine._nodal_remainder for solver in sim.solvers if solver._affine.remainder is not None]
+        return {name: sim.backend.local_array(sim.disc.field(name)).copy() for name in "mefb"}, nodal
+
+    with registered(Contract12Plugin()):
+        assembled, none = run("skfem_contract_1_2")
+    evaluated, nodal = run("skfem")
+    assert none and all(form is None for form in none) and all(form is not None for form in nodal)
+    for name in "mefb":
+        np.testing.assert_allclose(assembled[name], evaluated[name], rtol=1e-11, atol=1e-13)
