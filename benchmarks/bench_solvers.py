@@ -79,6 +79,10 @@ SYSTEMS = {
             "bjacobi_ilu": ["solver.chemotaxis_m.pc_type=\"bjacobi\""],
             "gamg": ["solver.chemotaxis_m.pc_type=\"gamg\""],
             "hypre": ["solver.chemotaxis_m.pc_type=\"hypre\""],
+            # BoomerAMG with HMIS coarsening and extended+i interpolation (hypre's advice for 2D and 3D)
+            "hypre_hmis": ["solver.chemotaxis_m.pc_type=\"hypre\"",
+                           "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
+                           "solver.chemotaxis_m.pc_hypre_boomeramg_interp_type=\"ext+i\""],
         },
     },
     "chemotaxis": {

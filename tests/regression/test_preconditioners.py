@@ -117,3 +117,20 @@ def test_splits_name_fields_of_the_subproblem(tmp_path):
                                           r"poroelastic_growth \(fields: u, psi, p\)"):
         run("ex02a", "fenicsx", tmp_path, 0, *GROWTH, 'physics.poroelastic_growth.preconditioner="schur"',
             'solver.poroelastic_growth.splits=[["u"], ["q", "p"]]')
+
+
+# -- the cell density's solve with BoomerAMG (HMIS coarsening, ext+i interpolation) -------------------------
+HMIS = ['solver.chemotaxis_m.pc_type="hypre"', 'solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type="HMIS"',
+        'solver.chemotaxis_m.pc_hypre_boomeramg_interp_type="ext+i"']
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_cell_density_boomeramg_hmis_reaches_the_direct_solution(backend, tmp_path):
+    """The configuration whose iterations stay flat over refinements (README, solver study)."""
+    coarse = ["mesh.cells=[24,24]", "time.t_final=2.0", "output.times=[2.0]"]
+    direct = run("ex01a", backend, tmp_path, 5, *coarse, 'solver.chemotaxis_m.ksp_type="preonly"',
+                 'solver.chemotaxis_m.pc_type="lu"')
+    amg = run("ex01a", backend, tmp_path, 5, *coarse, *HMIS)
+    assert_same_fields(direct, amg, 1e-9)
+    assert amg.solvers[0].ksp.getPC().getHYPREType() == "boomeramg"
+    assert all(iterations >= 2 for iterations in krylov_iterations(amg, "chemotaxis.m"))  # it iterates
