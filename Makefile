@@ -4,7 +4,7 @@
 setup:
 	@tools/setup.sh
 
-# Seed example 1a on the seed's mesh (58,482 triangles, 2,600 steps, about 2.5 minutes):
+# Seed example 1a on the seed's mesh (58,482 triangles, 2,600 steps, about a minute):
 # fields, series and pictures in out/ex01a/ (m_snapshots.png: rows of spots behind the wave).
 demo: setup
 	.venv/bin/primordia run examples/ex01a.toml --out out/ex01a
