@@ -13,7 +13,7 @@ or never when nothing is left.  Each B_c is assembled once, and again only when 
 constant it reads changes value (dt in an adaptive run); a diagonal one (lumped, vertex
 quadrature) is kept as a vector and applied pointwise.  A Jacobian that reads fields but is
 diagonal (a lumped reaction) is assembled as a vector, never as a matrix: the solve is then a
-division.  A lumped remainder or diagonal whose integrand is continuous at the vertices (the
+division.  A lumped remainder or diagonal whose integrand has one value at each vertex (the
 explicit reactions) is not assembled at all but evaluated at the nodes
 (:mod:`primordia.coupling.nodal`).  The physics is still stated once, in UFL: these are its
 own derivatives.

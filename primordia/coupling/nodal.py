@@ -5,9 +5,10 @@ each vertex of a cell K), the linear form
 
     L(v) = sum_K int_K g v dX    (vertex quadrature)
 
-has the entries L_i = sum_{K ni x_i} |K|/(d+1) g|_K(x_i).  When the integrand g is continuous
-at the vertices (it reads P1 fields, constants and the coordinates, and no derivative of
-them), g|_K(x_i) = g(x_i) in every cell, so
+has the entries L_i = sum_{K ni x_i} |K|/(d+1) g|_K(x_i).  When the integrand g has one value
+at each vertex, whichever cell it is read from (it reads P1 fields, constants and the
+coordinates, and no derivative of them; a conditional of those is fine), g|_K(x_i) = g(x_i)
+in every cell, so
 
     L_i = (M_L)_ii g(x_i),     M_L the lumped mass matrix (assembled once).
 
@@ -34,7 +35,7 @@ from ufl.corealg.traversal import unique_pre_traversal
 
 from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand
 
-#: Node types an integrand continuous at the vertices may not contain (after lowering).
+#: Node types an integrand single-valued at the vertices may not contain (after lowering).
 _NOT_NODAL = (uc.Derivative, uc.GeometricQuantity, uc.Argument, uc.Restricted, uc.ExprList, uc.ExprMapping)
 
 
@@ -90,7 +91,7 @@ def _terminals(expression):
 
 
 def _nodal(value, backend, space) -> bool:
-    """Whether ``value`` is continuous at the vertices and readable at the DOFs of ``space``."""
+    """Whether ``value`` is single-valued at the vertices and readable at the DOFs of ``space``."""
     spatial = (uc.SpatialCoordinate,)
     for node in unique_pre_traversal(value):
         if isinstance(node, _NOT_NODAL) and not isinstance(node, spatial):

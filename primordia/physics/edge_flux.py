@@ -144,7 +144,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._values = np.zeros(n_entries)
 
     def _entry_matrix(self):
-        """``_entries`` for the current weights (module docstring of :meth:`_prepare_pairs`)."""
+        """``_entries`` for the current weights (see :meth:`_prepare_pairs`)."""
         weights = self._scaled_weights[self._entry_pattern[0][: len(self._entry_pattern[0]) // 2]]
         return _csr((np.r_[-weights, weights], self._entry_pattern), (len(self._values), len(self._table)))
 
