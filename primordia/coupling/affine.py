@@ -157,7 +157,7 @@ class AffineResidual:
         self.jacobian = _Matrix(backend, subproblem.jacobian, subproblem.bcs)
         # the Jacobian without Dirichlet rows, for F(x) = J x + ... (only with conditions)
         self.full_jacobian = _Matrix(backend, subproblem.jacobian) if subproblem.bcs else self.jacobian
-        self._scratch = self._shifted = None
+        self._scratch = self._shifted = self._lift = None
 
     def invalidate(self) -> None:
         """Assemble every matrix again at the next solve (dt changed, say)."""
@@ -197,13 +197,13 @@ class AffineResidual:
             raise ValueError(f"{sub.name}: the Jacobian reads fields, so the residual is not split as J x + F(0)")
         b = self._without_unknown(x, b)
         if sub.bcs:
-            if self._shifted is None:
-                self._shifted = x.duplicate()
-            self._shifted.zeroEntries()
-            backend.set_dirichlet(self._shifted, sub.bcs)  # g on the fixed rows, 0 elsewhere
-            if self._shifted.norm(PETSc.NormType.NORM_INFINITY) > 0:
+            if self._lift is None:
+                self._lift = x.duplicate()
+            self._lift.zeroEntries()
+            backend.set_dirichlet(self._lift, sub.bcs)  # g on the fixed rows, 0 elsewhere
+            if self._lift.norm(PETSc.NormType.NORM_INFINITY) > 0:
                 self.full_jacobian.refresh()
-                self.full_jacobian.apply_add(self._shifted, b, self._scratch)
+                self.full_jacobian.apply_add(self._lift, b, self._scratch)
         b.scale(-1.0)
         if sub.bcs:
             backend.set_dirichlet(b, sub.bcs)
@@ -228,9 +228,4 @@ class AffineResidual:
         for coefficient, part in self.parts:
             part.apply_add(backend.petsc_vector(coefficient), b, self._scratch)
         return b
-
-
-def diagonal_solve(residual, diagonal, increment) -> None:
-    """increment = residual / diagonal (a diagonal system: no Krylov method, no preconditioner)."""
-    increment.pointwiseDivide(residual, diagonal)
 
