@@ -311,7 +311,9 @@ class ManufacturedSources(Physics):
         return []
 
 
-class _Plugin:
+class PhysicsPlugin:
+    """A plugin contributing one physics class (a test registers it for a block)."""
+
     def __init__(self, physics):
         self.physics = physics
 
@@ -325,7 +327,7 @@ def manufactured_sources_registered(problem: ManufacturedProblem = CHEMOTAXIS):
     """Register ``manufactured_sources`` (for ``problem``) in the process-wide plugin manager for the block."""
     physics = type("ManufacturedSources", (ManufacturedSources,), {"problem": problem, "requires": problem.fields})
     pm = get_plugin_manager()
-    plugin = pm.register(_Plugin(physics), name="tests.convergence.mms")
+    plugin = pm.register(PhysicsPlugin(physics), name="tests.convergence.mms")
     try:
         yield
     finally:

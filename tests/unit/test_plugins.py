@@ -21,6 +21,7 @@ from primordia.coupling.splitting import Sequential
 from primordia.model import Model
 
 from cli_checks import listing
+from mms import PhysicsPlugin
 from plugin_sources import FROZEN_KINETICS
 
 BUILT_IN = "primordia (built-in)"
@@ -231,15 +232,6 @@ def test_plugin_errors_are_user_errors():
     assert issubclass(PluginError, PrimordiaError)
 
 
-class _OnePhysics:
-    def __init__(self, physics):
-        self.physics = physics
-
-    @hookimpl
-    def primordia_physics(self):
-        return [self.physics]
-
-
 def test_a_plugin_registered_after_another_was_unregistered_is_the_one_looked_up():
     """The registry's cache is keyed by the hook functions' ids: an unregistered plugin's function
     must not be freed and its id reused by the next one (which would then get the old contributions)."""
@@ -248,7 +240,7 @@ def test_a_plugin_registered_after_another_was_unregistered_is_the_one_looked_up
     pm = get_plugin_manager()
     for generation in range(40):
         physics = type("Probe", (Physics,), {"name": "registry_probe", "generation": generation})
-        pm.register(_OnePhysics(physics), name="tests.registry_probe")
+        pm.register(PhysicsPlugin(physics), name="tests.registry_probe")
         try:
             assert registry("physics", pm)["registry_probe"][0].generation == generation
         finally:
