@@ -26,7 +26,7 @@ import ufl
 from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
-from primordia.coupling.nodal import nodal_form
+from primordia.coupling.nodal import NodalGroup, nodal_form
 
 
 def _constants_state(constants) -> tuple:
@@ -54,8 +54,9 @@ class _Matrix:
     when the assembled matrix turns out diagonal.
     """
 
-    def __init__(self, backend, form, bcs=()):
+    def __init__(self, backend, form, bcs=(), nodal_group: NodalGroup | None = None):
         self.backend, self.form, self.bcs = backend, form, bcs
+        self._nodal_group = nodal_group  # evaluated with the forms needed at the same state
         expanded = expand_derivatives(form)  # before expansion a derivative still lists what it differentiates
         self.reads_fields = bool(expanded.coefficients())
         self._constants = expanded.constants()
@@ -79,7 +80,7 @@ class _Matrix:
         self._state = state
         if self.vector_only:
             if self._nodal is None:
-                self._nodal = nodal_form(self.backend, self._row_sums()) or False
+                self._nodal = nodal_form(self.backend, self._row_sums(), self._nodal_group) or False
             if self._nodal:
                 self.diagonal = self._nodal.assemble(b=self.diagonal)
             else:
@@ -152,9 +153,11 @@ class AffineResidual:
         self.constant_jacobian = unknown in constant_fields
         remainder = ufl.replace(residual, {c: ufl.zero(*c.ufl_shape) for c in constant_fields})
         self.remainder = remainder if remainder.integrals() else None
-        self._nodal_remainder = nodal_form(backend, remainder) if self.remainder is not None else None
+        # the remainder and the Jacobian's diagonal at the same state, their common subexpressions once
+        self._nodal_group = NodalGroup(backend)
+        self._nodal_remainder = nodal_form(backend, remainder, self._nodal_group) if self.remainder is not None else None
         self.available = (bool(self.parts) or self.constant_jacobian) and (self.constant_jacobian or not subproblem.bcs)
-        self.jacobian = _Matrix(backend, subproblem.jacobian, subproblem.bcs)
+        self.jacobian = _Matrix(backend, subproblem.jacobian, subproblem.bcs, self._nodal_group)
         # the Jacobian without Dirichlet rows, for F(x) = J x + ... (only with conditions)
         self.full_jacobian = _Matrix(backend, subproblem.jacobian) if subproblem.bcs else self.jacobian
         self._scratch = self._shifted = self._lift = None
@@ -212,6 +215,7 @@ class AffineResidual:
     def _without_unknown(self, x, b):
         """b = F(x) - J x: the remainder and the parts that read other fields (``F(0)`` for a constant J)."""
         backend = self.backend
+        self._nodal_group.expire()  # a new solve: the fields have moved since the last evaluation
         for _, part in self.parts:
             part.refresh()
         if self._nodal_remainder is not None:

@@ -52,8 +52,12 @@ def _vertex_integrals(form) -> bool:
         and integral.metadata().get("quadrature_rule") == "vertex" for integral in form.integrals())
 
 
-def nodal_form(backend, form) -> NodalForm | None:
-    """A :class:`NodalForm` of ``form``, or ``None`` when it is not a lumped P1 form of nodal values."""
+def nodal_form(backend, form, group: NodalGroup | None = None) -> NodalForm | None:
+    """A :class:`NodalForm` of ``form``, or ``None`` when it is not a lumped P1 form of nodal values.
+
+    ``group``: forms needed together at the same field values (:class:`NodalGroup`); a form on
+    another space than the group's is evaluated on its own.
+    """
     arguments = form.arguments()
     if len(arguments) != 1 or not _is_p1_scalar(arguments[0].ufl_function_space()):
         return None
@@ -74,7 +78,9 @@ def nodal_form(backend, form) -> NodalForm | None:
         key = tuple(sorted(integral.metadata().items()))
         first, total = terms.get(key, (integral, None))
         terms[key] = (first, value if total is None else total + value)
-    return NodalForm(backend, space, [(integral.reconstruct(integrand=test), value)
+    if group is None or not group.accepts(space):
+        group = NodalGroup(backend, space)
+    return NodalForm(backend, group, [(integral.reconstruct(integrand=test), value)
                                       for integral, value in terms.values()])
 
 
@@ -125,29 +131,110 @@ class _NodeContext:
         return self.coordinates[:, :, None] if quantity == "SpatialCoordinate" else None
 
 
+def _shared_subexpressions(expression, canonical: dict):
+    """``expression`` with structurally equal subexpressions made one node, so the interpreter
+    evaluates each once (it keeps a value by node identity).  ``canonical`` maps an expression to
+    its representative and is shared by every expression evaluated together.
+
+    Reactions repeat themselves: the Hill function m^2/(1 + m^2) of (2.1c) enters the e
+    production, its loss and the Jacobian's diagonal, each written out by the kinetics.
+    """
+    mapped: dict[int, object] = {}  # by the id of a node of ``expression``: its representative
+    stack = [expression]
+    while stack:
+        node = stack[-1]
+        if id(node) in mapped:
+            stack.pop()
+            continue
+        pending = [op for op in node.ufl_operands if id(op) not in mapped]
+        if pending:
+            stack.extend(pending)
+            continue
+        stack.pop()
+        operands = tuple(mapped[id(op)] for op in node.ufl_operands)
+        rebuilt = node
+        if any(new is not old for new, old in zip(operands, node.ufl_operands)):
+            rebuilt = node._ufl_expr_reconstruct_(*operands)
+        mapped[id(node)] = canonical.setdefault(rebuilt, rebuilt)
+    return mapped[id(expression)]
+
+
+class NodalGroup:
+    """Nodal forms on one space needed at the same field values, evaluated in one pass.
+
+    A linear solve needs its lumped remainder and its Jacobian's diagonal at the same
+    state, and the two share most of their subexpressions (the diagonal is the remainder's
+    derivative).  The group evaluates every member's integrands at once, common
+    subexpressions once, when a member asks; later members take that evaluation.  An
+    evaluation serves each member once: a member asking again, or :meth:`expire` (the start
+    of a solve: the fields may have changed), triggers a new one.
+    """
+
+    def __init__(self, backend, space=None):
+        self.backend, self.space = backend, space
+        self._canonical: dict = {}  # representatives of the members' subexpressions
+        self._integrands: list = []  # every member's, in order
+        self._expression = None  # the same, as one vector
+        self._context = None
+        self._values = None  # (terms, owned DOFs) of the last evaluation
+        self._served: set[int] = set()
+
+    def accepts(self, space) -> bool:
+        """Whether a form on ``space`` can join (the first fixes the group's space)."""
+        return self.space is None or self.backend.shares_dofs(space, self.space)
+
+    def join(self, form: NodalForm, values: list) -> int:
+        """Add ``form``'s integrands; returns the index of its first term."""
+        if self.space is None:
+            self.space = form.space
+        first = len(self._integrands)
+        self._integrands += [_shared_subexpressions(value, self._canonical) for value in values]
+        self._expression = ufl.as_vector(self._integrands) if len(self._integrands) > 1 else self._integrands[0]
+        self._values = None
+        return first
+
+    def expire(self) -> None:
+        """The fields may have changed: the next request evaluates again."""
+        self._values = None
+
+    def values(self, form: NodalForm, first: int, count: int) -> np.ndarray:
+        """The values at the owned DOFs of ``form``'s integrands, (count, n_owned)."""
+        if self._values is None or id(form) in self._served:
+            if self._context is None:
+                self._context = _NodeContext(self.backend, self.space)
+            size = self._context.size
+            with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
+                evaluated = evaluate_integrand(self._expression, self._context)
+            self._values = np.broadcast_to(np.reshape(evaluated, (len(self._integrands), -1)), (len(self._integrands), size))
+            self._served = set()
+        self._served.add(id(form))
+        return self._values[first:first + count]
+
+
 class NodalForm:
     """L_i = (M_L)_ii g(x_i) for a lumped linear form (module docstring); ``assemble`` replaces
     ``backend.assemble_vector(form)`` and gives the same vector to round-off.
 
     ``terms`` pairs the integral of v over each measure the form uses (its row sums, the
-    diagonal of M_L, are assembled once) with the integrand g of that measure.
+    diagonal of M_L, are assembled once) with the integrand g of that measure; the
+    integrands are evaluated by ``group`` (:class:`NodalGroup`).
     """
 
-    def __init__(self, backend, space, terms):
-        self.backend = backend
+    def __init__(self, backend, group: NodalGroup, terms):
+        self.backend, self.space = backend, terms[0][0].integrand().ufl_function_space()
         masses = [backend.assemble_vector(ufl.Form([mass])) for mass, _ in terms]
         self._template = masses[0]
-        self._terms = [(mass.getArray(readonly=True).copy(), value) for mass, (_, value) in zip(masses, terms)]
-        self._context = _NodeContext(backend, space)
+        self._masses = [mass.getArray(readonly=True).copy() for mass in masses]
+        self._group = group
+        self._first = group.join(self, [value for _, value in terms])
 
     def assemble(self, b=None):
         """The assembled vector (PETSc Vec of the owned DOFs; ``b`` is filled when given)."""
-        with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
-            total = None
-            for lumped_mass, value in self._terms:
-                term = lumped_mass * np.reshape(evaluate_integrand(value, self._context), -1)
-                total = term if total is None else total + term
+        values = self._group.values(self, self._first, len(self._masses))
+        total = self._masses[0] * values[0]
+        for lumped_mass, value in zip(self._masses[1:], values[1:]):
+            total += lumped_mass * value
         if b is None:
             b = self._template.duplicate()
-        b.setArray(np.broadcast_to(total, lumped_mass.shape))
+        b.setArray(total)
         return b

@@ -72,6 +72,7 @@ class Simulation:
         self.restarts = 0
         self.status = "setting up"
         self.outputs: list = []
+        self._saved_state = None  # a sub-step's start values (their arrays reused from step to step)
         self._state_version = 0  # counts accepted sub-steps and restores: vertex values are cached per version
         self._vertex_cache: tuple[int, dict] | None = None
         self._solver_dt = model.dt
@@ -513,7 +514,7 @@ class Simulation:
             for solver in self.solvers:
                 solver.step_size_changed()
             self._solver_dt = dt
-        saved = self.disc.copy_state()
+        saved = self._saved_state = self.disc.copy_state(into=self._saved_state)
         saved_physics = [physics.state() for physics in self.model.physics_objects]
         try:
             stats = self.scheme.advance(self, self.time, dt)

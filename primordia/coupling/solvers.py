@@ -387,6 +387,10 @@ class LinearSolver(_Solver):
         self._stale = False
         if self.sub.operator is None:
             return jacobian.as_matrix(), changed
+        if jacobian.diagonal is not None:  # a lumped Jacobian: the operator may add it to its own values
+            shifted = self.sub.operator.shifted(jacobian.diagonal)
+            if shifted is not None:
+                return shifted, True
         operator = self.sub.operator.matrix()
         if self._combined is None:
             self._combined = operator.duplicate(copy=True)

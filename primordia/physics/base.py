@@ -136,6 +136,14 @@ class AlgebraicOperator(ABC):
         """residual += A x (PETSc vectors of the unknown and of the residual)."""
         self.matrix().multAdd(x, residual, residual)
 
+    def shifted(self, diagonal):
+        """A + diag(``diagonal``) (a PETSc Vec of the owned rows) in the operator's own storage, for a
+        solve whose Jacobian is otherwise diagonal (a lumped mass), valid until the next
+        :meth:`update`; or ``None`` when the operator cannot, and the solver adds a copy of
+        :meth:`matrix` and the diagonal.  :meth:`matrix` and :meth:`apply` keep meaning A alone.
+        """
+        return None
+
 
 class Physics(Configured, ABC):
     """A balance law or constitutive piece, contributed through ``primordia_physics``."""

@@ -383,9 +383,22 @@ class Discretisation:
                 functions[f"{name}/rate"] = group.rate
         return functions
 
-    def copy_state(self) -> dict[str, np.ndarray]:
-        """A copy of this rank's values (owned and ghost) of every state function: see :meth:`restore_state`."""
-        return {key: self.backend.local_array(function).copy() for key, function in self.state_functions().items()}
+    def copy_state(self, into: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """A copy of this rank's values (owned and ghost) of every state function: see :meth:`restore_state`.
+
+        ``into``: an earlier copy whose arrays are overwritten (a step saves its start every
+        time: no new arrays); a new copy when it does not match the state's functions.
+        """
+        functions = self.state_functions()
+        if into is None or into.keys() != functions.keys():
+            return {key: self.backend.local_array(function).copy() for key, function in functions.items()}
+        for key, function in functions.items():
+            values = self.backend.local_array(function)
+            if into[key].shape != values.shape:
+                into[key] = values.copy()
+            else:
+                np.copyto(into[key], values)
+        return into
 
     def restore_state(self, saved: dict[str, np.ndarray]) -> None:
         """Put back the values of :meth:`copy_state` (undo a rejected or interrupted step)."""

@@ -34,16 +34,23 @@ from primordia.physics.base import AlgebraicOperator
 from primordia.physics.discretisation import Discretisation
 
 
-def bernoulli(x: np.ndarray) -> np.ndarray:
-    """B(x) = x / (exp(x) - 1), with B(0) = 1, accurate near 0 and for large |x|."""
+def bernoulli(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """B(x) = x / (exp(x) - 1), with B(0) = 1, accurate near 0 and for large |x|; into ``out`` if given.
+
+    expm1 keeps its relative accuracy as x -> 0, so x / expm1(x) is within about 2 ulps of B(x)
+    for every x != 0 (no switch to a series is needed); only x = 0 (0/0) is set apart.
+    """
     x = np.asarray(x, dtype=float)
     flat = x.reshape(-1)
-    small = np.abs(flat) < 1e-6
+    result = np.empty_like(flat) if out is None else out.reshape(-1)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # x >> 1: expm1 overflows, B(x) -> 0
-        result = flat / np.expm1(flat)
-    if small.any():
-        near = flat[small]
-        result[small] = 1.0 - 0.5 * near + near * near / 12.0
+        np.expm1(flat, out=result)
+        np.divide(flat, result, out=result)
+    zero = flat == 0.0
+    if zero.any():
+        result[zero] = 1.0
+    if out is not None:
+        return out
     return result.reshape(x.shape) if x.ndim else result[0]
 
 
@@ -73,6 +80,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._prepare_gather(disc.previous_vector(species))
         self._prepare_pairs()
         self._in_place = self._share_values(stiffness)
+        self._shift = None  # the diagonal added by shifted(), until the next update
         if self.negative_weights and not self._moving:
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
                           "the exponentially fitted flux no longer guarantees a non-negative density",
@@ -133,7 +141,9 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         n_edges, n_entries = len(edges), len(self._columns)
         rows, ones = np.arange(n_edges), np.ones(n_edges)
         self._midpoint = _csr((np.r_[ones, ones] / 2, (np.r_[rows, rows], np.r_[edge_low, edge_high])), (n_edges, size))
-        self._difference = _csr((np.r_[ones, -ones], (np.r_[rows, rows], np.r_[edge_high, edge_low])), (n_edges, size))
+        # the difference over D: the Peclet number without another pass over the edges
+        self._difference = _csr((np.r_[ones, -ones] / self.diffusivity, (np.r_[rows, rows], np.r_[edge_high, edge_low])),
+                                (n_edges, size))
         forward = i < j  # entry (i, j) runs from the edge's low end to its high end
         toward = edge_of + n_edges * ~forward  # B(Pe_ij) in the table
         away = edge_of + n_edges * forward  # B(-Pe_ij) in the table
@@ -142,11 +152,19 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._entries = None
         self._table = np.zeros(2 * n_edges)
         self._values = np.zeros(n_entries)
+        self._values_vector = self._table_vector = None  # PETSc views of the two (_entry_matrix)
 
     def _entry_matrix(self):
-        """``_entries`` for the current weights (see :meth:`_prepare_pairs`)."""
+        """``_entries`` for the current weights (see :meth:`_prepare_pairs`), a serial PETSc matrix whose
+        product writes into the operator's values (``_values_vector`` wraps them) without a copy."""
         weights = self._scaled_weights[self._entry_pattern[0][: len(self._entry_pattern[0]) // 2]]
-        return _csr((np.r_[-weights, weights], self._entry_pattern), (len(self._values), len(self._table)))
+        entries = _csr((np.r_[-weights, weights], self._entry_pattern), (len(self._values), len(self._table)))
+        if self._values_vector is None:
+            self._values_vector = PETSc.Vec().createWithArray(self._values, comm=PETSc.COMM_SELF)
+            self._table_vector = PETSc.Vec().createWithArray(self._table, comm=PETSc.COMM_SELF)
+        entries.sum_duplicates()  # sorted columns in each row, as PETSc expects
+        self._entries_csr = (entries.indptr.astype(PETSc.IntType), entries.indices.astype(PETSc.IntType), entries.data)
+        return PETSc.Mat().createAIJWithArrays(entries.shape, self._entries_csr, comm=PETSc.COMM_SELF)
 
     def _share_values(self, stiffness) -> bool:
         """On one process, make the operator a matrix over this object's own CSR arrays.
@@ -185,18 +203,37 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self._entries = self._entry_matrix()
         c, a = self._gather(self.species), self._gather(self.attractant)
         chi = self.sensitivity(self._midpoint @ c)  # at the edge midpoint, as quadrature would
-        peclet = chi * (self._difference @ a)
-        peclet /= self.diffusivity  # Pe from the low end to the high end
+        peclet = chi * (self._difference @ a)  # Pe from the low end to the high end
         n_edges = len(peclet)
         table = self._table
-        table[:n_edges] = bernoulli(peclet)
+        bernoulli(peclet, out=table[:n_edges])
         np.add(table[:n_edges], peclet, out=table[n_edges:])  # B(-x) = B(x) + x
-        self._values[:] = self._entries @ table  # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
+        self._entries.mult(self._table_vector, self._values_vector)  # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
+        self._shift = None  # every value was just rewritten
         if not self._in_place:
             self._A.setValuesCSR(self._indptr, self._columns, self._values)
         self._A.assemble()  # also marks the matrix changed, for the solver's preconditioner
 
     def matrix(self):
+        if self._shift is not None:  # A again, without the diagonal of shifted()
+            self._values[self._diag_positions] -= self._shift
+            self._shift = None
+            self._A.assemble()
+        return self._A
+
+    def apply(self, x, residual) -> None:
+        self.matrix().multAdd(x, residual, residual)
+
+    def shifted(self, diagonal):
+        """A + diag(d) in place (one process, where PETSc reads this object's values): the lumped
+        mass of the cell density's step added without copying the matrix."""
+        if not self._in_place:
+            return None
+        if self._shift is not None:
+            self.matrix()
+        self._shift = diagonal.getArray(readonly=True).copy()
+        self._values[self._diag_positions] += self._shift
+        self._A.assemble()  # marks the matrix changed
         return self._A
 
 

@@ -45,9 +45,17 @@ def test_bernoulli_at_zero_is_one():
 
 @pytest.mark.parametrize("magnitude", [1e-14, 1e-10, 1e-7, 9.99e-7, 1e-6, 1.01e-6, 1e-5, 1e-3, 0.1])
 def test_bernoulli_is_accurate_near_zero(magnitude):
-    """Both sides of the switch to the Taylor series at |x| = 1e-6, to a few ulps."""
+    """x / expm1(x) near 0 (the 1e-6 where a Taylor series used to take over, and around it), to a few ulps."""
     for x in (magnitude, -magnitude):
         assert bernoulli(x) == pytest.approx(reference_bernoulli(x), rel=4e-16, abs=0), x
+
+
+def test_bernoulli_is_accurate_over_many_magnitudes():
+    """Random x with |x| from 1e-15 to 30, both signs, evaluated as one array (the operator's path)."""
+    rng = np.random.default_rng(7)
+    x = np.concatenate([sign * 10.0 ** rng.uniform(-15, 1.5, 1000) for sign in (1, -1)])
+    expected = np.array([reference_bernoulli(value) for value in x])
+    assert np.abs(bernoulli(x) / expected - 1).max() < 4e-16
 
 
 @pytest.mark.parametrize("magnitude", [1.0, 5.0, 20.0, 50.0, 200.0, 700.0])
@@ -149,6 +157,31 @@ def test_with_the_lumped_mass_it_is_an_m_matrix(backend):
     for dt in (1e-3, 0.2, 1e3):
         inverse = np.linalg.inv(np.diag(lumped / dt) + A)
         assert inverse.min() >= -1e-12 * np.abs(inverse).max(), dt
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_shifted_operator_adds_the_diagonal_and_leaves_a_itself_intact(backend):
+    """``shifted(d)`` (the cell density's lumped mass added in place, for the solve) is A + diag(d);
+    afterwards ``matrix()`` and ``apply`` are A again, and the next update starts from A."""
+    disc = discretisation(backend, MESHES["right"])
+    random_start_of_step(disc, seed=5)
+    operator = ExponentiallyFittedFlux(disc, "m", "f", diffusivity=0.05, sensitivity=lambda m: 4.0 * np.exp(-m))
+    operator.update()
+    A = dense(operator.matrix())
+    diagonal = operator.matrix().createVecLeft()
+    diagonal.setArray(np.linspace(1.0, 2.0, diagonal.getLocalSize()))
+    shifted = operator.shifted(diagonal)
+    assert shifted is not None  # one process: the values are the operator's own
+    np.testing.assert_allclose(dense(shifted), A + np.diag(diagonal.getArray()), rtol=1e-15, atol=1e-15)
+    x, y = diagonal.duplicate(), diagonal.duplicate()
+    x.setArray(np.cos(np.arange(x.getLocalSize())))
+    y.zeroEntries()
+    operator.apply(x, y)
+    np.testing.assert_allclose(y.getArray(), A @ x.getArray(), rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(dense(operator.matrix()), A, rtol=1e-15, atol=1e-15)
+    operator.shifted(diagonal)
+    operator.update()  # rewrites every value: no shift left
+    np.testing.assert_allclose(dense(operator.matrix()), A, rtol=1e-15, atol=1e-15)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -8,7 +8,7 @@ from mpi4py import MPI
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.backends.skfem import SkfemBackend
 from primordia.core.meshes import box, rectangle
-from primordia.coupling.nodal import nodal_form
+from primordia.coupling.nodal import NodalGroup, _shared_subexpressions, nodal_form
 
 BACKENDS = {"fenicsx": lambda: FenicsxBackend(MPI.COMM_WORLD), "skfem": lambda: SkfemBackend()}
 
@@ -60,6 +60,41 @@ def test_a_lumped_reaction_at_the_nodes_is_its_assembly(backend, make_mesh):
         got = nodal.assemble().getArray()
         assert np.abs(expected).max() > 1e-3
         assert np.allclose(got, expected, rtol=1e-13, atol=1e-15)
+
+
+def test_forms_evaluated_together_equal_their_assembly_and_follow_the_fields(backend):
+    """A solve's remainder and its Jacobian's diagonal, as AffineResidual evaluates them: one
+    pass for both, and a new pass once a member asks again or the group is expired."""
+    mesh = backend.create_mesh(rectangle((0, 0), (2, 1), (6, 4)))
+    m, e = _p1_fields(backend, mesh, "me")
+    v = ufl.TestFunction(e.ufl_function_space())
+    hill = m ** 2 / (1 + m ** 2)
+    remainder = -(0.05 * hill - e * (0.05 * hill + 1 - hill)) * v * backend.lumped_dx(mesh)
+    diagonal = (0.05 * hill + 1 - hill) * v * backend.lumped_dx(mesh)
+    group = NodalGroup(backend)
+    first, second = nodal_form(backend, remainder, group), nodal_form(backend, diagonal, group)
+
+    def check():
+        assert np.allclose(first.assemble().getArray(), backend.assemble_vector(remainder).getArray(), rtol=1e-13)
+        assert np.allclose(second.assemble().getArray(), backend.assemble_vector(diagonal).getArray(), rtol=1e-13)
+
+    check()
+    backend.local_array(m)[:] *= 1.5  # the fields move: the remainder asks again, so both are evaluated anew
+    check()
+    backend.local_array(m)[:] *= 2.0
+    group.expire()  # the start of a solve
+    assert np.allclose(second.assemble().getArray(), backend.assemble_vector(diagonal).getArray(), rtol=1e-13)
+
+
+def test_equal_subexpressions_become_one_node():
+    mesh = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.triangle, 1))
+    m = ufl.Coefficient(ufl.FunctionSpace(mesh, ufl.FiniteElement("Lagrange", ufl.triangle, 1)))
+    first, second = m ** 2 / (1 + m ** 2), m ** 2 / (1 + m ** 2)
+    assert first is not second
+    shared = _shared_subexpressions(first * 0.5 + second * (1 - second), {})
+    quotients = {id(node) for node in ufl.corealg.traversal.pre_traversal(shared) if isinstance(node, ufl.classes.Division)}
+    assert len(quotients) == 1
+    assert shared == first * 0.5 + second * (1 - second)  # last: UFL's == rewires equal operands in place
 
 
 def test_a_form_that_is_not_nodal_is_left_to_assembly(backend):
