@@ -58,30 +58,63 @@ def nodal_form(backend, form, group: NodalGroup | None = None) -> NodalForm | No
     ``group``: forms needed together at the same field values (:class:`NodalGroup`); a form on
     another space than the group's is evaluated on its own.
     """
+    split = _split(backend, form)
+    if split is None or split[1] or not split[0]:
+        return None
+    return _build(backend, form, split[0], group)
+
+
+def nodal_part(backend, form, group: NodalGroup | None = None) -> tuple[NodalForm | None, object]:
+    """``form`` split into its integrals evaluated at the nodes (a :class:`NodalForm`) and the
+    rest (a UFL form to assemble); either may be ``None``.
+
+    A species' explicit terms mix both: its lumped reactions are nodal, the advection by
+    the solid velocity (u_t . grad c, Gauss quadrature) is not.
+    """
+    split = _split(backend, form)
+    if split is None:
+        return None, form
+    terms, rest = split
+    return (_build(backend, form, terms, group) if terms else None), (ufl.Form(rest) if rest else None)
+
+
+def _split(backend, form):
+    """(the nodal values of ``form`` by measure, its other integrals), or None when no integral can be nodal."""
     arguments = form.arguments()
-    if len(arguments) != 1 or not _is_p1_scalar(arguments[0].ufl_function_space()):
-        return None
-    if not _vertex_integrals(form):
-        return None
-    test = arguments[0]
-    space = test.ufl_function_space()
-    if not backend.shares_dofs(space, space):  # a backend that cannot tell (Backend.shares_dofs)
+    space = arguments[0].ufl_function_space() if len(arguments) == 1 else None
+    # a backend that cannot tell whether DOFs are vertices (Backend.shares_dofs) assembles
+    if space is None or not _is_p1_scalar(space) or not backend.shares_dofs(space, space):
         return None
     terms: dict[tuple, tuple[object, object]] = {}  # by measure: (an integral of it, the sum of its values)
+    rest = []
     for integral in form.integrals():
-        integrand = apply_derivatives(apply_algebra_lowering(integral.integrand()))
-        if not _linear_in(integrand, test):
-            return None
-        value = ufl.replace(integrand, {test: ufl.as_ufl(1.0)})
-        if not _nodal(value, backend, space):
-            return None
+        value = _nodal_value(integral, arguments[0], backend, space)
+        if value is None:
+            rest.append(integral)
+            continue
         key = tuple(sorted(integral.metadata().items()))
         first, total = terms.get(key, (integral, None))
         terms[key] = (first, value if total is None else total + value)
+    return terms, rest
+
+
+def _build(backend, form, terms, group) -> NodalForm:
+    test = form.arguments()[0]
+    space = test.ufl_function_space()
     if group is None or not group.accepts(space):
         group = NodalGroup(backend, space)
-    return NodalForm(backend, group, [(integral.reconstruct(integrand=test), value)
-                                      for integral, value in terms.values()])
+    return NodalForm(backend, group, [(integral.reconstruct(integrand=test), value) for integral, value in terms.values()])
+
+
+def _nodal_value(integral, test, backend, space):
+    """The integrand g of ``integral`` = int g v (vertex quadrature), if it is single-valued at the vertices; else None."""
+    if not _vertex_integrals(ufl.Form([integral])):
+        return None
+    integrand = apply_derivatives(apply_algebra_lowering(integral.integrand()))
+    if not _linear_in(integrand, test):
+        return None
+    value = ufl.replace(integrand, {test: ufl.as_ufl(1.0)})
+    return value if _nodal(value, backend, space) else None
 
 
 def _linear_in(integrand, test) -> bool:
