@@ -39,7 +39,8 @@ hookspec = pluggy.HookspecMarker("primordia")
 #: (self.opts still reads them), GrowthLaw.directions_at, Output.options, the Coupling base, Discretisation
 #: in primordia.physics.discretisation.  1.3: the optional Backend.shares_dofs / owned_dof_coordinates,
 #: OutputOption.names_fields.
-CONTRACT_VERSION = (1, 3)
+#: 1.4: the optional AlgebraicOperator.shifted (the lumped mass added to an operator in place).
+CONTRACT_VERSION = (1, 4)
 
 
 @hookspec
