@@ -22,6 +22,9 @@ physics' UFL, evaluated by the backend-neutral interpreter of the scikit-fem bac
 :func:`nodal_form` returns ``None`` for any form it cannot evaluate this way (an integrand
 with a gradient, a P2 or mixed field, a geometric quantity other than the coordinates, a
 boundary integral, a measure other than vertex quadrature): the caller then assembles.
+:func:`nodal_part` splits a form into the integrals that can be evaluated this way and the
+rest.  Forms needed at the same state (a solve's remainder and its Jacobian's diagonal)
+share a :class:`NodalGroup`: one evaluation for all, equal subexpressions once.
 """
 
 from __future__ import annotations
@@ -79,7 +82,8 @@ def nodal_part(backend, form, group: NodalGroup | None = None) -> tuple[NodalFor
 
 
 def _split(backend, form):
-    """(the nodal values of ``form`` by measure, its other integrals), or None when no integral can be nodal."""
+    """(the nodal integrands of ``form`` by measure, its other integrals), or None when ``form`` is not
+    a linear form on a P1 space whose DOFs this backend can show are its vertices."""
     arguments = form.arguments()
     space = arguments[0].ufl_function_space() if len(arguments) == 1 else None
     # a backend that cannot tell whether DOFs are vertices (Backend.shares_dofs) assembles
@@ -210,7 +214,7 @@ class NodalGroup:
         self._expression = None  # the same, as one vector
         self._context = None
         self._values = None  # (terms, owned DOFs) of the last evaluation
-        self._served: set[int] = set()
+        self._served: set[int] = set()  # the members it served, by their first term
 
     def accepts(self, space) -> bool:
         """Whether a form on ``space`` can join (the first fixes the group's space)."""
@@ -230,9 +234,9 @@ class NodalGroup:
         """The fields may have changed: the next request evaluates again."""
         self._values = None
 
-    def values(self, form: NodalForm, first: int, count: int) -> np.ndarray:
-        """The values at the owned DOFs of ``form``'s integrands, (count, n_owned)."""
-        if self._values is None or id(form) in self._served:
+    def values(self, first: int, count: int) -> np.ndarray:
+        """The values at the owned DOFs of a member's integrands (its ``first`` term and ``count`` terms), (count, n_owned)."""
+        if self._values is None or first in self._served:
             if self._context is None:
                 self._context = _NodeContext(self.backend, self.space)
             size = self._context.size
@@ -240,7 +244,7 @@ class NodalGroup:
                 evaluated = evaluate_integrand(self._expression, self._context)
             self._values = np.broadcast_to(np.reshape(evaluated, (len(self._integrands), -1)), (len(self._integrands), size))
             self._served = set()
-        self._served.add(id(form))
+        self._served.add(first)
         return self._values[first:first + count]
 
 
@@ -263,7 +267,7 @@ class NodalForm:
 
     def assemble(self, b=None):
         """The assembled vector (PETSc Vec of the owned DOFs; ``b`` is filled when given)."""
-        values = self._group.values(self, self._first, len(self._masses))
+        values = self._group.values(self._first, len(self._masses))
         total = self._masses[0] * values[0]
         for lumped_mass, value in zip(self._masses[1:], values[1:]):
             total += lumped_mass * value

@@ -221,9 +221,6 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self._A.assemble()
         return self._A
 
-    def apply(self, x, residual) -> None:
-        self.matrix().multAdd(x, residual, residual)
-
     def shifted(self, diagonal):
         """A + diag(d) in place (one process, where PETSc reads this object's values): the lumped
         mass of the cell density's step added without copying the matrix."""
