@@ -16,7 +16,10 @@ is ``-poroelastic_growth_fieldsplit_u_pc_type gamg`` and so on.  ``splits`` says
 which fields (by name, as the physics module declares them) form each split of a
 ``fieldsplit`` preconditioner; a split is named by its fields joined with ``_``
 (``psi_p``), which is the prefix of its options.  Without ``splits`` every field
-is a split of its own.
+is a split of its own.  ``rebuild_preconditioner_after = N``, the other key that is
+not PETSc's, keeps a Newton solve's preconditioner over Newton steps and time steps
+until a Krylov solve needs more than N iterations (see
+:class:`~primordia.coupling.solvers.NewtonSolver`).
 
 Who wins, from weakest to strongest: the solver layer's defaults, the physics
 module's (``Subproblem.petsc_options``), the config's table, options given
@@ -46,6 +49,12 @@ from primordia.core.errors import ConfigError
 
 #: Not a PETSc option: the fields of each split of a fieldsplit preconditioner (lists of field names).
 SPLITS = "splits"
+#: Not a PETSc option: a Newton solve keeps its preconditioner (a factorisation, an AMG hierarchy) until a
+#: Newton step's Krylov solve takes more than this many iterations, then builds it anew from the current
+#: tangent (0: at every Newton step, PETSc's default; see NewtonSolver).
+REBUILD = "rebuild_preconditioner_after"
+#: The options of this table that primordia reads itself, not PETSc.
+OWN_OPTIONS = (SPLITS, REBUILD)
 
 #: Option families that describe the Krylov method or Newton, not the preconditioner: kept when pc_type changes.
 _KEPT_ACROSS_PC = ("ksp_", "snes_")
@@ -65,6 +74,10 @@ def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
             flat.update(flatten(value, where, name + ("" if name.endswith("_") else "_")))
         elif name == SPLITS:
             flat[name] = _splits(value, f"{where}.{name}")
+        elif name == REBUILD:
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"{where}.{name} must be a number of Krylov iterations (0 or more), got {value!r}")
+            flat[name] = value
         elif isinstance(value, (list, tuple, dict)):
             raise ConfigError(f"{where}.{name} must be a number, a string or true/false, got {value!r}")
         else:
@@ -206,7 +219,7 @@ def unused(prefix: str, keys: Iterable[str]) -> list[str]:
 
 def check_used(prefix: str, keys: Iterable[str], where: str) -> None:
     """After a first solve: an option the user gave that PETSc did not read is one line naming it."""
-    keys = [key for key in keys if key != SPLITS]
+    keys = [key for key in keys if key not in OWN_OPTIONS]
     missing = unused(prefix, keys)
     if missing:
         raise ConfigError(f"{where}: PETSc did not use option '{missing[0]}' (-{prefix}{missing[0]}): unknown, "

@@ -41,7 +41,7 @@ from primordia.core.backend import sub_elements
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
+    REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -210,6 +210,7 @@ class _Solver:
         options, self._user_keys = solver_options({**self.defaults, **subproblem.petsc_options}, overrides,
                                                   self.where, backend.comm.size > 1)
         self._splits = options.pop(SPLITS, None)
+        self._rebuild_after = options.pop(REBUILD, 0) or None  # see NewtonSolver
         self.options = options
         write_options(subproblem.prefix, options)
         self._unchecked = bool(self._user_keys)  # the user's options are checked once PETSc has read them
@@ -314,6 +315,9 @@ class LinearSolver(_Solver):
         self.ksp.setOptionsPrefix(subproblem.prefix)
         self._configure(self.ksp.getPC())
         self.ksp.setFromOptions()
+        if REBUILD in self._user_keys:
+            raise ConfigError(f"{self.where}.{REBUILD}: a linear subproblem has one Krylov solve per step and "
+                              f"no preconditioner to keep; the option is for Newton solves")
         self._increment = None
         self._affine = AffineResidual(backend, subproblem)
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
@@ -427,7 +431,18 @@ class LinearSolver(_Solver):
 
 
 class NewtonSolver(_Solver):
-    """PETSc SNES on the subproblem's residual and its UFL tangent (seed section 5.1)."""
+    """PETSc SNES on the subproblem's residual and its UFL tangent (seed section 5.1).
+
+    With the option ``rebuild_preconditioner_after = N`` the preconditioner is kept over
+    Newton steps and time steps while it works: every Newton step's Krylov solve uses the
+    current tangent, but the preconditioning matrix (a copy of an earlier tangent) is
+    only refreshed, and its factorisation or AMG hierarchy built again, after a Krylov
+    solve took more than N iterations, or when a Newton solve failed in its linear
+    solve (then the solve is repeated once with a fresh one).  PETSc's own
+    ``snes_lag_preconditioner`` rebuilds at fixed intervals instead, whether the old
+    preconditioner still works or not.  PETSc sets up a preconditioner again only when
+    its matrix changed, which is what keeps the old one.
+    """
 
     defaults = NEWTON_DEFAULTS
 
@@ -442,6 +457,16 @@ class NewtonSolver(_Solver):
         self._F = state.duplicate()
         self.snes.setFunction(self._function, self._F)
         self._tangent_matrices = None
+        if str(self.options.get("ksp_type")) == "preonly" and self._rebuild_after is not None:
+            # the preconditioner is the whole solve: kept, it would freeze the tangent (and a single
+            # application never counts more than one iteration)
+            if REBUILD in self._user_keys:
+                raise ConfigError(f"{self.where}.{REBUILD} needs a Krylov method (ksp_type \"gmres\", ...): "
+                                  f"with ksp_type = \"preonly\" a kept preconditioner would freeze the tangent")
+            self._rebuild_after = None
+        self._kept = None  # the preconditioning matrix kept while it works (rebuild_preconditioner_after)
+        self._rebuild = False  # refresh it at the next tangent (a Newton solve failed in its linear solve)
+        self.preconditioner_builds = 0  # refreshes of the kept preconditioning matrix
         self.ksp = self.snes.getKSP()
         self._assembly_seconds = 0.0
         self._configure(self.ksp.getPC())
@@ -466,15 +491,30 @@ class NewtonSolver(_Solver):
         start = time.process_time()
         self._load(x)
         tangent, _ = self._assemble_jacobian()  # into the matrices handed to SNES (same objects)
-        self._assemble_preconditioner(tangent)
+        if self._kept is None:
+            self._assemble_preconditioner(tangent)
+        elif self._rebuild or self.ksp.getIterationNumber() > self._rebuild_after:
+            self._refresh_kept(tangent)
         self._assembly_seconds += time.process_time() - start
 
     def _attach_tangent(self) -> None:
         """Create the tangent (and preconditioning) matrices once, at the initial state."""
         tangent, _ = self._assemble_jacobian()
         preconditioner = self._assemble_preconditioner(tangent)
+        if self._rebuild_after is not None:  # a matrix of its own, which keeps its values while the tangent moves on
+            self._kept = preconditioner.duplicate(copy=True) if preconditioner is tangent else preconditioner
+            preconditioner = self._kept
+            self.preconditioner_builds += 1
         self.snes.setJacobian(self._tangent, tangent, preconditioner)
         self._tangent_matrices = (tangent, preconditioner)
+
+    def _refresh_kept(self, tangent) -> None:
+        """The kept preconditioning matrix from the current tangent: PETSc then sets the preconditioner up again."""
+        preconditioner = self._assemble_preconditioner(tangent)
+        if preconditioner is tangent:
+            tangent.copy(self._kept, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self._rebuild = False
+        self.preconditioner_builds += 1
 
     # -- one solve ---------------------------------------------------------------------------
     def solve(self) -> SolveStats:
@@ -489,6 +529,11 @@ class NewtonSolver(_Solver):
         if (self.snes.getConvergedReason() == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
                 and self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
                 and self._switch_to_mumps(self.ksp)):
+            state.copy(self._x)
+            self._run_snes()
+        elif (self._kept is not None
+              and self.snes.getConvergedReason() == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE):
+            self._rebuild = True  # a kept preconditioner too old for this tangent: once more with a fresh one
             state.copy(self._x)
             self._run_snes()
         self._check_options_used()

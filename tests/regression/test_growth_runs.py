@@ -23,7 +23,7 @@ import ufl
 import xarray as xr
 
 import growth_test_laws
-from primordia.core.errors import SolverError
+from primordia.core.errors import ConfigError, SolverError
 from primordia.core.meshes import rectangle
 from primordia.coupling.orchestrator import Simulation
 from primordia.coupling.solvers import NewtonSolver
@@ -87,6 +87,41 @@ def _finite_difference_check(sim, subproblem, seed=0):
     state[:] = x0
     backend.update_ghosts(subproblem.unknown)
     return np.abs(difference - Jv.array).max() / np.abs(Jv.array).max()
+
+
+def test_a_kept_preconditioner_is_rebuilt_when_krylov_needs_more_iterations_and_gives_the_same_run(tmp_path):
+    """``rebuild_preconditioner_after`` (the 2D default: a MUMPS factorisation kept while GMRES needs at
+    most 10 iterations): a lower bound rebuilds more often, 0 at every Newton step (PETSc's default),
+    and the runs agree to the Newton tolerance, since every Newton step solves with the current tangent."""
+    def run(after):
+        model = Model.from_file(EXAMPLES / "ex02a.toml", [*COARSE, "mesh.cells=[12,12]", "time.t_final=3.0",
+                                                          "output.times=[3.0]",
+                                                          f"solver.poroelastic_growth.rebuild_preconditioner_after={after}"])
+        sim = Simulation(model, backend="fenicsx", out_dir=tmp_path / str(after)).setup()
+        while sim.step_index < model.num_steps:
+            sim.step()
+        solver = growth_solver(sim)
+        newton = sum(n for n, _ in sim.newton["poroelastic_growth"])
+        return sim.backend.local_array(sim.disc.unknown("u")).copy(), solver.preconditioner_builds, newton, solver
+
+    kept, kept_builds, newton, solver = run(10)
+    eager, eager_builds, _, _ = run(1)
+    fresh, fresh_builds, _, _ = run(0)
+    assert solver._kept is not None and solver.ksp.getType() == "gmres"
+    assert 1 <= kept_builds < eager_builds, (kept_builds, eager_builds)
+    assert kept_builds < newton  # kept over Newton steps and time steps
+    assert fresh_builds == 0  # no kept matrix: PETSc builds the preconditioner at every Newton step
+    scale = np.abs(fresh).max()
+    assert np.abs(kept - fresh).max() < 1e-5 * scale and np.abs(eager - fresh).max() < 1e-5 * scale
+
+
+def test_rebuild_preconditioner_after_is_refused_where_it_cannot_work(tmp_path):
+    for table, fragment in [
+            (["solver.poroelastic_growth.ksp_type=\"preonly\"", "solver.poroelastic_growth.rebuild_preconditioner_after=5"],
+             "needs a Krylov method"),
+            (["solver.chemotaxis_f.rebuild_preconditioner_after=5"], "a linear subproblem has one Krylov solve per step")]:
+        with pytest.raises(ConfigError, match=fragment):
+            coarse_ex02a("fenicsx", tmp_path, *table)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

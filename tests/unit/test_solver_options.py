@@ -28,6 +28,8 @@ def test_nested_tables_are_option_prefixes_as_in_firedrake():
 @pytest.mark.parametrize("table, fragment", [
     ({"ksp_rtol": [1e-2]}, "solver.x.ksp_rtol must be a number, a string or true/false"),
     ({"splits": ["u", "p"]}, "solver.x.splits must be a list of lists of field names"),
+    ({"rebuild_preconditioner_after": -1}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
+    ({"rebuild_preconditioner_after": True}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
     (3, "solver.x must be a table"),
 ])
 def test_a_malformed_table_is_one_line(table, fragment):
