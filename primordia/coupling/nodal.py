@@ -107,7 +107,8 @@ def _build(backend, form, terms, group) -> NodalForm:
     space = test.ufl_function_space()
     if group is None or not group.accepts(space):
         group = NodalGroup(backend, space)
-    return NodalForm(backend, group, [(integral.reconstruct(integrand=test), value) for integral, value in terms.values()])
+    return NodalForm(backend, space, group, [(integral.reconstruct(integrand=test), value)
+                                             for integral, value in terms.values()])
 
 
 def _nodal_value(integral, test, backend, space):
@@ -257,8 +258,8 @@ class NodalForm:
     integrands are evaluated by ``group`` (:class:`NodalGroup`).
     """
 
-    def __init__(self, backend, group: NodalGroup, terms):
-        self.backend, self.space = backend, terms[0][0].integrand().ufl_function_space()
+    def __init__(self, backend, space, group: NodalGroup, terms):
+        self.backend, self.space = backend, space
         masses = [backend.assemble_vector(ufl.Form([mass])) for mass, _ in terms]
         self._template = masses[0]
         self._masses = [mass.getArray(readonly=True).copy() for mass in masses]

@@ -42,7 +42,9 @@ def bernoulli(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     flat = x.reshape(-1)
-    result = np.empty_like(flat) if out is None else out.reshape(-1)
+    if out is not None and (out.shape != flat.shape or not out.flags.writeable):
+        raise ValueError(f"bernoulli: out must be a writeable array of shape {flat.shape}, got {out.shape}")
+    result = np.empty_like(flat) if out is None else out
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # x >> 1: expm1 overflows, B(x) -> 0
         np.expm1(flat, out=result)
         np.divide(flat, result, out=result)
@@ -152,16 +154,15 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._entries = None
         self._table = np.zeros(2 * n_edges)
         self._values = np.zeros(n_entries)
-        self._values_vector = self._table_vector = None  # PETSc views of the two (_entry_matrix)
+        # PETSc views of the two: the entry product writes the operator's values in place
+        self._values_vector = PETSc.Vec().createWithArray(self._values, comm=PETSc.COMM_SELF)
+        self._table_vector = PETSc.Vec().createWithArray(self._table, comm=PETSc.COMM_SELF)
 
     def _entry_matrix(self):
         """``_entries`` for the current weights (see :meth:`_prepare_pairs`), a serial PETSc matrix whose
         product writes into the operator's values (``_values_vector`` wraps them) without a copy."""
         weights = self._scaled_weights[self._entry_pattern[0][: len(self._entry_pattern[0]) // 2]]
         entries = _csr((np.r_[-weights, weights], self._entry_pattern), (len(self._values), len(self._table)))
-        if self._values_vector is None:
-            self._values_vector = PETSc.Vec().createWithArray(self._values, comm=PETSc.COMM_SELF)
-            self._table_vector = PETSc.Vec().createWithArray(self._table, comm=PETSc.COMM_SELF)
         entries.sum_duplicates()  # sorted columns in each row, as PETSc expects
         self._entries_csr = (entries.indptr.astype(PETSc.IntType), entries.indices.astype(PETSc.IntType), entries.data)
         return PETSc.Mat().createAIJWithArrays(entries.shape, self._entries_csr, comm=PETSc.COMM_SELF)

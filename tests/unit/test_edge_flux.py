@@ -56,6 +56,10 @@ def test_bernoulli_is_accurate_over_many_magnitudes():
     x = np.concatenate([sign * 10.0 ** rng.uniform(-15, 1.5, 1000) for sign in (1, -1)])
     expected = np.array([reference_bernoulli(value) for value in x])
     assert np.abs(bernoulli(x) / expected - 1).max() < 4e-16
+    out = np.empty_like(x)
+    assert bernoulli(x, out=out) is out and np.array_equal(out, bernoulli(x))
+    with pytest.raises(ValueError, match="out must be a writeable array of shape"):
+        bernoulli(x, out=np.empty((2, x.size // 2)))  # a reshape would be written to and lost
 
 
 @pytest.mark.parametrize("magnitude", [1.0, 5.0, 20.0, 50.0, 200.0, 700.0])
