@@ -201,7 +201,9 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self.disc.assemble_matrix(self._stiffness_form, A=self._stiffness)
             self._set_weights(self._stiffness.getValuesCSR()[2])
         if self._entries is None or self._moving:
-            self._entries = self._entry_matrix()
+            stale, self._entries = self._entries, self._entry_matrix()
+            if stale is not None:  # petsc4py would only free it at the next garbage collection
+                stale.destroy()
         c, a = self._gather(self.species), self._gather(self.attractant)
         chi = self.sensitivity(self._midpoint @ c)  # at the edge midpoint, as quadrature would
         peclet = chi * (self._difference @ a)  # Pe from the low end to the high end
