@@ -158,6 +158,7 @@ class ScalarSeriesNetcdf(Output):
         row.update(run.diagnostic_values())
         row.update(run.iteration_counts())
         row.update(run.step_sizes())
+        row.update(run.memory_use())
         if run.is_root and (not self.series.times or run.time > self.series.times[-1]):
             self.series.append(run.time, row)
 

@@ -695,6 +695,16 @@ class Simulation:
         """The last sub-step's dt and the number of rejected sub-steps so far."""
         return {"dt": self.last_dt, "rejections": float(len(self.rejections))}
 
+    def memory_use(self) -> dict[str, float]:
+        """Resident memory now and its peak so far (since this process started), in MB summed over the ranks.
+
+        Recorded in the series, a run that leaks shows it long before the kernel kills it.
+        """
+        now, peak = resident_memory_mb()
+        if self.comm.size > 1:
+            now, peak = self.comm.allreduce(now), self.comm.allreduce(peak)
+        return {"memory_mb": now, "peak_memory_mb": peak}
+
     def summary(self, status: str) -> dict:
         wall = self._wall_time()
         field_space = {group: self.disc.group_function(group).ufl_function_space() for group in self.disc.groups()}
@@ -720,7 +730,21 @@ class Simulation:
             "mean_coupling_iterations": {scheme: float(np.mean(its))
                                          for scheme, its in self.coupling_iterations.items() if its},
             "splitting_scheme": self.scheme.name,
+            "peak_memory_mb": self.memory_use()["peak_memory_mb"],
         }
+
+
+def resident_memory_mb() -> tuple[float, float]:
+    """This process's resident memory and its peak (Linux's /proc; elsewhere the peak for both)."""
+    import resource
+
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+    try:
+        fields = Path("/proc/self/status").read_text().split("\n")
+        now = next(float(line.split()[1]) for line in fields if line.startswith("VmRSS:")) / 1024.0
+    except (OSError, StopIteration, ValueError, IndexError):
+        now = peak
+    return now, max(peak, now)
 
 
 def _rows(keys: np.ndarray) -> np.ndarray:

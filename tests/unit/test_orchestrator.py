@@ -12,7 +12,9 @@ from __future__ import annotations
 import json
 import shutil
 
+import numpy as np
 import pytest
+import xarray as xr
 
 from primordia.core.errors import ConfigError, PluginError, SolverError
 from primordia.core.meshes import rectangle
@@ -157,7 +159,8 @@ def test_outputs_are_called_at_start_at_series_steps_at_snapshot_times_and_at_th
 def test_the_summary_states_the_run(completed):
     summary = json.loads((completed.out_dir / "summary.json").read_text())
     assert summary == completed.summary("completed") | {"wall_time_s": summary["wall_time_s"],
-                                                         "ms_per_step": summary["ms_per_step"]}
+                                                         "ms_per_step": summary["ms_per_step"],
+                                                         "peak_memory_mb": summary["peak_memory_mb"]}
     assert (summary["status"], summary["backend"], summary["mpi_ranks"]) == ("completed", "fenicsx", 1)
     assert (summary["steps"], summary["time"], summary["dt"]) == (5, 5 * DT, DT)
     assert summary["cells"] == 32
@@ -166,6 +169,11 @@ def test_the_summary_states_the_run(completed):
     assert summary["splitting_scheme"] == "sequential"
     assert set(summary["mean_linear_iterations"]) == {"chemotaxis.m", "chemotaxis.e", "chemotaxis.f", "chemotaxis.b"}
     assert summary["wall_time_s"] > 0 and summary["ms_per_step"] == pytest.approx(1e3 * summary["wall_time_s"] / 5)
+    # this process's peak resident memory: more than the interpreter alone, less than the machine
+    assert 50.0 < summary["peak_memory_mb"] < 1e6
+    with xr.open_dataset(completed.out_dir / "series.nc") as series:  # and the memory at every record
+        assert np.all(series["memory_mb"].values > 50.0)
+        assert np.all(series["memory_mb"].values <= series["peak_memory_mb"].values)
     final = summary["final"]
     assert set(final) == {"m", "e", "f", "b"}
     # zero-flux boundaries and no reaction in the cell equation: the cells are conserved (seed (2.3a), (2.7a))

@@ -154,6 +154,9 @@ class StandInRun:
     def step_sizes(self):
         return {"dt": 0.2}
 
+    def memory_use(self):
+        return {"memory_mb": 100.0 + self.step_index, "peak_memory_mb": 150.0}
+
     def summary(self, status):
         return {"status": status, "steps": self.step_index, "time": self.time}
 
@@ -169,6 +172,7 @@ def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_p
     with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
         np.testing.assert_allclose(data["time"], [0.0, 0.2, 0.4])
         np.testing.assert_allclose(data["m_integral"], [0.0, 3.2, 6.4])
+        np.testing.assert_allclose(data["memory_mb"], [100.0, 101.0, 102.0])
     resumed = ScalarSeriesNetcdf()
     resumed.resume(run, state)
     with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
