@@ -160,12 +160,37 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
 
     def _entry_matrix(self):
         """``_entries`` for the current weights (see :meth:`_prepare_pairs`), a serial PETSc matrix whose
-        product writes into the operator's values (``_values_vector`` wraps them) without a copy."""
+        product writes into the operator's values (``_values_vector`` wraps them) without a copy.
+
+        Its pattern is fixed by the mesh: made once, with the order that takes the entries'
+        values (-w_ij for the off-diagonal entries, then w_ij for the diagonal ones) into it.
+        On a moving mesh (the metric follows the deformation) an update only rewrites the values
+        through :meth:`_refresh_entries`, where PETSc reads them.
+        """
+        rows, columns = self._entry_pattern
+        order = np.lexsort((columns, rows))  # CSR: by row, columns sorted in each row, as PETSc expects
+        rows, columns = rows[order], columns[order]
+        if np.any((np.diff(rows) == 0) & (np.diff(columns) == 0)):
+            raise ValueError("an edge appears twice in a row of the fitted operator")
+        shape = (len(self._values), len(self._table))
+        indptr = np.searchsorted(rows, np.arange(shape[0] + 1)).astype(PETSc.IntType)
+        self._entry_order = order
+        self._entry_values = np.empty(len(order))
+        self._entries_csr = (indptr, columns.astype(PETSc.IntType), self._entry_values)
+        self._write_entry_values()
+        entries, self._entries_shared = _aij_over(shape, self._entries_csr, PETSc.COMM_SELF)
+        return entries
+
+    def _write_entry_values(self) -> None:
         weights = self._scaled_weights[self._entry_pattern[0][: len(self._entry_pattern[0]) // 2]]
-        entries = _csr((np.r_[-weights, weights], self._entry_pattern), (len(self._values), len(self._table)))
-        entries.sum_duplicates()  # sorted columns in each row, as PETSc expects
-        self._entries_csr = (entries.indptr.astype(PETSc.IntType), entries.indices.astype(PETSc.IntType), entries.data)
-        return PETSc.Mat().createAIJWithArrays(entries.shape, self._entries_csr, comm=PETSc.COMM_SELF)
+        np.take(np.concatenate((-weights, weights)), self._entry_order, out=self._entry_values)
+
+    def _refresh_entries(self) -> None:
+        """New weights (a moving mesh): the entry matrix's values rewritten in place."""
+        self._write_entry_values()
+        if not self._entries_shared:
+            self._entries.setValuesCSR(*self._entries_csr)
+        self._entries.assemble()
 
     def _share_values(self, stiffness) -> bool:
         """On one process, make the operator a matrix over this object's own CSR arrays.
@@ -178,16 +203,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             return False
         self._indptr = self._indptr.astype(PETSc.IntType)
         self._columns = self._columns.astype(PETSc.IntType)
-        size = stiffness.getSizes()
-        self._A = PETSc.Mat().createAIJWithArrays(size, (self._indptr, self._columns, self._values),
-                                                  comm=stiffness.getComm())
-        self._A.assemble()
-        self._values[0] = 1.0  # check the sharing once: PETSc copies arrays of another type
-        shared = self._A.getValuesCSR()[2][0] == 1.0
-        self._values[0] = 0.0
-        if not shared:
-            self._A.setValuesCSR(self._indptr, self._columns, self._values)
-            self._A.assemble()
+        self._A, shared = _aij_over(stiffness.getSizes(), (self._indptr, self._columns, self._values),
+                                    stiffness.getComm())
         return shared
 
     def _gather(self, name: str) -> np.ndarray:
@@ -200,10 +217,10 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         if self._moving:
             self.disc.assemble_matrix(self._stiffness_form, A=self._stiffness)
             self._set_weights(self._stiffness.getValuesCSR()[2])
-        if self._entries is None or self._moving:
-            stale, self._entries = self._entries, self._entry_matrix()
-            if stale is not None:  # petsc4py would only free it at the next garbage collection
-                stale.destroy()
+        if self._entries is None:
+            self._entries = self._entry_matrix()
+        elif self._moving:
+            self._refresh_entries()
         c, a = self._gather(self.species), self._gather(self.attractant)
         chi = self.sensitivity(self._midpoint @ c)  # at the edge midpoint, as quadrature would
         peclet = chi * (self._difference @ a)  # Pe from the low end to the high end
@@ -235,6 +252,26 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._values[self._diag_positions] += self._shift
         self._A.assemble()  # marks the matrix changed
         return self._A
+
+
+def _aij_over(shape, csr: tuple, comm) -> tuple:
+    """A PETSc AIJ matrix over the CSR arrays ``csr``, and whether it reads their values in place.
+
+    PETSc copies arrays of another type than its own: the sharing is checked once, and a
+    matrix that does not share is given the values by ``setValuesCSR``.
+    """
+    matrix = PETSc.Mat().createAIJWithArrays(shape, csr, comm=comm)
+    matrix.assemble()
+    values = csr[2]
+    if len(values) == 0:
+        return matrix, True
+    values[0] += 1.0
+    shared = matrix.getValuesCSR()[2][0] == values[0]
+    values[0] -= 1.0
+    if not shared:
+        matrix.setValuesCSR(*csr)
+        matrix.assemble()
+    return matrix, shared
 
 
 def _max_op():
