@@ -265,9 +265,9 @@ def _aij_over(shape, csr: tuple, comm) -> tuple:
     values = csr[2]
     if len(values) == 0:
         return matrix, True
-    values[0] += 1.0
-    shared = matrix.getValuesCSR()[2][0] == values[0]
-    values[0] -= 1.0
+    kept, values[0] = values[0], np.nan  # a value no assembly gives
+    shared = bool(np.isnan(matrix.getValuesCSR()[2][0]))
+    values[0] = kept
     if not shared:
         matrix.setValuesCSR(*csr)
         matrix.assemble()
