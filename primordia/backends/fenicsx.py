@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 import ufl
 
-from primordia.core.backend import Backend, BoundaryCondition, index_set, sub_elements
+from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, sub_elements
 from primordia.core.mesh_data import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
@@ -54,7 +54,7 @@ class FenicsxBackend(Backend):
         from mpi4py import MPI
 
         super().__init__(comm if comm is not None else MPI.COMM_WORLD)
-        self._compiled: dict[int, tuple[ufl.Form, object]] = {}
+        self._compiled = FormCache()  # compiled forms and expressions
         self._vertex_maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._p1_spaces: dict[tuple, object] = {}
         self._components: dict[tuple, tuple] = {}
@@ -106,12 +106,7 @@ class FenicsxBackend(Backend):
 
     # -- assembly -----------------------------------------------------------------------
     def _form(self, form: ufl.Form):
-        key = id(form)
-        hit = self._compiled.get(key)
-        if hit is None or hit[0] is not form:
-            hit = (form, fem.form(form))
-            self._compiled[key] = hit
-        return hit[1]
+        return self._compiled.get(form, lambda: fem.form(form))
 
     def assemble_matrix(self, form, bcs: Sequence[BoundaryCondition] = (), A=None, diagonal: float = 1.0):
         compiled = self._form(form)
@@ -141,14 +136,10 @@ class FenicsxBackend(Backend):
     def extrema(self, expression, mesh) -> tuple[float, float]:
         from mpi4py import MPI
 
-        key = id(expression)
-        hit = self._compiled.get(key)
-        if hit is None or hit[0] is not expression:
-            vertices = basix_reference_vertices(mesh.topology.cell_name())
-            hit = (expression, fem.Expression(expression, vertices))
-            self._compiled[key] = hit
+        compiled = self._compiled.get(
+            expression, lambda: fem.Expression(expression, basix_reference_vertices(mesh.topology.cell_name())))
         cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
-        values = hit[1].eval(cells)
+        values = compiled.eval(cells)
         low = float(values.min()) if values.size else np.inf
         high = float(values.max()) if values.size else -np.inf
         return self.comm.allreduce(low, op=MPI.MIN), self.comm.allreduce(high, op=MPI.MAX)

@@ -25,7 +25,6 @@ order, the same order dolfinx keeps, so quadrature points coincide with FFCx's.
 from __future__ import annotations
 
 import functools
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -48,7 +47,7 @@ from primordia.backends.ufl_numpy import (
     reference_quadrature,
     unsupported,
 )
-from primordia.core.backend import Backend, BoundaryCondition, index_set, sub_elements
+from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, sub_elements
 from primordia.core.errors import MeshError, PrimordiaError
 from primordia.core.mesh_data import MeshData
 
@@ -668,7 +667,7 @@ class SkfemBackend(Backend):
             raise PrimordiaError("the skfem backend is serial: run it without mpirun "
                                  "(or choose --backend fenicsx for parallel runs)")
         super().__init__(comm)
-        self._plans: OrderedDict[int, tuple[ufl.Form, list[IntegralPlan]]] = OrderedDict()
+        self._plans = FormCache(_CACHED_FORMS)
         self._rules: dict[tuple, _Rule] = {}
         self._patterns: dict[tuple[int, int], _Pattern] = {}
 
@@ -693,14 +692,7 @@ class SkfemBackend(Backend):
     # -- integration --------------------------------------------------------------------
     def _form_plans(self, form: ufl.Form) -> list[IntegralPlan]:
         """The preprocessed integrals of ``form``, kept for the most recently used forms."""
-        hit = self._plans.get(id(form))
-        if hit is None or hit[0] is not form:
-            hit = (form, preprocess_form(form))
-            self._plans[id(form)] = hit
-            if len(self._plans) > _CACHED_FORMS:
-                self._plans.popitem(last=False)
-        self._plans.move_to_end(id(form))
-        return hit[1]
+        return self._plans.get(form, lambda: preprocess_form(form))
 
     def _rule(self, mesh: SkfemMesh, plan: IntegralPlan) -> _Rule:
         key = (mesh.cellname, plan.integral_type, plan.degree, plan.rule)

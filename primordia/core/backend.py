@@ -30,6 +30,7 @@ Conventions shared by all backends
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -238,6 +239,32 @@ class Backend(ABC):
 
         PETSc.garbage_cleanup(self.comm)
         PETSc.garbage_cleanup(PETSc.COMM_SELF)
+
+
+class FormCache:
+    """What a backend made of a UFL form (or expression), for the ``size`` most recently used ones.
+
+    Keyed by the object's identity, which the entry keeps alive (so that its id is not
+    reused). Bounded: the solvers are made anew at every checkpoint and rejected step, with
+    new forms, and an unbounded cache would keep every old compiled form for the whole run.
+    """
+
+    def __init__(self, size: int = 256):
+        self.size = size
+        self._entries: OrderedDict[int, tuple[Any, Any]] = OrderedDict()
+
+    def get(self, key_object, make: Callable[[], Any]):
+        """The cached result for ``key_object``, made by ``make()`` on a miss."""
+        hit = self._entries.get(id(key_object))
+        if hit is None or hit[0] is not key_object:
+            hit = self._entries[id(key_object)] = (key_object, make())
+            if len(self._entries) > self.size:
+                self._entries.popitem(last=False)
+        self._entries.move_to_end(id(key_object))
+        return hit[1]
+
+    def __len__(self) -> int:
+        return len(self._entries)
 
 
 def sub_elements(element) -> list:

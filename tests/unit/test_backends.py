@@ -393,3 +393,21 @@ def test_skfem_works_without_dolfinx_basix_and_mpi4py():
     assert float(volume) == pytest.approx(1.0 / 3.0 + 0.5, rel=1e-13)
     assert float(bottom) == pytest.approx(1.0 / 3.0, rel=1e-13)
     assert int(size) == 9
+
+
+def test_the_form_cache_keeps_the_most_recently_used_forms_by_identity():
+    """A backend's compiled forms: by the form's identity (an equal form made anew is a miss), the
+    least recently used one dropped beyond the bound (solvers are made anew at every checkpoint)."""
+    from primordia.core.backend import FormCache
+
+    cache, made = FormCache(size=2), []
+    forms = [object() for _ in range(3)]
+    make = lambda form: lambda: made.append(form) or len(made)  # noqa: E731
+    assert cache.get(forms[0], make(forms[0])) == 1
+    assert cache.get(forms[1], make(forms[1])) == 2
+    assert cache.get(forms[0], make(forms[0])) == 1  # a hit: forms[0] is now the most recent
+    assert cache.get(forms[2], make(forms[2])) == 3  # drops forms[1], the least recently used
+    assert len(cache) == 2
+    assert cache.get(forms[0], make(forms[0])) == 1
+    assert cache.get(forms[1], make(forms[1])) == 4  # made again
+    assert made == [forms[0], forms[1], forms[2], forms[1]]
