@@ -58,7 +58,7 @@ class FenicsxBackend(Backend):
         self._vertex_maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._p1_spaces: dict[tuple, object] = {}
         self._components: dict[tuple, tuple] = {}
-        self._petsc_comms: dict[int, object] = {}  # mesh -> the PETSc communicator of its objects
+        self._petsc_comms: dict[int, object] = {}  # the PETSc communicators of the objects made here
         _silence_jit_logging()
 
     # -- mesh, spaces, fields -----------------------------------------------------------
@@ -94,8 +94,14 @@ class FenicsxBackend(Backend):
 
     def function(self, space, name: str):
         function = fem.Function(space, name=name)
-        self._petsc_comms.setdefault(id(space.mesh), function.vector.getComm())
+        self._track(function.vector)
         return function
+
+    def _track(self, petsc_object):
+        """Remember the communicator of ``petsc_object`` for :meth:`collect_garbage`; returns the object."""
+        comm = petsc_object.getComm()
+        self._petsc_comms.setdefault(comm.tompi4py().py2f(), comm)
+        return petsc_object
 
     def constant(self, mesh, value):
         return fem.Constant(mesh, PETSc.ScalarType(value) if np.isscalar(value) else np.asarray(value, float))
@@ -112,7 +118,7 @@ class FenicsxBackend(Backend):
         compiled = self._form(form)
         handles = [bc.handle for bc in bcs]
         if A is None:
-            A = fem_petsc.assemble_matrix(compiled, bcs=handles, diagonal=diagonal)
+            A = self._track(fem_petsc.assemble_matrix(compiled, bcs=handles, diagonal=diagonal))
         else:
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, compiled, bcs=handles, diagonal=diagonal)
@@ -122,7 +128,7 @@ class FenicsxBackend(Backend):
     def assemble_vector(self, form, b=None):
         compiled = self._form(form)
         if b is None:
-            b = fem_petsc.assemble_vector(compiled)
+            b = self._track(fem_petsc.assemble_vector(compiled))
         else:
             with b.localForm() as local:
                 local.set(0.0)
@@ -147,7 +153,7 @@ class FenicsxBackend(Backend):
     def assemble_residual(self, residual, jacobian, bcs, state, b=None):
         compiled = self._form(residual)
         if b is None:
-            b = fem_petsc.create_vector(compiled)
+            b = self._track(fem_petsc.create_vector(compiled))
         with b.localForm() as local:
             local.set(0.0)
         fem_petsc.assemble_vector(b, compiled)
@@ -289,10 +295,10 @@ class FenicsxBackend(Backend):
 
     def collect_garbage(self, mesh) -> None:
         super().collect_garbage(mesh)
-        # dolfinx's objects live on the mesh's duplicate of the communicator; PETSc keys its
-        # garbage by its own communicator of that duplicate, which only its objects give
-        comm = self._petsc_comms.get(id(mesh))
-        if comm is not None:
+        # dolfinx's objects live on duplicates of the communicator (the mesh's, each function
+        # space's index map's), and PETSc keys its garbage by its own communicator of each: the
+        # ones seen on the objects made here, in the same order on every rank (made collectively)
+        for comm in self._petsc_comms.values():
             PETSc.garbage_cleanup(comm)
 
     # -- sizes --------------------------------------------------------------------------
