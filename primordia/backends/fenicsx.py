@@ -58,7 +58,7 @@ class FenicsxBackend(Backend):
         self._vertex_maps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._p1_spaces: dict[tuple, object] = {}
         self._components: dict[tuple, tuple] = {}
-        self._petsc_comms: dict[int, object] = {}  # the PETSc communicators of the objects made here
+        self._petsc_comms: dict[int, object] = {}  # communicator -> an empty vector keeping it alive
         _silence_jit_logging()
 
     # -- mesh, spaces, fields -----------------------------------------------------------
@@ -98,9 +98,15 @@ class FenicsxBackend(Backend):
         return function
 
     def _track(self, petsc_object):
-        """Remember the communicator of ``petsc_object`` for :meth:`collect_garbage`; returns the object."""
+        """Remember the communicator of ``petsc_object`` for :meth:`collect_garbage`; returns the object.
+
+        PETSc frees a communicator with the last object on it, and cleaning a freed one aborts the
+        run: an empty vector kept on it keeps it alive (made collectively, as the object was).
+        """
         comm = petsc_object.getComm()
-        self._petsc_comms.setdefault(comm.tompi4py().py2f(), comm)
+        key = comm.tompi4py().py2f()
+        if key not in self._petsc_comms:
+            self._petsc_comms[key] = PETSc.Vec().createMPI(0, comm=comm)
         return petsc_object
 
     def constant(self, mesh, value):
@@ -298,8 +304,8 @@ class FenicsxBackend(Backend):
         # dolfinx's objects live on duplicates of the communicator (the mesh's, each function
         # space's index map's), and PETSc keys its garbage by its own communicator of each: the
         # ones seen on the objects made here, in the same order on every rank (made collectively)
-        for comm in self._petsc_comms.values():
-            PETSc.garbage_cleanup(comm)
+        for keeper in self._petsc_comms.values():
+            PETSc.garbage_cleanup(keeper.getComm())
 
     # -- sizes --------------------------------------------------------------------------
     def num_cells(self, mesh) -> int:

@@ -38,7 +38,7 @@ def test_a_fixed_point_step_leaves_no_petsc_garbage(tmp_path, monkeypatch, capfd
     run's collection switched off, a step must leave nothing behind."""
     sim = simulation(tmp_path, 'coupling.scheme="fixed_point"', "coupling.tolerance=1e-10", backend="fenicsx")
     sim.step()  # the first step makes the scheme's work vectors
-    comms = list(sim.backend._petsc_comms.values())
+    comms = [keeper.getComm() for keeper in sim.backend._petsc_comms.values()]
     for comm in comms:
         PETSc.garbage_cleanup(comm)
     monkeypatch.setattr(sim.backend, "collect_garbage", lambda mesh: None)
