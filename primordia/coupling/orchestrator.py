@@ -204,6 +204,8 @@ class Simulation:
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
         self.scheme.build(self)
+        # the old solvers' PETSc objects (a factorisation) go now, before the new ones make theirs
+        self._collect_petsc_garbage()
         self.disc.check_contributions()
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
