@@ -113,13 +113,14 @@ def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, A
 def parallel_safe(options: Mapping[str, Any], parallel: bool) -> dict[str, Any]:
     """A direct solve without a factor package gets PETSc's own (serial) or MUMPS (more than one rank).
 
-    Block-Jacobi and additive-Schwarz sub-solves (``sub_``) are serial on every rank: PETSc's own.
+    Block-Jacobi and additive-Schwarz sub-solves (``sub_``) and the whole-system solve of a
+    ``redundant`` preconditioner (``redundant_``) are serial on every rank: PETSc's own.
     """
     safe = dict(options)
     for key, value in options.items():
         level = key[: -len("pc_type")]
         if key.endswith("pc_type") and str(value) in DIRECT and level + "pc_factor_mat_solver_type" not in options:
-            serial = not parallel or "sub_" in level
+            serial = not parallel or "sub_" in level or "redundant_" in level
             safe[level + "pc_factor_mat_solver_type"] = "petsc" if serial else "mumps"
     return safe
 

@@ -265,7 +265,7 @@ class Chemotaxis(Physics):
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
                 linear=True, constant_jacobian=jacobian_is_constant(jacobian, self.disc),
-                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks > 1),
+                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks),
             ))
         return problems
 
@@ -280,6 +280,10 @@ class Chemotaxis(Physics):
                           jacobian=ufl.derivative(residual, unknown), linear=False,
                           fields=self.disc.unknown_fields(first),
                           petsc_options=_coupled_defaults(self.settings["preconditioner"], self.species))
+
+
+#: Up to this many ranks, a constant species matrix is factorised whole on every rank (see _solver_defaults).
+REDUNDANT_RANKS = 8
 
 
 def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict:
@@ -297,18 +301,28 @@ def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict
             "pc_fieldsplit_type": "additive", **blocks}
 
 
-def _solver_defaults(species: Species, parallel: bool = False) -> dict:
+def _solver_defaults(species: Species, ranks: int = 1) -> dict:
     """Direct solves for constant symmetric matrices, Krylov for the rest (overridable).
 
     A constant matrix is factorised once, so in serial each step costs two triangular
-    solves; on several ranks those go through MUMPS, whose distributed triangular solves
-    cost several times a serial one, so there the symmetric positive definite matrices of
-    the diffusing species get CG with BoomerAMG (set up once, the matrix is constant).
+    solves.  On up to ``REDUNDANT_RANKS`` ranks every rank factorises the whole matrix
+    once and solves the whole system (``redundant``: the right-hand side is gathered, the
+    rank's part of the solution kept), the memory of a serial run on every rank.  Measured
+    on example 1a on 2 ranks (``benchmarks/bench_scaling.py``), f and b per step at 171,
+    342 and 684 cells per side: 3.0, 13.9 and 64 ms each, as in serial, against 13-16,
+    65-75 and 290-330 ms for CG with BoomerAMG (7 iterations), and about 21 ms at 171 for
+    MUMPS's distributed triangular solves.  AMG is 4.3 to 4.7 times the redundant solve on
+    2 ranks; if it scaled perfectly it would catch up near 9 ranks, so from there the
+    symmetric positive definite matrices of the diffusing species get CG with BoomerAMG
+    (set up once, the matrix is constant).
     """
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}
     if species.attractant is not None:  # nonsymmetric M-matrix, rebuilt every step
         return {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
-    if parallel:
+    if ranks > REDUNDANT_RANKS:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
+    if ranks > 1:
+        return {"ksp_type": "preonly", "pc_type": "redundant", "redundant_pc_type": "lu",
+                "redundant_pc_factor_mat_ordering_type": "nd"}
     return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
