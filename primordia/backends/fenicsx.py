@@ -299,8 +299,8 @@ class FenicsxBackend(Backend):
             result[indices] = vals
         return result[:, 0] if bs == 1 else result
 
-    def collect_garbage(self, mesh) -> None:
-        super().collect_garbage(mesh)
+    def collect_garbage(self) -> None:
+        super().collect_garbage()
         # dolfinx's objects live on duplicates of the communicator (the mesh's, each function
         # space's index map's), and PETSc keys its garbage by its own communicator of each: the
         # ones seen on the objects made here, in the same order on every rank (made collectively)

@@ -225,7 +225,7 @@ class Backend(ABC):
     def is_root(self) -> bool:
         return self.comm.rank == 0
 
-    def collect_garbage(self, mesh) -> None:
+    def collect_garbage(self) -> None:
         """Destroy PETSc objects dropped on the run's communicators (collective).
 
         petsc4py (3.18) does not destroy an object when Python drops it: it defers that to

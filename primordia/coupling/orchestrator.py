@@ -508,7 +508,7 @@ class Simulation:
         2a at 86 x 86 squares grew to 15 GB over 2,600 steps, through the fixed-point
         iteration's copies, now kept).
         """
-        self.backend.collect_garbage(self.disc.mesh)
+        self.backend.collect_garbage()
 
     def _substep(self, t_next: float, dt: float) -> str | None:
         """Try to advance from ``self.time`` to ``t_next``; None on success, else why the try was undone."""

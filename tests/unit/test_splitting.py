@@ -41,7 +41,7 @@ def test_a_fixed_point_step_leaves_no_petsc_garbage(tmp_path, monkeypatch, capfd
     comms = [keeper.getComm() for keeper in sim.backend._petsc_comms.values()]
     for comm in comms:
         PETSc.garbage_cleanup(comm)
-    monkeypatch.setattr(sim.backend, "collect_garbage", lambda mesh: None)
+    monkeypatch.setattr(sim.backend, "collect_garbage", lambda: None)
     sim.step()
     capfd.readouterr()
     for comm in comms:
