@@ -206,6 +206,7 @@ class Simulation:
         self.scheme.build(self)
         # the old solvers' PETSc objects (a factorisation) go now, before the new ones make theirs
         self._collect_petsc_garbage()
+        release_free_memory()  # and what they held is the system's again, not the allocator's
         self.disc.check_contributions()
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
@@ -747,6 +748,27 @@ def resident_memory_mb() -> tuple[float, float]:
     except (OSError, StopIteration, ValueError, IndexError):
         now = peak
     return now, max(peak, now)
+
+
+def release_free_memory() -> bool:
+    """Give the memory the process has freed back to the system (glibc's ``malloc_trim``); whether it could.
+
+    glibc keeps freed memory for later allocations, so the resident size stays at its
+    peak: example 2b at 171 x 171 squares kept 2.77 GB after its first steps, and 1.83 GB
+    once trimmed (the transient of the first factorisations and form compilations).
+    Elsewhere (musl, macOS) nothing is done.
+    """
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        trim = libc.malloc_trim
+    except (OSError, AttributeError):
+        return False
+    trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
+    trim(0)
+    return True
 
 
 def _rows(keys: np.ndarray) -> np.ndarray:
