@@ -5,7 +5,9 @@ For each example (with its size and number of steps), runs ``primordia run`` on 
 set-up excluded; the first step, which compiles the forms, is amortised over the steps), the
 speedup, and the largest relative difference between the two runs' final integrals, minima and
 maxima of every field (the solvers' tolerance bounds it, not round-off: iterative solvers on
-other partitions take other paths to their tolerance).
+other partitions take other paths to their tolerance).  With ``--solves`` it also prints, for
+each run, the CPU ms per step of every subproblem's linear algebra (``summary.json``'s
+``linear_solve_ms_per_step``, the largest over the ranks).
 
     .venv/bin/python benchmarks/bench_scaling.py                         # examples 1a, 2a, 4 (small)
     .venv/bin/python benchmarks/bench_scaling.py --examples ex04_small --set 'mesh.cells=[40,40,4]' --steps 3
@@ -61,6 +63,7 @@ def main() -> None:
     parser.add_argument("--ranks", type=int, default=2)
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--set", action="append", default=[], help="an extra config override (both runs)")
+    parser.add_argument("--solves", action="store_true", help="also print each subproblem's linear-solve ms/step")
     args = parser.parse_args()
     extra = [a for s in args.set for a in ("--set", s)]
     print(f"{'example':>11} {'dofs':>9} {'1 rank ms/step':>15} {f'{args.ranks} ranks ms/step':>16} {'speedup':>8} "
@@ -72,6 +75,10 @@ def main() -> None:
         print(f"{example:>11} {serial['dofs_total']:>9} {serial['ms_per_step']:>15.1f} {parallel['ms_per_step']:>16.1f} "
               f"{serial['ms_per_step'] / parallel['ms_per_step']:>8.2f} {largest_difference(serial, parallel):>20.1e}",
               flush=True)
+        if args.solves:
+            for ranks, summary in ((1, serial), (args.ranks, parallel)):
+                shares = ", ".join(f"{name} {ms:.1f}" for name, ms in summary["linear_solve_ms_per_step"].items())
+                print(f"{'':>11} linear solves on {ranks} rank(s), ms/step: {shares}", flush=True)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ Each (system, preconditioner, size) runs in a child process (``--one``), so its 
 
 ``--share ex01a ex01b`` prints instead, per example, backend and size, the cost of a step against the
 time its linear solves take in the same run (Krylov iterations, preconditioner set-ups,
-factorisations, diagonal divisions: ``linear_solve_seconds`` of each solver), and their ratio.
+factorisations, diagonal divisions: ``linear_solve_seconds`` of each solver), and their ratio, then
+each subproblem's share; with ``--ranks 2`` under ``mpirun`` (fenicsx), the largest over the ranks.
 
     .venv/bin/python benchmarks/bench_solvers.py --systems growth2d --sizes 43 86 171 --steps 3
     .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 40 --steps 2
@@ -136,7 +137,8 @@ def one(system: str, preconditioner: str, size: int, steps: int, warmup: int, ex
 
 
 def share(example: str, backend: str, size: int, steps: int, warmup: int, extra: list[str], clock: str) -> dict:
-    """ms/step and ms of linear solves per step of one example in this process."""
+    """ms/step and ms of linear solves per step of one example in this process (under MPI: the largest
+    over the ranks, for the step and for each subproblem's solves)."""
     from primordia.coupling.orchestrator import Simulation
     from primordia.model import Model
 
@@ -147,14 +149,20 @@ def share(example: str, backend: str, size: int, steps: int, warmup: int, extra:
     sim.setup()
     for _ in range(warmup):
         sim.step()
-    solving = sum(solver.linear_solve_seconds for solver in sim.solvers)
+    before = [solver.linear_solve_seconds for solver in sim.solvers]
+    sim.comm.Barrier()
     start, start_cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         sim.step()
     elapsed = time.process_time() - start_cpu if clock == "cpu" else time.perf_counter() - start
-    solving = sum(solver.linear_solve_seconds for solver in sim.solvers) - solving
-    return {"example": example, "backend": backend, "size": size, "ms_per_step": 1e3 * elapsed / steps,
-            "solve_ms_per_step": 1e3 * solving / steps, "ratio": elapsed / solving}
+    solves = {solver.sub.name: solver.linear_solve_seconds - old for solver, old in zip(sim.solvers, before)}
+    if sim.comm.size > 1:
+        elapsed = sim.comm.allreduce(elapsed, op=_max())
+        solves = {name: sim.comm.allreduce(value, op=_max()) for name, value in solves.items()}
+    solving = sum(solves.values())
+    return {"example": example, "backend": backend, "size": size, "ranks": sim.comm.size,
+            "ms_per_step": 1e3 * elapsed / steps, "solve_ms_per_step": 1e3 * solving / steps, "ratio": elapsed / solving,
+            "solves_ms_per_step": {name: 1e3 * value / steps for name, value in solves.items()}}
 
 
 def _max():
@@ -186,7 +194,11 @@ def share_table(args) -> None:
                 command = [sys.executable, __file__, "--share-one", example, backend, str(size), "--steps",
                            str(args.steps), "--warmup", str(args.warmup), "--clock", args.clock,
                            *sum((["--set", s] for s in args.set), [])]
-                done = subprocess.run(command, capture_output=True, text=True)
+                env = os.environ
+                if args.ranks > 1:
+                    command = ["mpirun", "-n", str(args.ranks), *command]
+                    env = {**env, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+                done = subprocess.run(command, capture_output=True, text=True, env=env)
                 lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
                 if done.returncode != 0 or not lines:
                     print(f"  {example} {backend} {size}: failed ({(done.stderr.strip().splitlines() or ['?'])[-1]})")
@@ -194,6 +206,8 @@ def share_table(args) -> None:
                 row = json.loads(lines[-1])
                 print(f"{example:>8} {backend:>8} {size:>5} {row['ms_per_step']:>9.1f} {row['solve_ms_per_step']:>10.1f} "
                       f"{row['ratio']:>11.2f}", flush=True)
+                shares = ", ".join(f"{name} {ms:.1f}" for name, ms in row["solves_ms_per_step"].items())
+                print(f"{'':>8} solves on {row['ranks']} rank(s), ms/step: {shares}", flush=True)
                 if args.json:
                     with open(args.json, "a") as stream:
                         stream.write(json.dumps(row) + "\n")
@@ -217,7 +231,11 @@ def main() -> None:
     args = parser.parse_args()
     if args.share_one:
         example, backend, size = args.share_one
-        print(json.dumps(share(example, backend, int(size), args.steps, args.warmup, args.set, args.clock)), flush=True)
+        row = share(example, backend, int(size), args.steps, args.warmup, args.set, args.clock)
+        from mpi4py import MPI
+
+        if MPI.COMM_WORLD.rank == 0:
+            print(json.dumps(row), flush=True)
         return
     if args.share:
         share_table(args)

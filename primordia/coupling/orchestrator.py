@@ -78,6 +78,8 @@ class Simulation:
         self._solver_dt = model.dt
         self._wall_before = 0.0  # wall time of the earlier parts of a restarted run
         self._checkpoint_step: int | None = None
+        self._solve_seconds: dict[str, float] = {}  # linear algebra of solvers made anew since (see linear_solve_ms)
+        self._first_step = 0  # the step this process started from (a restart's checkpoint)
 
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> "Simulation":
@@ -94,6 +96,7 @@ class Simulation:
         if checkpoint is not None:
             self._restore(checkpoint)
         self._attach_outputs(checkpoint)
+        self._first_step = self.step_index
         return self
 
     def _choose_backend(self):
@@ -203,6 +206,9 @@ class Simulation:
 
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
+        for solver in getattr(self, "solvers", ()):  # their time goes on counting in linear_solve_ms
+            name = solver.sub.name
+            self._solve_seconds[name] = self._solve_seconds.get(name, 0.0) + solver.linear_solve_seconds
         self.scheme.build(self)
         # the old solvers' PETSc objects (a factorisation) go now, before the new ones make theirs
         self._collect_petsc_garbage()
@@ -708,6 +714,20 @@ class Simulation:
             now, peak = self.comm.allreduce(now), self.comm.allreduce(peak)
         return {"memory_mb": now, "peak_memory_mb": peak}
 
+    def linear_solve_ms(self) -> dict[str, float]:
+        """Per subproblem, the CPU ms per step spent in its linear algebra (Krylov iterations, preconditioner
+        set-up, factorisations, diagonal divisions; not assembly) over the steps of this process, the
+        largest over the ranks: what a step cannot do without, to hold its whole cost against."""
+        steps = self.step_index - self._first_step
+        totals = dict(self._solve_seconds)
+        for solver in getattr(self, "solvers", ()):
+            totals[solver.sub.name] = totals.get(solver.sub.name, 0.0) + solver.linear_solve_seconds
+        names = sorted(totals)
+        values = np.array([totals[name] for name in names])
+        if self.comm.size > 1:
+            values = np.max(self.comm.allgather(values), axis=0)
+        return {name: 1e3 * float(value) / steps for name, value in zip(names, values)} if steps else {}
+
     def summary(self, status: str) -> dict:
         wall = self._wall_time()
         field_space = {group: self.disc.group_function(group).ufl_function_space() for group in self.disc.groups()}
@@ -726,6 +746,7 @@ class Simulation:
             "checkpoint_step": self._checkpoint_step,
             "wall_time_s": wall,
             "ms_per_step": 1e3 * wall / self.step_index if self.step_index else None,
+            "linear_solve_ms_per_step": self.linear_solve_ms(),
             "final": self.field_statistics(),
             "mean_linear_iterations": {name: float(np.mean(its)) for name, its in self.iterations.items() if its},
             "mean_newton_iterations": {name: float(np.mean([its for its, _ in record]))

@@ -308,13 +308,13 @@ def _solver_defaults(species: Species, ranks: int = 1) -> dict:
     solves.  On up to ``REDUNDANT_RANKS`` ranks every rank factorises the whole matrix
     once and solves the whole system (``redundant``: the right-hand side is gathered, the
     rank's part of the solution kept), the memory of a serial run on every rank.  Measured
-    on example 1a on 2 ranks (``benchmarks/bench_scaling.py``), f and b per step at 171,
-    342 and 684 cells per side: 3.0, 13.9 and 64 ms each, as in serial, against 13-16,
-    65-75 and 290-330 ms for CG with BoomerAMG (7 iterations), and about 21 ms at 171 for
-    MUMPS's distributed triangular solves.  AMG is 4.3 to 4.7 times the redundant solve on
-    2 ranks; if it scaled perfectly it would catch up near 9 ranks, so from there the
-    symmetric positive definite matrices of the diffusing species get CG with BoomerAMG
-    (set up once, the matrix is constant).
+    on example 1a on 2 ranks (``benchmarks/bench_solvers.py --share ex01a --ranks 2``), f and
+    b per step at 171, 342 and 684 cells per side: 2.8, 13.4 and 60 ms each, as in serial,
+    against 12-15, 59-66 and 311-314 ms for CG with BoomerAMG to 1e-12 (7 iterations), and
+    about 21 ms at 171 for MUMPS's distributed triangular solves.  AMG is 4.4 to 5.4 times
+    the redundant solve on 2 ranks; if it scaled perfectly it would catch up near 9 to 11
+    ranks, so from 9 ranks on the symmetric positive definite matrices of the diffusing
+    species get CG with BoomerAMG (set up once, the matrix is constant).
     """
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}

@@ -168,6 +168,9 @@ def test_the_summary_states_the_run(completed):
     assert (summary["rejected_steps"], summary["restarts"], summary["checkpoint_step"]) == (0, 0, 5)
     assert summary["splitting_scheme"] == "sequential"
     assert set(summary["mean_linear_iterations"]) == {"chemotaxis.m", "chemotaxis.e", "chemotaxis.f", "chemotaxis.b"}
+    solves = summary["linear_solve_ms_per_step"]  # what each step's linear algebra costs, by subproblem
+    assert set(solves) == set(summary["mean_linear_iterations"]) and min(solves.values()) >= 0.0
+    assert 0.0 < sum(solves.values()) < summary["ms_per_step"]
     assert summary["wall_time_s"] > 0 and summary["ms_per_step"] == pytest.approx(1e3 * summary["wall_time_s"] / 5)
     # this process's peak resident memory: more than the interpreter alone, less than the machine
     assert 50.0 < summary["peak_memory_mb"] < 1e6
@@ -299,3 +302,12 @@ def test_solvers_made_anew_give_the_old_ones_memory_back(watching, tmp_path, mon
     old = sim.solvers
     sim._create_solvers()  # as at a checkpoint
     assert len(released) == 1 and released[0] is not old  # after the old solvers went, the new made
+
+
+def test_the_time_of_the_solves_counts_on_when_solvers_are_made_anew(watching, tmp_path):
+    sim = Simulation(model(), out_dir=tmp_path / "run").setup()
+    for _ in range(3):
+        sim.step()
+    before = sim.linear_solve_ms()
+    sim._create_solvers()  # as at a checkpoint: the new solvers start from zero
+    assert sim.linear_solve_ms() == before and sum(before.values()) > 0.0
