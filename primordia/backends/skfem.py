@@ -125,6 +125,7 @@ class SkfemMesh(ufl.Mesh):
         if np.any(self.determinant == 0.0):
             raise MeshError("the mesh has degenerate (zero-volume) cells")
         self._index_facets(data)
+        self.cell_weights: dict[tuple, tuple] = {}  # (rule, weights) by run of cells: see _Chunk.weights
 
     def ufl_domain(self):
         return self
@@ -439,10 +440,22 @@ class _Chunk:
     # -- integration weights ------------------------------------------------------------
     @cached_property
     def weights(self) -> np.ndarray:
-        """Quadrature weights times the Jacobian of the map to the entity: (E, Q)."""
-        if not self.rule.facet:
-            return np.abs(self.mesh.determinant[self.cells])[:, None] * self.rule.weights
-        return self._facet_scale[:, None] * self.rule.weights
+        """Quadrature weights times the Jacobian of the map to the entity: (E, Q), a view of point-major
+        (Q, E) data as the evaluator multiplies them (an (E, Q) array transposed costs it a strided pass).
+
+        A run of cells keeps its weights on the mesh (its geometry never changes): forms assembled at
+        every step do not compute them again.
+        """
+        if self.rule.facet:
+            return np.ascontiguousarray((self._facet_scale[:, None] * self.rule.weights).T).T
+        key = (id(self.rule), self.cells.start, self.cells.stop) if isinstance(self.cells, slice) else None
+        hit = self.mesh.cell_weights.get(key) if key is not None else None
+        if hit is None or hit[0] is not self.rule:
+            weights = (self.rule.weights[:, None] * np.abs(self.mesh.determinant[self.cells])[None, :]).T
+            if key is None:
+                return weights
+            hit = self.mesh.cell_weights[key] = (self.rule, weights)
+        return hit[1]
 
     @cached_property
     def _facet_scale(self) -> np.ndarray:

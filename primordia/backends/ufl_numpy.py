@@ -321,7 +321,9 @@ def _block_tensor(contributions: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
         references.append(np.einsum("iaq,jbq->ijabq", test_table, trial_table).reshape(n_test * n_trial, -1))
         value = np.broadcast_to(value * weights.T, (test_directions, trial_directions, points, entities))
         weighted.append(value.reshape(-1, entities))
-    product = np.concatenate(weighted).T @ np.concatenate(references, axis=1).T   # BLAS reads them transposed
+    weighted = weighted[0] if len(weighted) == 1 else np.concatenate(weighted)
+    references = references[0] if len(references) == 1 else np.concatenate(references, axis=1)
+    product = weighted.T @ references.T   # BLAS reads them transposed
     return product.reshape(entities, n_test, n_trial)
 
 

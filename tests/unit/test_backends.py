@@ -411,3 +411,18 @@ def test_the_form_cache_keeps_the_most_recently_used_forms_by_identity():
     assert cache.get(forms[0], make(forms[0])) == 1
     assert cache.get(forms[1], make(forms[1])) == 4  # made again
     assert made == [forms[0], forms[1], forms[2], forms[1]]
+
+
+def test_integrals_of_several_quadrature_degrees_on_one_mesh_stay_exact(backend, data):
+    """The skfem backend keeps each run of cells' quadrature weights on the mesh: integrals with
+    other rules on the same cells, in turn, must each get their own."""
+    mesh = backend.create_mesh(data)
+    x = ufl.SpatialCoordinate(mesh)
+    lengths = LENGTHS[: data.gdim]
+    volume = float(np.prod(lengths))
+    for _ in range(2):
+        for degree in (1, 2, 4, 6):
+            dx = backend.measure("dx", mesh, metadata={"quadrature_degree": degree})
+            # int x0^degree dX = L0^(degree + 1) / (degree + 1) * (the other sides): exact at this degree
+            exact = lengths[0] ** (degree + 1) / (degree + 1) * volume / lengths[0]
+            assert backend.assemble_scalar(x[0] ** degree * dx) == pytest.approx(exact, rel=1e-12), degree
