@@ -230,6 +230,24 @@ FORMS = {
         + ufl.inner(ufl.sym(ufl.grad(s["u"])) + 2 * ufl.skew(ufl.nabla_grad(s["u"])) + ufl.dev(ufl.grad(s["u"]))
                     + ufl.cofac(deformation_gradient(s)), ufl.grad(s.test("vector P2")))
         + ufl.nabla_div(s["u"]) * ufl.div(s.test("vector P2"))) * ufl.dx,
+    # sums over the identity (contract_identities eliminates them; FFCx evaluates them as written)
+    "identity contractions": lambda s: (
+        ufl.inner(s["m"] * ufl.Identity(s.gdim) - ufl.grad(s["u"]), ufl.grad(s.test("vector P2")))
+        + ufl.inner(ufl.dot(ufl.Identity(s.gdim), ufl.grad(s["u"])).T, ufl.grad(s.test("vector P2")))
+        + ufl.Identity(s.gdim)[0, ufl.i] * ufl.grad(s["m"])[ufl.i] * s.test("vector P2")[s.gdim - 1]
+        + ufl.inner(ufl.outer(s["u"], ufl.grad(s["m"])), s["c"] * ufl.Identity(s.gdim)) * s.test("vector P2")[0]
+        + ufl.tr(ufl.Identity(s.gdim)) * ufl.inner(s["u"], s.test("vector P2"))
+        # I[i, j] u1[i] u[j]: after either sum the other index is in two factors; left as written
+        + ufl.Identity(s.gdim)[ufl.i, ufl.j] * (s["u1"][ufl.i] * s["u"][ufl.j]) * s.test("vector P2")[0]
+        # sum_j I[i, j] m: no other factor reads j (each row of I sums to 1); left as written
+        + ufl.dot(ufl.as_vector(ufl.classes.IndexSum(ufl.Identity(s.gdim)[ufl.i, ufl.j] * s["m"],
+                                                     ufl.classes.MultiIndex((ufl.j,))), ufl.i),
+                  s.test("vector P2"))) * ufl.dx,
+    "identity contractions, mixed matrix": lambda s: (
+        ufl.inner(ufl.split(s.trial("Taylor-Hood"))[1] * ufl.Identity(s.gdim),
+                  ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))
+        + ufl.inner(ufl.dot(ufl.Identity(s.gdim) + ufl.grad(s["u"]), ufl.grad(ufl.split(s.trial("Taylor-Hood"))[0])),
+                    ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))) * ufl.dx,
     "tensor field": lambda s: ufl.inner(ufl.dot(s["T"], s["T"].T), ufl.grad(s.test("vector P1"))) * ufl.dx,
     # math functions
     "exp ln": lambda s: ufl.exp(-s["m"]) * ufl.ln(1 + s["c"] ** 2) * s.test("P2") * ufl.dx,
@@ -579,3 +597,28 @@ def test_an_integrand_rewired_by_ufl_after_its_analysis_still_assembles():
                if isinstance(node, ufl.classes.Sin)]
     assert rewired and rewired[0] == twin  # UFL's comparison makes one share the other's operands
     assert backend.assemble_vector(form).array == pytest.approx(first, rel=1e-14)
+
+
+def test_sums_over_the_identity_are_eliminated_and_their_value_kept(skfem_setup):
+    """``inner(m I, grad v)`` is evaluated as m div v: no identity is left where it is summed over, and the
+    vector is the one of the form evaluated as written (to round-off)."""
+    from ufl.corealg.traversal import unique_pre_traversal
+
+    from primordia.backends import ufl_numpy
+
+    s = skfem_setup
+    v = s.test("vector P2")
+    form = (ufl.inner(s["m"] * ufl.Identity(s.gdim), ufl.grad(v))
+            + ufl.inner(ufl.dot(ufl.Identity(s.gdim), ufl.grad(s["u"])), ufl.grad(v))) * ufl.dx
+    (plan,) = preprocess_form(form)
+    identities = [o for o in unique_pre_traversal(plan.integrand)
+                  if isinstance(o, ufl.classes.Identity)]
+    assert not identities, plan.integrand
+    contracted = s.backend.assemble_vector(form).array.copy()
+    written = ufl_numpy.contract_identities
+    try:
+        ufl_numpy.contract_identities = lambda expression: expression
+        as_written = s.backend.assemble_vector(ufl.replace(form, {})).array  # a new form: planned again
+    finally:
+        ufl_numpy.contract_identities = written
+    assert np.abs(contracted - as_written).max() <= 1e-13 * np.abs(as_written).max()
