@@ -262,10 +262,11 @@ class Chemotaxis(Physics):
                     metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
                 self._fitted_operators = {**getattr(self, "_fitted_operators", {}), species.name: operator}
+            constant = jacobian_is_constant(jacobian, self.disc)
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
-                linear=True, constant_jacobian=jacobian_is_constant(jacobian, self.disc),
-                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks),
+                linear=True, constant_jacobian=constant,
+                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks, constant),
             ))
         return problems
 
@@ -301,8 +302,8 @@ def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict
             "pc_fieldsplit_type": "additive", **blocks}
 
 
-def _solver_defaults(species: Species, ranks: int = 1) -> dict:
-    """Direct solves for constant symmetric matrices, Krylov for the rest (overridable).
+def _solver_defaults(species: Species, ranks: int = 1, constant: bool = True) -> dict:
+    """Direct solves for symmetric matrices in serial, Krylov for the rest (overridable).
 
     A constant matrix is factorised once, so in serial each step costs two triangular
     solves.  On up to ``REDUNDANT_RANKS`` ranks every rank factorises the whole matrix
@@ -314,13 +315,22 @@ def _solver_defaults(species: Species, ranks: int = 1) -> dict:
     about 21 ms at 171 for MUMPS's distributed triangular solves.  AMG is 4.4 to 5.4 times
     the redundant solve on 2 ranks; if it scaled perfectly it would catch up near 9 to 11
     ranks, so from 9 ranks on the symmetric positive definite matrices of the diffusing
-    species get CG with BoomerAMG (set up once, the matrix is constant).
+    species get CG with BoomerAMG (set up once, the matrix is constant).  A matrix that
+    changes (a growing tissue's metric, example 2a) gets CG with BoomerAMG on any number of
+    ranks: every rank refactorising the whole matrix at every solve does not scale (2a at
+    86 x 86 squares on 2 ranks, f and b per step: 41.7 and 41.9 ms redundant, 22.7 and 34.4
+    with BoomerAMG; ``bench_scaling.py --examples ex02a --solves``).
     """
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}
     if species.attractant is not None:  # nonsymmetric M-matrix, rebuilt every step
-        return {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
-    if ranks > REDUNDANT_RANKS:
+        # ILU on each rank's rows; on several ranks with one layer of overlap (additive Schwarz): per step
+        # on 2 ranks at 171, 342, 684 cells per side 4.8, 33.9, 255 ms against 5.6, 39.8, 331 for block
+        # Jacobi, whose iterations double on 2 ranks.  On one rank it is the same ILU with more overhead
+        # (7.4 against 5.3 ms at 171), so serial keeps block Jacobi.
+        return {"ksp_type": "gmres", "pc_type": "asm" if ranks > 1 else "bjacobi", "ksp_rtol": 1e-12,
+                "ksp_atol": 1e-14}
+    if ranks > REDUNDANT_RANKS or (ranks > 1 and not constant):
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     if ranks > 1:
         return {"ksp_type": "preonly", "pc_type": "redundant", "redundant_pc_type": "lu",
