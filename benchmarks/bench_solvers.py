@@ -149,16 +149,15 @@ def share(example: str, backend: str, size: int, steps: int, warmup: int, extra:
     sim.setup()
     for _ in range(warmup):
         sim.step()
-    before = [solver.linear_solve_seconds for solver in sim.solvers]
+    before = sim.linear_solve_seconds()
     sim.comm.Barrier()
     start, start_cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         sim.step()
     elapsed = time.process_time() - start_cpu if clock == "cpu" else time.perf_counter() - start
-    solves = {solver.sub.name: solver.linear_solve_seconds - old for solver, old in zip(sim.solvers, before)}
+    solves = {name: seconds - before.get(name, 0.0) for name, seconds in sim.linear_solve_seconds().items()}
     if sim.comm.size > 1:
         elapsed = sim.comm.allreduce(elapsed, op=_max())
-        solves = {name: sim.comm.allreduce(value, op=_max()) for name, value in solves.items()}
     solving = sum(solves.values())
     return {"example": example, "backend": backend, "size": size, "ranks": sim.comm.size,
             "ms_per_step": 1e3 * elapsed / steps, "solve_ms_per_step": 1e3 * solving / steps, "ratio": elapsed / solving,

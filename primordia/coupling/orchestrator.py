@@ -78,7 +78,7 @@ class Simulation:
         self._solver_dt = model.dt
         self._wall_before = 0.0  # wall time of the earlier parts of a restarted run
         self._checkpoint_step: int | None = None
-        self._solve_seconds: dict[str, float] = {}  # linear algebra of solvers made anew since (see linear_solve_ms)
+        self._solve_seconds: dict[str, float] = {}  # linear algebra of solvers made anew since (linear_solve_seconds)
         self._first_step = 0  # the step this process started from (a restart's checkpoint)
 
     # -- setup ----------------------------------------------------------------------------
@@ -206,7 +206,7 @@ class Simulation:
 
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
-        for solver in getattr(self, "solvers", ()):  # their time goes on counting in linear_solve_ms
+        for solver in getattr(self, "solvers", ()):  # their time goes on counting in linear_solve_seconds
             name = solver.sub.name
             self._solve_seconds[name] = self._solve_seconds.get(name, 0.0) + solver.linear_solve_seconds
         self.scheme.build(self)
@@ -714,11 +714,10 @@ class Simulation:
             now, peak = self.comm.allreduce(now), self.comm.allreduce(peak)
         return {"memory_mb": now, "peak_memory_mb": peak}
 
-    def linear_solve_ms(self) -> dict[str, float]:
-        """Per subproblem, the CPU ms per step spent in its linear algebra (Krylov iterations, preconditioner
-        set-up, factorisations, diagonal divisions; not assembly) over the steps of this process, the
-        largest over the ranks: what a step cannot do without, to hold its whole cost against."""
-        steps = self.step_index - self._first_step
+    def linear_solve_seconds(self) -> dict[str, float]:
+        """Per subproblem, the CPU seconds this process has spent in its linear algebra (Krylov iterations,
+        preconditioner set-up, factorisations, diagonal divisions; not assembly), the solvers made anew at
+        checkpoints included, the largest over the ranks (collective)."""
         totals = dict(self._solve_seconds)
         for solver in getattr(self, "solvers", ()):
             totals[solver.sub.name] = totals.get(solver.sub.name, 0.0) + solver.linear_solve_seconds
@@ -726,7 +725,14 @@ class Simulation:
         values = np.array([totals[name] for name in names])
         if self.comm.size > 1:
             values = np.max(self.comm.allgather(values), axis=0)
-        return {name: 1e3 * float(value) / steps for name, value in zip(names, values)} if steps else {}
+        return {name: float(value) for name, value in zip(names, values)}
+
+    def linear_solve_ms(self) -> dict[str, float]:
+        """:meth:`linear_solve_seconds` in ms per step of this process: what a step cannot do without, to
+        hold its whole cost against."""
+        steps = self.step_index - self._first_step
+        totals = self.linear_solve_seconds()
+        return {name: 1e3 * seconds / steps for name, seconds in totals.items()} if steps else {}
 
     def summary(self, status: str) -> dict:
         wall = self._wall_time()
