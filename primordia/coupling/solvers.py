@@ -204,7 +204,15 @@ def _weakly(method):
     time, for example 2a.  (Destroying the SNES by hand instead left 17 MB behind at 43^2.)
     """
     owner = weakref.WeakMethod(method)
-    return lambda *args: owner()(*args)
+    name = method.__qualname__
+
+    def callback(*args):
+        bound = owner()
+        if bound is None:  # someone kept the SNES and solved with it after its solver was dropped
+            raise SolverError(f"{name}: the solver that made this SNES is gone; make a new solver")
+        return bound(*args)
+
+    return callback
 
 
 def SubproblemSolver(backend, subproblem, overrides: dict | None = None):

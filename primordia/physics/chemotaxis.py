@@ -266,7 +266,7 @@ class Chemotaxis(Physics):
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
                 linear=True, constant_jacobian=constant,
-                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks, constant),
+                operator=operator, petsc_options=_solver_defaults(species, self.disc.ranks, constant=constant),
             ))
         return problems
 
@@ -302,7 +302,7 @@ def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict
             "pc_fieldsplit_type": "additive", **blocks}
 
 
-def _solver_defaults(species: Species, ranks: int = 1, constant: bool = True) -> dict:
+def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
     """Direct solves for symmetric matrices in serial, Krylov for the rest (overridable).
 
     A constant matrix is factorised once, so in serial each step costs two triangular

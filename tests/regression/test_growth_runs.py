@@ -26,6 +26,7 @@ import xarray as xr
 from petsc4py import PETSc
 
 import growth_test_laws
+from petsc_garbage import garbage_report, run_communicators
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.meshes import rectangle
 from primordia.coupling.orchestrator import Simulation
@@ -188,12 +189,9 @@ def test_a_step_of_a_growing_tissue_leaves_no_petsc_objects_behind(backend, tmp_
     sim = coarse_ex02a(backend, tmp_path)
     for _ in range(2):
         sim.step()
-    comms = [PETSc.COMM_SELF, PETSc.COMM_WORLD, *(keeper.getComm() for keeper in getattr(sim.backend, "_petsc_comms", {}).values())]
-    capfd.readouterr()
-    for comm in comms:
-        PETSc.garbage_view(comm)
-    report = capfd.readouterr().out
-    assert report.count("Total entries: 0") == len(comms), report
+    comms = run_communicators(sim)
+    empty, report = garbage_report(comms, capfd)
+    assert empty == len(comms), report
 
 
 def test_solvers_made_anew_free_the_old_ones_without_waiting_for_a_full_collection(tmp_path):
@@ -212,6 +210,20 @@ def test_solvers_made_anew_free_the_old_ones_without_waiting_for_a_full_collecti
     assert alive == []
 
 
+def test_a_snes_kept_past_its_solver_says_the_solver_is_gone(tmp_path):
+    """The SNES holds its solver only weakly (see above): used after the solver was dropped, its
+    callbacks say so, instead of calling None."""
+    sim = coarse_ex02a("fenicsx", tmp_path)
+    solver = growth_solver(sim)
+    snes, x, f = solver.snes, solver._F.duplicate(), solver._F.duplicate()
+    x.set(0.0)
+    del solver
+    sim._create_solvers()
+    gc.collect()
+    with pytest.raises(SolverError, match="the solver that made this SNES is gone"):
+        snes.computeFunction(x, f)
+
+
 def test_solvers_made_anew_leave_no_petsc_objects_behind(tmp_path, capfd):
     """dolfinx makes PETSc objects on duplicates of the communicator (one per function space's index map),
     and PETSc keeps each one's garbage apart: the old solvers' matrices and vectors (a factorisation's
@@ -225,11 +237,8 @@ def test_solvers_made_anew_leave_no_petsc_objects_behind(tmp_path, capfd):
     del objects
     sim._create_solvers()
     sim.step()  # which collects the garbage
-    capfd.readouterr()
-    for comm in comms.values():
-        PETSc.garbage_view(comm)
-    report = capfd.readouterr().out
-    assert report.count("Total entries: 0") == len(comms) >= 2, report
+    empty, report = garbage_report(comms.values(), capfd)
+    assert empty == len(comms) >= 2, report
 
 
 def test_the_constraint_residual_at_the_vertices_shrinks_with_the_mesh(tmp_path):
