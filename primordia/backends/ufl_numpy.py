@@ -69,6 +69,7 @@ import numpy as np
 import ufl
 from ufl import classes as uc
 from ufl.algorithms import compute_form_data
+from ufl.corealg.traversal import unique_pre_traversal
 
 from primordia.core.errors import PrimordiaError
 
@@ -194,9 +195,14 @@ def contract_identities(expression: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
 
 def _inline_component(o: uc.Indexed) -> ufl.core.expr.Expr:
     """``as_tensor(B, (k, l))[i, j]`` as ``B`` with k -> i, l -> j, when B is a product with the identity
-    (``s I``) and no index of B clashes.  Any other component tensor is left whole: the evaluator computes
-    it once and indexes it, where a copy of B per index would be evaluated again and again (the growth
-    tangent's tensors are indexed in many places)."""
+    (``s I``).  Any other component tensor is left whole: the evaluator computes it once and indexes it,
+    where a copy of B per index would be evaluated again and again (the growth tangent's tensors are
+    indexed in many places).
+
+    B may read i itself (free in the tensor): then ``T[i, j]`` is its diagonal in i, which the
+    substitution keeps.  An index that a sum or component tensor inside B binds must not be put in:
+    that scope would capture it (sum_i X[k, i] with k -> i is sum_i X[i, i]), so B stays whole.
+    """
     tensor, multiindex = o.ufl_operands
     if not isinstance(tensor, uc.ComponentTensor):
         return o
@@ -205,11 +211,15 @@ def _inline_component(o: uc.Indexed) -> ufl.core.expr.Expr:
                for factor in _product_factors(body)):
         return o
     targets = multiindex.indices()
-    clash = {i.count() for i in targets if isinstance(i, uc.Index)} & (
-        set(body.ufl_free_indices) - {i.count() for i in bound.indices()})
-    if clash:
+    if set(targets) & _bound_inside(body):
         return o
     return _substitute(body, dict(zip(bound.indices(), targets)))
+
+
+def _bound_inside(expression) -> set:
+    """The indices that sums and component tensors within ``expression`` bind."""
+    return {index for o in unique_pre_traversal(expression) if isinstance(o, (uc.IndexSum, uc.ComponentTensor))
+            for index in o.ufl_operands[1].indices()}
 
 
 def _sum_over_identity(o: uc.IndexSum) -> ufl.core.expr.Expr:

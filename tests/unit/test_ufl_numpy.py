@@ -243,6 +243,14 @@ FORMS = {
         + ufl.dot(ufl.as_vector(ufl.classes.IndexSum(ufl.Identity(s.gdim)[ufl.i, ufl.j] * s["m"],
                                                      ufl.classes.MultiIndex((ufl.j,))), ufl.i),
                   s.test("vector P2"))) * ufl.dx,
+    # as_tensor(s I, (k, l))[i, j] inlined as s I[i, j]: where B reads i itself (the same index, so the
+    # diagonal), and where i is bound by a sum inside B (which must not capture the i put in for k)
+    "identity contractions, shared and bound indices": lambda s: (
+        ufl.as_vector(ufl.as_tensor(s["u"][ufl.i] * ufl.Identity(s.gdim)[ufl.k, ufl.l], (ufl.k, ufl.l))[ufl.i, ufl.j],
+                      ufl.j)[0] * s.test("vector P2")[0]
+        + ufl.as_tensor(ufl.Identity(s.gdim)[ufl.l, 0]
+                        * (s["u"][ufl.i] * ufl.grad(s["u"])[ufl.k, ufl.i] + s["m"] * s["u"][ufl.k]),  # k inside a sum over i
+                        (ufl.k, ufl.l))[ufl.i, ufl.j] * ufl.grad(s.test("vector P2"))[ufl.i, ufl.j]) * ufl.dx,
     "identity contractions, mixed matrix": lambda s: (
         ufl.inner(ufl.split(s.trial("Taylor-Hood"))[1] * ufl.Identity(s.gdim),
                   ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))
