@@ -238,7 +238,7 @@ def _sum_over_identity(o: uc.IndexSum) -> ufl.core.expr.Expr:
         k = b if a == j else a
         others = factors[:n] + factors[n + 1:]
         holders = [g for g in others if j.count() in g.ufl_free_indices]
-        if len(holders) != 1:
+        if len(holders) != 1 or k in _bound_inside(holders[0]):  # a sum over k inside F would capture it
             continue
         rebuilt = [_substitute(g, {j: k}) if g is holders[0] else g for g in others]
         return functools.reduce(uc.Product, rebuilt)

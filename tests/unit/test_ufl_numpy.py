@@ -250,7 +250,10 @@ FORMS = {
                       ufl.j)[0] * s.test("vector P2")[0]
         + ufl.as_tensor(ufl.Identity(s.gdim)[ufl.l, 0]
                         * (s["u"][ufl.i] * ufl.grad(s["u"])[ufl.k, ufl.i] + s["m"] * s["u"][ufl.k]),  # k inside a sum over i
-                        (ufl.k, ufl.l))[ufl.i, ufl.j] * ufl.grad(s.test("vector P2"))[ufl.i, ufl.j]) * ufl.dx,
+                        (ufl.k, ufl.l))[ufl.i, ufl.j] * ufl.grad(s.test("vector P2"))[ufl.i, ufl.j]
+        # sum_j I[k, j] F(j) as F(k), where F sums over k itself: F's k must not capture the k put in for j
+        + ufl.as_vector(ufl.Identity(s.gdim)[ufl.k, ufl.j] * (s["u"][ufl.k] * ufl.grad(s["u"])[ufl.j, ufl.k]),
+                        ufl.k)[0] * s.test("vector P2")[1]) * ufl.dx,
     "identity contractions, mixed matrix": lambda s: (
         ufl.inner(ufl.split(s.trial("Taylor-Hood"))[1] * ufl.Identity(s.gdim),
                   ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))
