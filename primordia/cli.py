@@ -144,7 +144,8 @@ def _report_dry_run(model, out: Path) -> int:
 
 
 def command_plugins(args) -> int:
-    from primordia.core.plugins import HOOK_BY_KIND, get_plugin_manager, registry
+    from primordia.core.plugins import (CHOOSING_HOOKS, HOOK_BY_KIND, ask_backend_choosers, choosers,
+                                        get_plugin_manager, registry)
 
     pm = get_plugin_manager()
     for kind in HOOK_BY_KIND:
@@ -156,6 +157,11 @@ def command_plugins(args) -> int:
                 reason = piece.availability()
                 note = "  [available]" if reason is None else f"  [unavailable: {reason}]"
             print(f"  {name:<22} {origin}{note}")
+    ask_backend_choosers(pm)  # a chooser that breaks is listed below, not found at the next run
+    print("choosers:")
+    for hook, asked in choosers(pm).items():
+        order = ", then ".join(f"{plugin} [{origin}]" if origin != plugin else plugin for plugin, origin in asked)
+        print(f"  {hook:<34} {CHOOSING_HOOKS[hook]}, asking {order or 'nobody'}")
     if pm.load_report.broken:
         print("broken:")
         for plugin, problems in pm.load_report.broken.items():

@@ -11,7 +11,9 @@ something other than a list of named pieces of the right kind, or reuses a name
 already taken (a built-in's, or another plugin's) is named in one warning and
 its contribution skipped; a choosing hook (:func:`choose`) that raises or returns
 something of the wrong kind is skipped the same way.  Every such plugin is listed
-as broken by ``primordia plugins`` (:attr:`LoadReport.broken`).
+as broken by ``primordia plugins`` (:attr:`LoadReport.broken`), which asks the
+backend choosers itself (:func:`ask_backend_choosers`); a splitting-scheme chooser
+needs a model's physics, so only a run finds it broken.
 """
 
 from __future__ import annotations
@@ -253,6 +255,44 @@ def choose(hook_name: str, validate, pm: pluggy.PluginManager | None = None, **k
             continue
         return answer
     return None
+
+
+#: The hooks that choose (``firstresult``), and what each chooses.
+CHOOSING_HOOKS = {
+    "primordia_select_backend": "the backend",
+    "primordia_select_splitting_scheme": "the splitting scheme",
+}
+
+
+def choosers(pm: pluggy.PluginManager | None = None) -> dict[str, list[tuple[str, str]]]:
+    """hook name -> [(plugin, origin), ...] in the order :func:`choose` asks them (the first answer wins)."""
+    pm = pm or get_plugin_manager()
+    return {hook: [(impl.plugin_name, _origin(pm, impl.plugin_name))
+                   for impl in reversed(getattr(pm.hook, hook).get_hookimpls())]
+            for hook in CHOOSING_HOOKS}
+
+
+def ask_backend_choosers(pm: pluggy.PluginManager | None = None) -> None:
+    """Ask the backend choosers for every registered backend that imports, as a run on one rank would,
+    and drop the answers: a third-party chooser that raises or answers junk is reported
+    (:attr:`LoadReport.broken`) now rather than at the next run.  A user error a chooser raises (an
+    unknown name, say) is what a run would print; it is not a broken plugin.
+    """
+    from mpi4py import MPI
+
+    from primordia.core.backend import Backend
+    from primordia.core.errors import PrimordiaError
+
+    pm = pm or get_plugin_manager()
+    entries = {name: entry for name, (entry, _) in registry("backends", pm).items()}
+    for name, entry in sorted(entries.items()):
+        if entry.availability() is not None:
+            continue
+        try:
+            choose("primordia_select_backend", lambda answer: isinstance(answer, Backend), pm,
+                   name=name, entries=entries, comm=MPI.COMM_SELF)
+        except PrimordiaError:
+            continue
 
 
 def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):

@@ -144,3 +144,19 @@ def test_a_chooser_that_raises_is_skipped(primordia_cli, small_config, plugin_di
     warnings = ran.stderr.splitlines()
     assert len(warnings) == 1 and "plugin 'chooser'" in warnings[0] and "breaks on purpose" in warnings[0]
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["backend"] == "fenicsx"
+
+
+def test_plugins_asks_the_backend_choosers_and_lists_a_broken_one(primordia_cli, plugin_distribution):
+    """``primordia plugins`` names who chooses, in the order asked, and finds a chooser that breaks
+    without a run: one warning, and the plugin listed as broken."""
+    env = plugin_distribution("primordia-chooser", "0.1", {"chooser": CHOOSER_RAISES}, {"chooser": "chooser"})
+    listed = primordia_cli("plugins", env=env)
+    assert listed.returncode == 0 and "Traceback" not in listed.stderr, listed.stderr
+    warnings = listed.stderr.splitlines()
+    assert len(warnings) == 1 and "plugin 'chooser'" in warnings[0] and "breaks on purpose" in warnings[0], warnings
+    table = listing(listed.stdout)
+    assert "breaks on purpose" in table["broken"]["chooser"]
+    assert table["choosers"]["primordia_select_backend"] == (
+        "the backend, asking chooser [primordia-chooser 0.1], then primordia.core.selection [primordia (built-in)]")
+    assert table["choosers"]["primordia_select_splitting_scheme"] == (
+        "the splitting scheme, asking primordia.core.selection [primordia (built-in)]")
