@@ -23,8 +23,9 @@ Each (system, preconditioner, size) runs in a child process (``--one``), so its 
 
 ``--share ex01a ex01b`` prints instead, per example, backend and size, the cost of a step against the
 time its linear solves take in the same run (Krylov iterations, preconditioner set-ups,
-factorisations, diagonal divisions: ``linear_solve_seconds`` of each solver), and their ratio, then
-each subproblem's share; with ``--ranks 2`` under ``mpirun`` (fenicsx), the largest over the ranks.
+factorisations, diagonal divisions: ``linear_solve_seconds`` of each solver, on the clock the step is
+timed with, ``--clock``), and their ratio, then each subproblem's share; with ``--ranks 2`` under
+``mpirun`` (fenicsx), the largest over the ranks.
 
     .venv/bin/python benchmarks/bench_solvers.py --systems growth2d --sizes 43 86 171 --steps 3
     .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 40 --steps 2
@@ -149,13 +150,13 @@ def share(example: str, backend: str, size: int, steps: int, warmup: int, extra:
     sim.setup()
     for _ in range(warmup):
         sim.step()
-    before = sim.linear_solve_seconds()
+    before = sim.linear_solve_seconds(clock)  # the solves on the clock the step is timed with
     sim.comm.Barrier()
     start, start_cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         sim.step()
     elapsed = time.process_time() - start_cpu if clock == "cpu" else time.perf_counter() - start
-    solves = {name: seconds - before.get(name, 0.0) for name, seconds in sim.linear_solve_seconds().items()}
+    solves = {name: seconds - before.get(name, 0.0) for name, seconds in sim.linear_solve_seconds(clock).items()}
     if sim.comm.size > 1:
         elapsed = sim.comm.allreduce(elapsed, op=_max())
     solving = sum(solves.values())

@@ -25,6 +25,7 @@ order, the same order dolfinx keeps, so quadrature points coincide with FFCx's.
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -664,6 +665,30 @@ def _flat(arrays: list[np.ndarray]) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 
 
+#: Environment variables by which a user sets the BLAS thread count themselves.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+def blas_on_one_thread() -> bool:
+    """numpy's BLAS on one thread for this process, unless the user set a thread count; whether it was set.
+
+    The evaluator's products are many and small (an element-tensor block: a chunk of cells
+    times a few dozen reference values), too small for threads to share: with two threads
+    (this machine's default) example 1b at 171 x 171 squares ran 100.4 ms/step against 99.2 on
+    one, and 2a at 43 x 43 849 against 840 ms, while the second thread's waiting for the next
+    product (OpenBLAS spins) doubled the CPU time (207 against 100 ms/step for 1b): a core
+    taken from the other work of the machine.  Example 4 at 10 x 10 x 2 (P2 tetrahedra) was
+    3% faster on two (3,039 against 3,140 ms/step): set ``OPENBLAS_NUM_THREADS`` (or
+    ``OMP_NUM_THREADS``) to keep threads; this is then left alone.
+    """
+    if any(name in os.environ for name in BLAS_THREAD_VARIABLES):
+        return False
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
+    return True
+
+
 class SkfemBackend(Backend):
     """scikit-fem 12: serial assembly of UFL forms (evaluated with numpy) into PETSc objects."""
 
@@ -680,6 +705,7 @@ class SkfemBackend(Backend):
             raise PrimordiaError("the skfem backend is serial: run it without mpirun "
                                  "(or choose --backend fenicsx for parallel runs)")
         super().__init__(comm)
+        blas_on_one_thread()
         self._plans = FormCache(_CACHED_FORMS)
         self._rules: dict[tuple, _Rule] = {}
         self._patterns: dict[tuple[int, int], _Pattern] = {}

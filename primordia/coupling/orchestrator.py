@@ -78,7 +78,8 @@ class Simulation:
         self._solver_dt = model.dt
         self._wall_before = 0.0  # wall time of the earlier parts of a restarted run
         self._checkpoint_step: int | None = None
-        self._solve_seconds: dict[str, float] = {}  # linear algebra of solvers made anew since (linear_solve_seconds)
+        # linear algebra of the solvers made anew since, by subproblem and clock (linear_solve_seconds)
+        self._solve_seconds: dict[str, dict[str, float]] = {}
         self._first_step = 0  # the step this process started from (a restart's checkpoint)
 
     # -- setup ----------------------------------------------------------------------------
@@ -207,8 +208,9 @@ class Simulation:
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
         for solver in getattr(self, "solvers", ()):  # their time goes on counting in linear_solve_seconds
-            name = solver.sub.name
-            self._solve_seconds[name] = self._solve_seconds.get(name, 0.0) + solver.linear_solve_seconds
+            carried = self._solve_seconds.setdefault(solver.sub.name, {"cpu": 0.0, "wall": 0.0})
+            for clock, seconds in solver.linear_solve_seconds.items():
+                carried[clock] += seconds
         self.scheme.build(self)
         # the old solvers' PETSc objects (a factorisation) go now, before the new ones make theirs
         self._collect_petsc_garbage()
@@ -714,13 +716,14 @@ class Simulation:
             now, peak = self.comm.allreduce(now), self.comm.allreduce(peak)
         return {"memory_mb": now, "peak_memory_mb": peak}
 
-    def linear_solve_seconds(self) -> dict[str, float]:
-        """Per subproblem, the CPU seconds this process has spent in its linear algebra (Krylov iterations,
+    def linear_solve_seconds(self, clock: str = "cpu") -> dict[str, float]:
+        """Per subproblem, the seconds this process has spent in its linear algebra (Krylov iterations,
         preconditioner set-up, factorisations, diagonal divisions; not assembly), the solvers made anew at
-        checkpoints included, the largest over the ranks (collective)."""
-        totals = dict(self._solve_seconds)
+        checkpoints included, the largest over the ranks (collective).  ``clock``: "cpu" (this process's
+        CPU time) or "wall"."""
+        totals = {name: seconds[clock] for name, seconds in self._solve_seconds.items()}
         for solver in getattr(self, "solvers", ()):
-            totals[solver.sub.name] = totals.get(solver.sub.name, 0.0) + solver.linear_solve_seconds
+            totals[solver.sub.name] = totals.get(solver.sub.name, 0.0) + solver.linear_solve_seconds[clock]
         names = sorted(totals)
         values = np.array([totals[name] for name in names])
         if self.comm.size > 1:

@@ -426,3 +426,25 @@ def test_integrals_of_several_quadrature_degrees_on_one_mesh_stay_exact(backend,
             # int x0^degree dX = L0^(degree + 1) / (degree + 1) * (the other sides): exact at this degree
             exact = lengths[0] ** (degree + 1) / (degree + 1) * volume / lengths[0]
             assert backend.assemble_scalar(x[0] ** degree * dx) == pytest.approx(exact, rel=1e-12), degree
+
+
+def test_the_skfem_backend_runs_numpy_blas_on_one_thread_unless_the_user_set_a_count(monkeypatch):
+    """The evaluator's small products gain nothing from BLAS threads, which spin a core each between
+    them (example 1b: the same wall time, twice the CPU); a thread count the user set is kept."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from primordia.backends.skfem import BLAS_THREAD_VARIABLES, SkfemBackend
+
+    def blas_threads() -> set[int]:
+        return {library["num_threads"] for library in threadpool_info() if library["user_api"] == "blas"}
+
+    for name in BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    with threadpool_limits(limits=2, user_api="blas"):  # the process's own limits come back after
+        assert blas_threads() == {2}  # numpy's BLAS is loaded, on two threads
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+        SkfemBackend(MPI.COMM_SELF)
+        assert blas_threads() == {2}
+        monkeypatch.delenv("OPENBLAS_NUM_THREADS")
+        SkfemBackend(MPI.COMM_SELF)
+        assert blas_threads() == {1}

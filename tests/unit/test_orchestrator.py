@@ -309,5 +309,9 @@ def test_the_time_of_the_solves_counts_on_when_solvers_are_made_anew(watching, t
     for _ in range(3):
         sim.step()
     before = sim.linear_solve_ms()
+    clocks = {clock: sim.linear_solve_seconds(clock) for clock in ("cpu", "wall")}
     sim._create_solvers()  # as at a checkpoint: the new solvers start from zero
     assert sim.linear_solve_ms() == before and sum(before.values()) > 0.0
+    assert {clock: sim.linear_solve_seconds(clock) for clock in ("cpu", "wall")} == clocks
+    # each clock its own: the wall time of the solves is there, and is not the CPU time
+    assert sum(clocks["wall"].values()) > 0.0 and clocks["wall"] != clocks["cpu"]
