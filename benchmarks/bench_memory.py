@@ -5,7 +5,10 @@ bytes the process has allocated, C libraries included: PETSc, MUMPS, dolfinx; no
 which reused pages hide) how much stays allocated
 
 * per time step, over ``--steps`` steps after ``--warmup``;
-* per rebuild of the solvers (what a checkpoint or a rejected step does), over ``--rebuilds``.
+* per rebuild of the solvers (what a checkpoint or a rejected step does), over ``--rebuilds``;
+* how much a rebuild gives back at once, before the new solvers solve ("MB freed at once": the old
+  solvers' factorisations and work arrays; about 0 when something still holds them, and the next
+  step then holds two factorisations).
 
 A run that holds its memory prints about 0 kB per step. Two leaks found this way killed example 2a at
 the seed's 171 x 171 mesh (see the README, "Long runs"): 1.9 MB a step at 43 x 43 from PETSc objects
@@ -58,12 +61,14 @@ def measure(example: str, backend: str, steps: int, warmup: int, rebuilds: int) 
         for _ in range(steps):
             sim.step()
         per_step = (allocated_mb() - start) / steps
-        start = allocated_mb()
+        start, freed = allocated_mb(), 0.0
         for _ in range(rebuilds):
+            before = allocated_mb()
             sim._create_solvers()
+            freed += before - allocated_mb()  # the old solvers' memory, given back before the new ones solve
             sim.step()
         per_rebuild = (allocated_mb() - start) / rebuilds - per_step
-    return per_step, per_rebuild
+    return per_step, per_rebuild, freed / rebuilds
 
 
 def main() -> None:
@@ -76,12 +81,12 @@ def main() -> None:
     args = parser.parse_args()
     if not sys.platform.startswith("linux"):
         sys.exit("bench_memory: needs glibc's mallinfo2 (Linux)")
-    print(f"{'example':>11} {'backend':>8} {'mesh':>9} {'kB per step':>12} {'kB per rebuild':>15}")
+    print(f"{'example':>11} {'backend':>8} {'mesh':>9} {'kB per step':>12} {'kB per rebuild':>15} {'MB freed at once':>17}")
     for example in args.examples:
         for backend in args.backends:
-            per_step, per_rebuild = measure(example, backend, args.steps, args.warmup, args.rebuilds)
-            print(f"{example:>11} {backend:>8} {CASES[example]:>9} {1024 * per_step:>12.1f} {1024 * per_rebuild:>15.1f}",
-                  flush=True)
+            per_step, per_rebuild, freed = measure(example, backend, args.steps, args.warmup, args.rebuilds)
+            print(f"{example:>11} {backend:>8} {CASES[example]:>9} {1024 * per_step:>12.1f} {1024 * per_rebuild:>15.1f}"
+                  f" {freed:>17.1f}", flush=True)
 
 
 if __name__ == "__main__":
