@@ -236,7 +236,7 @@ def choose(hook_name: str, validate, pm: pluggy.PluginManager | None = None, **k
     from primordia.core.errors import PrimordiaError
 
     pm = pm or get_plugin_manager()
-    for impl in reversed(getattr(pm.hook, hook_name).get_hookimpls()):
+    for impl in _asking_order(pm, hook_name):
         plugin = impl.plugin_name
         where = f"plugin '{plugin}' ({_origin(pm, plugin)}): hook {hook_name}"
         try:
@@ -267,9 +267,13 @@ CHOOSING_HOOKS = {
 def choosers(pm: pluggy.PluginManager | None = None) -> dict[str, list[tuple[str, str]]]:
     """hook name -> [(plugin, origin), ...] in the order :func:`choose` asks them (the first answer wins)."""
     pm = pm or get_plugin_manager()
-    return {hook: [(impl.plugin_name, _origin(pm, impl.plugin_name))
-                   for impl in reversed(getattr(pm.hook, hook).get_hookimpls())]
+    return {hook: [(impl.plugin_name, _origin(pm, impl.plugin_name)) for impl in _asking_order(pm, hook)]
             for hook in CHOOSING_HOOKS}
+
+
+def _asking_order(pm, hook_name: str) -> list:
+    """A ``firstresult`` hook's implementations in the order pluggy calls them (``trylast`` ones last)."""
+    return list(reversed(getattr(pm.hook, hook_name).get_hookimpls()))
 
 
 def ask_backend_choosers(pm: pluggy.PluginManager | None = None) -> None:
