@@ -864,15 +864,14 @@ class SkfemBackend(Backend):
         x = state.array
         if bcs:
             test, trial = self._form_spaces(jacobian)
-            # lifting as dolfinx apply_lifting(b, [J], [bcs], x0=[x], scale=-1): b += J (g - x) on fixed columns
+            # lifting as dolfinx apply_lifting(b, [J], [bcs], x0=[x], scale=-1): b += J (g - x) on fixed columns,
+            # on the cells where g - x is not 0 (none once Newton's first update has put g in)
             shift = np.zeros(trial.num_dofs)
-            fixed = np.zeros(trial.num_dofs, dtype=bool)
             for bc in bcs:
                 if bc.space == trial:
                     shift[bc.handle.dofs] = bc.handle.values - x[bc.handle.dofs]
-                    fixed[bc.handle.dofs] = True
-            if fixed.any():
-                touched = fixed[trial.cell_dofs].any(axis=1)
+            if shift.any():
+                touched = (shift != 0.0)[trial.cell_dofs].any(axis=1)
                 for cells, blocks in self._element_tensors(jacobian, cell_mask=touched):
                     test_dofs, trial_dofs = test.cell_dofs[cells], trial.cell_dofs[cells]
                     local = [np.einsum("eij,ej->ei", tensors, shift[trial_dofs[:, columns]])

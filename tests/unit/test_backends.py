@@ -265,6 +265,47 @@ def test_update_dirichlet_bc(backend, data):
     np.testing.assert_allclose(values[np.isclose(data.points[:, 0], LENGTHS[0])], 4.0, rtol=1e-12)
 
 
+def spy_on_lifting(backend, monkeypatch) -> list:
+    """A list that grows at every lifting the backend assembles (fenicsx: ``apply_lifting``; skfem: element
+    tensors of the Jacobian on the cells that hold fixed DOFs)."""
+    calls = []
+    if backend.name == "fenicsx":
+        import primordia.backends.fenicsx as module
+
+        lifting = module.fem_petsc.apply_lifting
+        monkeypatch.setattr(module.fem_petsc, "apply_lifting",
+                            lambda *args, **kwargs: calls.append(1) or lifting(*args, **kwargs))
+    else:
+        tensors = type(backend)._element_tensors
+
+        def spied(self, form, cell_mask=None):
+            if cell_mask is not None:
+                calls.append(1)
+            return tensors(self, form, cell_mask)
+
+        monkeypatch.setattr(type(backend), "_element_tensors", spied)
+    return calls
+
+
+def test_the_lifting_is_left_out_where_the_state_holds_the_prescribed_values(backend, data, monkeypatch):
+    """Once Newton's first update has put the prescribed values g in, J (g - x) is 0: the right-hand side
+    is the residual with x - g = 0 on the fixed rows, without assembling the tangent for the lifting
+    (12 of the 58 ms of a residual of example 2a at 171 x 171 squares on fenicsx, 13 of 32 at 43 x 43 on
+    skfem); with a new g the lifting is there again."""
+    residual, jacobian, bcs, state = elastic_problem(backend, data)  # a whole and a component condition
+    newton_step(backend, residual, jacobian, bcs, state)
+    expected = backend.assemble_vector(residual)
+    backend.set_dirichlet(expected, bcs, x0=backend.petsc_vector(state), scale=-1.0)  # x - g on fixed rows
+    lifted = spy_on_lifting(backend, monkeypatch)
+    F = backend.assemble_residual(residual, jacobian, bcs, state)
+    assert lifted == []
+    np.testing.assert_allclose(F.array, expected.array, rtol=0, atol=1e-13 * np.abs(expected.array).max())
+    backend.update_dirichlet_bc(bcs[1], 0.2)
+    F = backend.assemble_residual(residual, jacobian, bcs, state)
+    assert lifted
+    assert np.abs(F.array - expected.array).max() > 1e-3 * np.abs(expected.array).max()
+
+
 @pytest.mark.parametrize("degree", [1, 2])
 def test_newton_update_is_the_same_on_both_backends(data, degree):
     results = []
