@@ -119,6 +119,35 @@ def test_a_kept_preconditioner_is_rebuilt_when_krylov_needs_more_iterations_and_
     assert np.abs(kept - fresh).max() < 1e-5 * scale and np.abs(eager - fresh).max() < 1e-5 * scale
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_matrix_free_tangent_is_assembled_only_for_the_kept_preconditioner_and_gives_the_same_run(
+        backend, tmp_path, monkeypatch):
+    """The 2D default (``snes_mf_operator`` with the kept factorisation): GMRES applies the tangent by
+    differences of the residual, the tangent is assembled only when the factorisation is refreshed, and
+    the run agrees with one that assembles it at every Newton step to the Newton tolerance."""
+    def run(matrix_free):
+        model = Model.from_file(EXAMPLES / "ex02a.toml", [*COARSE, "time.t_final=1.0", "output.times=[1.0]",
+                                                          f"solver.poroelastic_growth.snes_mf_operator={matrix_free}"])
+        sim = Simulation(model, backend=backend, out_dir=tmp_path / str(matrix_free)).setup()
+        solver = growth_solver(sim)
+        assembled = []
+        tangent = type(solver)._assemble_jacobian
+        monkeypatch.setattr(solver, "_assemble_jacobian", lambda: assembled.append(1) or tangent(solver))
+        while sim.step_index < model.num_steps:
+            sim.step()
+        newton = sum(n for n, _ in sim.newton["poroelastic_growth"])
+        operator = solver.snes.getKSP().getOperators()[0].getType()
+        return sim.backend.local_array(sim.disc.unknown("u")).copy(), len(assembled), solver.preconditioner_builds, \
+            newton, operator
+
+    free, free_tangents, free_builds, newton, free_operator = run("true")
+    assembled, tangents, _, _, operator = run("false")
+    assert free_operator == PETSc.Mat.Type.MFFD and operator != PETSc.Mat.Type.MFFD
+    assert tangents >= newton  # every Newton step assembles its tangent
+    assert free_tangents == free_builds < newton  # only to build or refresh the kept factorisation
+    assert np.abs(free - assembled).max() < 1e-6 * np.abs(assembled).max()
+
+
 def test_rebuild_preconditioner_after_is_refused_where_it_cannot_work(tmp_path):
     for table, fragment in [
             (["solver.poroelastic_growth.ksp_type=\"preonly\"", "solver.poroelastic_growth.rebuild_preconditioner_after=5"],

@@ -61,8 +61,10 @@ def test_a_run_killed_at_a_random_step_and_restarted_ends_bit_for_bit_as_the_uni
     assert sorted(got) == sorted(expected)
     assert any(key.endswith("/rate") for key in got) == (example != "ex01a")  # velocities are state too
     # in serial bit for bit; under MPI the mesh partition (PT-SCOTCH's) differs from run to run, and with it
-    # the order of every parallel sum: equal to round-off, 1e-12 of each field's size
-    tolerance = 0.0 if ranks == 1 else 1e-12
+    # the order of every parallel sum: equal to round-off, 1e-12 of each field's size, or 1e-10 where GMRES
+    # applies a growth tangent matrix-free (2a's default), whose differences of residuals scale round-off
+    # by 1 / h ~ 1e8 before Newton's tolerance damps it (3.5e-12 of the rate's size measured)
+    tolerance = 0.0 if ranks == 1 else (1e-10 if example == "ex02a" else 1e-12)
     for key, values in expected.items():
         difference = np.max(np.abs(got[key] - values), initial=0.0)
         assert difference <= tolerance * max(1.0, np.max(np.abs(values), initial=0.0)), (key, difference)
