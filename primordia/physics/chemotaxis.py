@@ -303,7 +303,7 @@ def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict
 
 
 def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
-    """Direct solves for symmetric matrices in serial, Krylov for the rest (overridable).
+    """Direct solves for constant symmetric matrices on few ranks, Krylov for the rest (overridable).
 
     A constant matrix is factorised once, so in serial each step costs two triangular
     solves.  On up to ``REDUNDANT_RANKS`` ranks every rank factorises the whole matrix
@@ -317,9 +317,12 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
     ranks, so from 9 ranks on the symmetric positive definite matrices of the diffusing
     species get CG with BoomerAMG (set up once, the matrix is constant).  A matrix that
     changes (a growing tissue's metric, example 2a) gets CG with BoomerAMG on any number of
-    ranks: every rank refactorising the whole matrix at every solve does not scale (2a at
-    86 x 86 squares on 2 ranks, f and b per step: 41.7 and 41.9 ms redundant, 22.7 and 34.4
-    with BoomerAMG; ``bench_scaling.py --examples ex02a --solves``).
+    ranks, one included: a factorisation at every solve costs more than AMG's set-up and
+    iterations.  Example 2a, f and b per step (``bench_solvers.py --share ex02a --clock wall``,
+    the solves' split): in serial at 171 x 171 squares 316 and 304 ms with LU, 113 and 135
+    with BoomerAMG (86 x 86: 38 and 38 against 24 and 31); on 2 ranks at 86 x 86 41.7 and
+    41.9 ms redundant, 22.7 and 34.4 with BoomerAMG (``bench_scaling.py --examples ex02a
+    --solves``).
     """
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}
@@ -330,7 +333,7 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # (7.4 against 5.3 ms at 171), so serial keeps block Jacobi.
         return {"ksp_type": "gmres", "pc_type": "asm" if ranks > 1 else "bjacobi", "ksp_rtol": 1e-12,
                 "ksp_atol": 1e-14}
-    if ranks > REDUNDANT_RANKS or (ranks > 1 and not constant):
+    if ranks > REDUNDANT_RANKS or not constant:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     if ranks > 1:
         return {"ksp_type": "preonly", "pc_type": "redundant", "redundant_pc_type": "lu",
