@@ -38,7 +38,7 @@ from primordia.core.errors import ConfigError, InterruptedRun, PluginError, Prim
 from primordia.core.plugins import choose, get_plugin_manager, registry
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
-from primordia.coupling.solvers import SubproblemSolver, accumulate
+from primordia.coupling.solvers import SubproblemSolver, accumulate, no_time
 from primordia.physics.discretisation import Discretisation
 
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
@@ -209,7 +209,7 @@ class Simulation:
         """Add the solve times of ``solvers`` (about to be replaced) to the run's: they go on counting in
         :meth:`linear_solve_seconds`."""
         for solver in solvers:
-            carried = self._solve_seconds.setdefault(solver.sub.name, {"cpu": 0.0, "wall": 0.0})
+            carried = self._solve_seconds.setdefault(solver.sub.name, no_time())
             for clock, seconds in solver.linear_solve_seconds.items():
                 carried[clock] += seconds
 

@@ -194,9 +194,18 @@ def _rotation(x: np.ndarray, i: int, j: int, dimension: int) -> np.ndarray:
     return values
 
 
+#: The clocks solve times are kept in: this process's CPU time, and wall time.
+CLOCKS = {"cpu": time.process_time, "wall": time.perf_counter}
+
+
+def no_time() -> dict[str, float]:
+    """Zero seconds on every clock of :data:`CLOCKS`: a total to add solve times to."""
+    return dict.fromkeys(CLOCKS, 0.0)
+
+
 def _clocks() -> dict[str, float]:
-    """The two clocks solve times are kept in: this process's CPU time, and wall time."""
-    return {"cpu": time.process_time(), "wall": time.perf_counter()}
+    """Now, on every clock of :data:`CLOCKS`."""
+    return {name: read() for name, read in CLOCKS.items()}
 
 
 def _add_since(totals: dict[str, float], start: dict[str, float], minus: dict[str, float] | None = None) -> None:
@@ -259,7 +268,7 @@ class _Solver:
         #: clock: "cpu" (this process's CPU time: its threads, other programs' load left out) and
         #: "wall"; hold a step's time against the same clock (numpy's BLAS threads, which spin
         #: after a product, count in CPU time while the main thread solves).
-        self.linear_solve_seconds = {"cpu": 0.0, "wall": 0.0}
+        self.linear_solve_seconds = no_time()
 
     def step_size_changed(self) -> None:
         """dt changed (an adaptive time step): a constant Jacobian holds 1/dt, so the next solve assembles it again."""
@@ -510,7 +519,7 @@ class NewtonSolver(_Solver):
         self._rebuild = False  # refresh it at the next tangent (a Newton solve failed in its linear solve)
         self.preconditioner_builds = 0  # refreshes of the kept preconditioning matrix
         self.ksp = self.snes.getKSP()
-        self._assembly_seconds = {"cpu": 0.0, "wall": 0.0}  # in the SNES callbacks, taken off its solve time
+        self._assembly_seconds = no_time()  # in the SNES callbacks, taken off its solve time
         self._configure(self.ksp.getPC())
         self.snes.setFromOptions()
         self.history: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
@@ -600,7 +609,7 @@ class NewtonSolver(_Solver):
     def _run_snes(self) -> None:
         """SNES solve; its time outside the residual and tangent callbacks is linear algebra."""
         self.snes.setConvergenceHistory(length=self.snes.getTolerances()[3] + 1, reset=True)
-        self._assembly_seconds, start = {"cpu": 0.0, "wall": 0.0}, _clocks()
+        self._assembly_seconds, start = no_time(), _clocks()
         try:
             self.snes.solve(None, self._x)
         except PETSc.Error as error:
