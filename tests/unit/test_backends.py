@@ -476,8 +476,9 @@ def test_the_skfem_backend_runs_numpy_blas_on_one_thread_unless_the_user_set_a_c
 
     from primordia.backends.skfem import BLAS_THREAD_VARIABLES, SkfemBackend
 
-    def blas_threads() -> set[int]:
-        return {library["num_threads"] for library in threadpool_info() if library["user_api"] == "blas"}
+    def blas_threads() -> set[int]:  # of the BLAS libraries built with threads (not a serial OpenBLAS, always 1)
+        return {library["num_threads"] for library in threadpool_info()
+                if library["user_api"] == "blas" and library.get("threading_layer") != "disabled"}
 
     for name in BLAS_THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)
