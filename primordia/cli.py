@@ -105,6 +105,7 @@ def command_run(args) -> int:
             raise ConfigError("--out needs a directory name")
     if args.dry_run:
         return _report_dry_run(model, out)
+    _warn_about_a_slow_blas()
     sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
                     restart=args.restart is not None)
     final = sim.summary(sim.status)  # collective (reductions over ranks): every rank calls it
@@ -114,6 +115,19 @@ def command_run(args) -> int:
         print(f"primordia: {sim.status}{restarted}: {sim.step_index} steps{rejected} on {final['backend']} "
               f"({final['cells']} cells, {final['dofs_total']} dofs) in {sim.wall_time:.1f} s -> {out}")
     return 0
+
+
+def _warn_about_a_slow_blas() -> None:
+    """One line on stderr when PETSc runs on the reference BLAS (:mod:`primordia.core.blas`); the run goes on."""
+    try:
+        from petsc4py import PETSc  # noqa: F401  (maps PETSc's BLAS into the process)
+    except ImportError:
+        return
+    from primordia.core.blas import reference_blas_warning
+
+    warning = reference_blas_warning()
+    if warning is not None and is_root_process():
+        print(f"primordia: warning: {warning}", file=sys.stderr)
 
 
 def _checkpointed_config(out: Path) -> dict:
@@ -162,12 +176,34 @@ def command_plugins(args) -> int:
     for hook, asked in choosers(pm).items():
         order = ", then ".join(f"{plugin} [{origin}]" if origin != plugin else plugin for plugin, origin in asked)
         print(f"  {hook:<34} {CHOOSING_HOOKS[hook]}, asking {order or 'nobody'}")
+    _print_linear_algebra()
     if pm.load_report.broken:
         print("broken:")
         for plugin, problems in pm.load_report.broken.items():
             origin = pm.load_report.sources.get(plugin, "")
             print(f"  {plugin:<22} {origin + '  ' if origin else ''}[{'; '.join(problems)}]")
     return 0
+
+
+def _print_linear_algebra() -> None:
+    """PETSc's version and the BLAS it runs on (:mod:`primordia.core.blas`)."""
+    from primordia.core.blas import reference_blas_warning, system_blas
+
+    print("linear algebra:")
+    try:
+        from petsc4py import PETSc
+    except ImportError as exc:
+        print(f"  {'PETSc':<22} [unavailable: {exc}]")
+        return
+    print(f"  {'PETSc':<22} {'.'.join(str(part) for part in PETSc.Sys.getVersion())}")
+    libraries = system_blas()
+    for library in libraries:
+        print(f"  {'BLAS':<22} {library.describe()}")
+    if not libraries:
+        print(f"  {'BLAS':<22} [not found among the process's mapped libraries]")
+    warning = reference_blas_warning(libraries)
+    if warning is not None:
+        print(f"  warning: {warning}")
 
 
 def main(argv: list[str] | None = None) -> int:
