@@ -3,7 +3,7 @@
 #   1. Debian packages: dolfinx 0.5.2 + PETSc 3.18 (MUMPS, hypre) + OpenMPI, venv, MPI-enabled h5py,
 #      and OpenBLAS (single-threaded) as the system BLAS/LAPACK: without it PETSc, MUMPS and hypre run
 #      on Debian's reference BLAS, and MUMPS factorises example 2a's tangent at 171 x 171 in 14.8 s
-#      instead of 5.0 (README, "Solvers");
+#      instead of 5.0 (README, "Backends");
 #   2. .venv made from /usr/bin/python3 with --system-site-packages (sees Debian's dolfinx/petsc4py);
 #   3. primordia (editable) and the example plugins, with numpy pinned below 2
 #      (Debian's petsc4py/dolfinx are built against numpy 1.x).

@@ -751,7 +751,7 @@ class Simulation:
     def _ms_per_step_after_first(self) -> float | None:
         """Wall ms per step of this process after its first step, outputs included: what a long run settles
         to.  The first step also loads the compiled forms and makes the first factorisations and AMG
-        hierarchies (example 2a at 171 x 171 squares: two LU factorisations of the growth system), which a
+        hierarchies (example 2a at 171 x 171 squares: the growth system's first LU factorisation), which a
         run of thousands of steps amortises and ``ms_per_step`` of a short one does not."""
         later = self.step_index - self._first_step - 1
         if self._wall_after_first is None or later < 1:
