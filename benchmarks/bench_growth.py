@@ -29,7 +29,7 @@ import sys
 import time
 from pathlib import Path
 
-from primordia.coupling.solvers import CLOCKS  # the clocks the solvers time themselves on
+from primordia.core.clocks import CLOCKS  # the clocks the solvers time themselves on (no PETSc import)
 
 ROOT = Path(__file__).resolve().parent.parent
 

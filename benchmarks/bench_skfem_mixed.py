@@ -30,7 +30,7 @@ import ufl
 from mpi4py import MPI
 
 from primordia.core.meshes import box, rectangle
-from primordia.coupling.solvers import CLOCKS
+from primordia.core.clocks import CLOCKS
 
 
 def growth_system(backend, data):

@@ -107,7 +107,7 @@ def one(system: str, preconditioner: str, size: int, steps: int, warmup: int, ex
         clock: str = "cpu") -> dict:
     """Time one run in this process (rank 0 returns the figures)."""
     from primordia.coupling.orchestrator import Simulation
-    from primordia.coupling.solvers import CLOCKS
+    from primordia.core.clocks import CLOCKS
     from primordia.model import Model
 
     spec = SYSTEMS[system]
@@ -142,7 +142,7 @@ def share(example: str, backend: str, size: int, steps: int, warmup: int, extra:
     """ms/step and ms of linear solves per step of one example in this process (under MPI: the largest
     over the ranks, for the step and for each subproblem's solves)."""
     from primordia.coupling.orchestrator import Simulation
-    from primordia.coupling.solvers import CLOCKS
+    from primordia.core.clocks import CLOCKS
     from primordia.model import Model
 
     overrides = [f"mesh.cells=[{size},{size}]", "output.pictures=false", "output.series_every=100000",

@@ -34,11 +34,12 @@ import numpy as np
 import ufl
 
 from primordia.core import checkpoint as checkpoint_file
+from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.plugins import choose, get_plugin_manager, registry
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
-from primordia.coupling.solvers import SubproblemSolver, accumulate, no_time
+from primordia.coupling.solvers import SubproblemSolver, accumulate
 from primordia.physics.discretisation import Discretisation
 
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.

@@ -30,7 +30,6 @@ rows), so the Newton update lands exactly on the prescribed values.
 
 from __future__ import annotations
 
-import time
 import warnings
 import weakref
 from dataclasses import dataclass
@@ -39,6 +38,8 @@ import numpy as np
 from petsc4py import PETSc
 
 from primordia.core.backend import sub_elements
+from primordia.core.clocks import add_since, no_time
+from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
@@ -192,27 +193,6 @@ def _rotation(x: np.ndarray, i: int, j: int, dimension: int) -> np.ndarray:
     values = np.zeros((dimension, x.shape[1]))
     values[i], values[j] = -x[j], x[i]
     return values
-
-
-#: The clocks solve times are kept in: this process's CPU time, and wall time.
-CLOCKS = {"cpu": time.process_time, "wall": time.perf_counter}
-
-
-def no_time() -> dict[str, float]:
-    """Zero seconds on every clock of :data:`CLOCKS`: a total to add solve times to."""
-    return dict.fromkeys(CLOCKS, 0.0)
-
-
-def _clocks() -> dict[str, float]:
-    """Now, on every clock of :data:`CLOCKS`."""
-    return {name: read() for name, read in CLOCKS.items()}
-
-
-def _add_since(totals: dict[str, float], start: dict[str, float], minus: dict[str, float] | None = None) -> None:
-    """totals += the time since ``start`` (less ``minus``), on each clock."""
-    now = _clocks()
-    for clock, begun in start.items():
-        totals[clock] += now[clock] - begun - (minus[clock] if minus else 0.0)
 
 
 def _weakly(method):
@@ -425,9 +405,9 @@ class LinearSolver(_Solver):
         if jacobian.diagonal is None:
             self._pointwise = False
             return False
-        start = _clocks()
+        start = clock_now()
         solution.pointwiseDivide(b, jacobian.diagonal)
-        _add_since(self.linear_solve_seconds, start)
+        add_since(self.linear_solve_seconds, start)
         return True
 
     def _affine_tangent(self):
@@ -454,11 +434,11 @@ class LinearSolver(_Solver):
 
     def _solve_linear(self, b, solution):
         """KSP solve into ``solution``; an unpivoted LU that meets a zero pivot is retried once with MUMPS."""
-        start = _clocks()
+        start = clock_now()
         try:
             self._solve_linear_once(b, solution)
         finally:
-            _add_since(self.linear_solve_seconds, start)
+            add_since(self.linear_solve_seconds, start)
         self._check_options_used()
 
     def _solve_linear_once(self, b, solution):
@@ -533,13 +513,13 @@ class NewtonSolver(_Solver):
         self.backend.update_ghosts(self.sub.unknown)
 
     def _function(self, snes, x, F) -> None:
-        start = _clocks()
+        start = clock_now()
         self._load(x)
         self._assemble_residual(self.backend.petsc_vector(self.sub.unknown), b=F)
-        _add_since(self._assembly_seconds, start)
+        add_since(self._assembly_seconds, start)
 
     def _tangent(self, snes, x, J, P) -> None:
-        start = _clocks()
+        start = clock_now()
         self._load(x)
         # snes_mf_operator: the Krylov method applies the tangent by differences of the residual, J v =
         # (F(x + h v) - F(x)) / h, and the tangent is assembled only when the preconditioner needs it
@@ -553,7 +533,7 @@ class NewtonSolver(_Solver):
                 self._assemble_preconditioner(tangent)
             elif refresh:
                 self._refresh_kept(tangent)
-        _add_since(self._assembly_seconds, start)
+        add_since(self._assembly_seconds, start)
 
     def _attach_tangent(self) -> None:
         """Create the tangent (and preconditioning) matrices once, at the initial state."""
@@ -609,14 +589,14 @@ class NewtonSolver(_Solver):
     def _run_snes(self) -> None:
         """SNES solve; its time outside the residual and tangent callbacks is linear algebra."""
         self.snes.setConvergenceHistory(length=self.snes.getTolerances()[3] + 1, reset=True)
-        self._assembly_seconds, start = no_time(), _clocks()
+        self._assembly_seconds, start = no_time(), clock_now()
         try:
             self.snes.solve(None, self._x)
         except PETSc.Error as error:
             raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}); "
                               f"try other options under -{self.sub.prefix}") from None
         finally:
-            _add_since(self.linear_solve_seconds, start, minus=self._assembly_seconds)
+            add_since(self.linear_solve_seconds, start, minus=self._assembly_seconds)
 
     def _failure(self, reason: int) -> str:
         """One line: which solve, why SNES stopped, how far it got, where to change options."""
