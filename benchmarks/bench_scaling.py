@@ -42,6 +42,9 @@ CASES = {
     "ex04_small": ("[20,20,2]", 0.5, 6),
 }
 
+#: summary.json's ms per step of the whole run, and of the steps after the first.
+WHOLE, LATER = "ms_per_step", "ms_per_step_after_first"
+
 
 def run(example: str, ranks: int, steps: int | None, extra: list[str], out: Path) -> dict:
     return finish(example, ranks, start(example, ranks, steps, extra, out), out)
@@ -129,10 +132,6 @@ def main() -> None:
             for ranks, summary in ((1, _median_run(serials)), (n, _median_run(parallels))):
                 shares = ", ".join(f"{name} {ms:.1f}" for name, ms in summary["linear_solve_ms_per_step"].items())
                 print(f"{'':>11} linear solves on {ranks} rank(s), ms/step: {shares}", flush=True)
-
-
-#: summary.json's ms per step of the whole run, and of the steps after the first.
-WHOLE, LATER = "ms_per_step", "ms_per_step_after_first"
 
 
 def _median(summaries: list[dict], key: str) -> float:
