@@ -554,6 +554,58 @@ def test_reassembly_into_a_matrix_is_seen_by_its_solver(skfem_setup):
     np.testing.assert_allclose(solution.array, expected.array, rtol=1e-12)
 
 
+def test_a_field_read_by_several_forms_is_interpolated_once_while_its_values_stay(skfem_setup, monkeypatch):
+    """The forms of a step read the same fields (example 1b: the solid velocity in the advection of
+    m, f and b): the values at the points are kept across forms, and interpolated again once the
+    field's DOF values change, written in place as solvers do."""
+    s = skfem_setup
+    backend, m, w = s.backend, s["m"], s["w"]
+    calls = []
+    interpolate = skfem_backend._Chunk._interpolate
+    monkeypatch.setattr(skfem_backend._Chunk, "_interpolate",
+                        lambda self, values, block, derivatives: calls.append(derivatives)
+                        or interpolate(self, values, block, derivatives))
+    velocity = ufl.as_vector([w[i] for i in range(s.gdim)])  # a part of a mixed field, as 1b's rate
+    # the same quadrature degree (the same points), different integrands
+    one = (m * m * ufl.div(velocity) * s.test("P1")) * ufl.dx
+    other = ((m * m + 1.0) * ufl.div(velocity) * s.test("P1")) * ufl.dx
+    shift = ufl.div(velocity) * s.test("P1") * ufl.dx
+    first = backend.assemble_vector(one).array.copy()
+    assert calls, "the first form interpolates its fields"
+    calls.clear()
+    np.testing.assert_allclose(backend.assemble_vector(other).array, first + backend.assemble_vector(shift).array,
+                               rtol=1e-12, atol=1e-14)
+    assert calls.count(0) == 0, "m and w had the same values: nothing to interpolate again for the second form"
+
+    saved = m.array.copy()
+    try:
+        m.array[:] += 0.5  # in place, as a solve through the PETSc vector writes it
+        calls.clear()
+        changed = backend.assemble_vector(one).array.copy()
+        assert calls.count(0) == 1, "only m changed: interpolated again, w's values reused"
+        s.mesh.field_values = skfem_backend._FieldValues()  # nothing kept: what the values must be
+        np.testing.assert_array_equal(backend.assemble_vector(one).array, changed)
+        assert np.abs(changed - first).max() > 1e-3 * np.abs(first).max()
+    finally:
+        m.array[:] = saved
+    np.testing.assert_array_equal(backend.assemble_vector(one).array, first)
+
+    (plan,) = preprocess_form(one)
+    context = skfem_backend._Chunk(s.mesh, backend._rule(s.mesh, plan), slice(0, s.data.num_cells), None)
+    assert not context.coefficient(m, 0).flags.writeable, "a form must not change the values the next one reads"
+
+
+def test_the_fields_kept_at_the_points_hold_at_most_their_limit(skfem_setup, monkeypatch):
+    s = skfem_setup
+    monkeypatch.setattr(s.mesh, "field_values", skfem_backend._FieldValues())
+    values = s.mesh.field_values
+    monkeypatch.setattr(values, "LIMIT", 1)  # below one entry: only the last is kept
+    for name in ("m", "c"):
+        s.backend.assemble_vector(s[name] * s[name] * s.test("P2") * ufl.dx)
+    assert len(values) == 1
+    assert values._bytes == sum(entry[2].nbytes + entry[3].nbytes for entry in values._entries.values())
+
+
 def test_unsupported_operator_is_named(skfem_setup):
     s = skfem_setup
     with pytest.raises(UnsupportedUFL, match="'BesselJ' is not supported by the scikit-fem backend"):
