@@ -39,7 +39,7 @@ from primordia.core.errors import ConfigError, InterruptedRun, PluginError, Prim
 from primordia.core.plugins import choose, get_plugin_manager, registry
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
-from primordia.coupling.solvers import SubproblemSolver, accumulate
+from primordia.coupling.solvers import SubproblemSolver, accumulate, independent_batches, solve_in_turn
 from primordia.physics.discretisation import Discretisation
 
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
@@ -218,6 +218,7 @@ class Simulation:
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""
         self._carry_solve_times(getattr(self, "solvers", ()))
+        self._batches: dict[tuple, list[list]] = {}  # the old solvers' batches hold them: dropped first
         self.scheme.build(self)
         self.disc.check_contributions()
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
@@ -609,11 +610,19 @@ class Simulation:
         delta = duration / inner_steps
         groups = list(dict.fromkeys(self.disc.group_of_function(s.sub.unknown) for s in solvers))
         stats: dict = {}
+        batches = self.batches(solvers)
         for k in range(inner_steps):
             with self.substep(groups, t0 + (k + 1) * delta, delta):
-                for solver in solvers:
-                    accumulate(stats, solver.sub.name, solver.solve())
+                for name, solve in solve_in_turn(batches):
+                    accumulate(stats, name, solve)
         return stats
+
+    def batches(self, solvers: list) -> list[list]:
+        """``solvers`` grouped for :func:`~primordia.coupling.solvers.solve_in_turn` (found once per list)."""
+        key = tuple(id(solver) for solver in solvers)
+        if key not in self._batches:
+            self._batches[key] = independent_batches(solvers)
+        return self._batches[key]
 
     @contextmanager
     def substep(self, groups: list[str], t: float, dt: float):

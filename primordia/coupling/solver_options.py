@@ -53,8 +53,12 @@ SPLITS = "splits"
 #: Newton step's Krylov solve takes more than this many iterations, then builds it anew from the current
 #: tangent (0: at every Newton step, PETSc's default; see NewtonSolver).
 REBUILD = "rebuild_preconditioner_after"
+#: Not a PETSc option: a linear subproblem's whole system is gathered to one rank and solved there by that
+#: rank's serial KSP (the other options of the table configure it); independent subproblems of a step so
+#: marked are solved at once, each on its own rank (see :func:`~primordia.coupling.solvers.solve_in_turn`).
+GATHER = "solve_on_one_rank"
 #: The options of this table that primordia reads itself, not PETSc.
-OWN_OPTIONS = (SPLITS, REBUILD)
+OWN_OPTIONS = (SPLITS, REBUILD, GATHER)
 
 #: Option families that describe the Krylov method or Newton, not the preconditioner: kept when pc_type changes.
 _KEPT_ACROSS_PC = ("ksp_", "snes_")
@@ -77,6 +81,10 @@ def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
         elif name == REBUILD:
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ConfigError(f"{where}.{name} must be a number of Krylov iterations (0 or more), got {value!r}")
+            flat[name] = value
+        elif name == GATHER:
+            if not isinstance(value, bool):
+                raise ConfigError(f"{where}.{name} must be true or false, got {value!r}")
             flat[name] = value
         elif isinstance(value, (list, tuple, dict)):
             raise ConfigError(f"{where}.{name} must be a number, a string or true/false, got {value!r}")
@@ -114,9 +122,11 @@ def parallel_safe(options: Mapping[str, Any], parallel: bool) -> dict[str, Any]:
     """A direct solve without a factor package gets PETSc's own (serial) or MUMPS (more than one rank).
 
     Block-Jacobi and additive-Schwarz sub-solves (``sub_``) and the whole-system solve of a
-    ``redundant`` preconditioner (``redundant_``) are serial on every rank: PETSc's own.
+    ``redundant`` preconditioner (``redundant_``) are serial on every rank: PETSc's own, and so is
+    the solve of a system gathered to one rank (``solve_on_one_rank``).
     """
     safe = dict(options)
+    parallel = parallel and not options.get(GATHER)
     for key, value in options.items():
         level = key[: -len("pc_type")]
         if key.endswith("pc_type") and str(value) in DIRECT and level + "pc_factor_mat_solver_type" not in options:

@@ -43,7 +43,7 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
+    GATHER, REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe, unused)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -234,6 +234,14 @@ class _Solver:
                                                   self.where, backend.comm.size > 1)
         self._splits = options.pop(SPLITS, None)
         self._rebuild_after = options.pop(REBUILD, 0) or None  # see NewtonSolver
+        gather = bool(options.pop(GATHER, False))
+        self._gather = gather and backend.comm.size > 1  # see LinearSolver
+        if gather and not subproblem.linear:
+            raise ConfigError(f"{self.where}.{GATHER}: a Newton solve is not gathered to one rank; the option "
+                              f"is for linear subproblems")
+        if gather and str(options.get("pc_type")) == "fieldsplit":
+            raise ConfigError(f"{self.where}.{GATHER}: a system solved on one rank takes a whole-matrix "
+                              f"preconditioner, not fieldsplit")
         self.options = options
         write_options(subproblem.prefix, options)
         self._unchecked = bool(self._user_keys)  # the user's options are checked once PETSc has read them
@@ -337,13 +345,17 @@ class LinearSolver(_Solver):
 
     def __init__(self, backend, subproblem, overrides: dict | None = None):
         super().__init__(backend, subproblem, overrides)
-        self.ksp = PETSc.KSP().create(backend.comm)
-        self.ksp.setOptionsPrefix(subproblem.prefix)
-        self._configure(self.ksp.getPC())
-        self.ksp.setFromOptions()
         if REBUILD in self._user_keys:
             raise ConfigError(f"{self.where}.{REBUILD}: a linear subproblem has one Krylov solve per step and "
                               f"no preconditioner to keep; the option is for Newton solves")
+        #: the rank that solves the whole system when it is gathered (``solve_on_one_rank``); set by
+        #: solve_in_turn so that independent subproblems solved at once go to different ranks
+        self.owner = 0
+        self._on_one_rank = None
+        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF if self._gather else backend.comm)
+        self.ksp.setOptionsPrefix(subproblem.prefix)
+        self._configure(self.ksp.getPC())
+        self.ksp.setFromOptions()
         self._increment = None
         self._affine = AffineResidual(backend, subproblem)
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
@@ -361,6 +373,39 @@ class LinearSolver(_Solver):
         self._affine.invalidate()
 
     def solve(self) -> SolveStats:
+        b, target = self._right_hand_side()
+        if self._affine.available and self._solve_diagonal(b, target):
+            iterations, reason = 1, PETSc.KSP.ConvergedReason.CONVERGED_ITS
+        elif self._gather:
+            gathered = self._gathered(b)
+            start = clock_now()
+            try:
+                gathered.send(b)
+                gathered.receive(b)
+                gathered.solve()
+                gathered.return_to(target)
+                gathered.arrive(target)
+            finally:
+                add_since(self.linear_solve_seconds, start)
+            iterations, reason = gathered.result()
+            self._check_options_used()
+        else:
+            A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
+            if changed or self._operators is not A:
+                self.ksp.setOperators(A, self._assemble_preconditioner(A))
+                self._operators = A
+            self._solve_linear(b, target)
+            iterations, reason = max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason()
+        return self._finish(iterations, reason)
+
+    @property
+    def gathered(self) -> bool:
+        """Whether the whole system is solved on one rank (``solve_on_one_rank``, more than one rank)."""
+        return self._gather
+
+    def _right_hand_side(self):
+        """The step's right-hand side and where its solve goes: (b, x) for a constant Jacobian and a direct
+        solve, (F(x), increment) otherwise."""
         sub, backend = self.sub, self.backend
         x = backend.petsc_vector(sub.unknown)
         if sub.operator is not None:
@@ -377,24 +422,44 @@ class LinearSolver(_Solver):
             raise SolverError(f"{sub.name}: the residual is not finite")
         if self._increment is None:
             self._increment = b.duplicate()
-        if self._affine.available and self._solve_diagonal(b, x if self._for_unknown else self._increment):
-            iterations, reason = 1, PETSc.KSP.ConvergedReason.CONVERGED_ITS
-        else:
-            A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
-            if changed or self._operators is not A:
-                self.ksp.setOperators(A, self._assemble_preconditioner(A))
-                self._operators = A
-            self._solve_linear(b, x if self._for_unknown else self._increment)
-            iterations, reason = max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason()
+        return b, (x if self._for_unknown else self._increment)
+
+    def _finish(self, iterations: int, reason: int) -> SolveStats:
+        sub, backend = self.sub, self.backend
         if reason < 0:
             raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {KSP_REASONS.get(reason, reason)}); "
                               f"try other options under -{sub.prefix}")
+        x = backend.petsc_vector(sub.unknown)
         if not self._for_unknown:
             x.axpy(-1.0, self._increment)
         backend.update_ghosts(sub.unknown)
         if not np.isfinite(x.norm()):
             raise SolverError(f"{sub.name}: the solution is not finite")
         return SolveStats(newton_iterations=1, linear_iterations=iterations, reason=reason)
+
+    def _gathered(self, b) -> "_OnOneRank":
+        """The system gathered to :attr:`owner` (collective: the matrix is gathered again when it changed)."""
+        A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
+        if self._on_one_rank is None or self._on_one_rank.owner != self.owner:
+            self._on_one_rank = _OnOneRank(self.ksp, b, self.owner, self.sub.name)
+            changed = True
+        if changed or self._operators is not A:
+            self._on_one_rank.set_matrix(A)
+            self._operators = A
+        return self._on_one_rank
+
+    def _check_options_used(self) -> None:
+        if not self._gather:
+            super()._check_options_used()
+            return
+        if self._unchecked:  # only the owner's KSP read them: its verdict, on every rank
+            self._unchecked = False
+            comm = self.backend.comm
+            keys = [key for key in self._user_keys if key not in (SPLITS, REBUILD, GATHER)]
+            missing = comm.bcast(unused(self.sub.prefix, keys) if comm.rank == self.owner else None, root=self.owner)
+            if missing:
+                raise ConfigError(f"{self.where}: PETSc did not use option '{missing[0]}' (-{self.sub.prefix}{missing[0]}): "
+                                  f"unknown, or not read by the chosen solver")
 
     def _solve_diagonal(self, b, solution) -> bool:
         """A diagonal system under the default options: ``solution`` by a division; False otherwise."""
@@ -454,6 +519,124 @@ class LinearSolver(_Solver):
         elif raised is not None:
             raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}); "
                               f"try other options under -{self.sub.prefix}") from None
+
+
+class _OnOneRank:
+    """A distributed linear system solved whole by one rank, in phases others can overlap.
+
+    The owner holds the whole matrix (gathered once, and again when it changes) and
+    factorises it with its serial KSP; a solve sends the right-hand side to it, it solves,
+    and the solution goes back to the ranks that own its rows.  Between those phases
+    another rank can solve another system (:func:`solve_in_turn`): on 2 ranks the species
+    f and b of example 1a are each solved by one rank, at once, where a ``redundant``
+    solve had every rank solve both.  The owner's memory is that of a serial solve; the
+    others hold none of it.
+    """
+
+    def __init__(self, ksp, b, owner: int, name: str):
+        self.ksp, self.owner, self.name = ksp, owner, name
+        comm = b.getComm().tompi4py()
+        self.mine = comm.rank == owner
+        size = b.getSize() if self.mine else 0
+        self._rows = PETSc.IS().createStride(size, 0, 1, comm=PETSc.COMM_SELF)
+        self._b = PETSc.Vec().createSeq(size, comm=PETSc.COMM_SELF)
+        self._x = self._b.duplicate()
+        self._scatter = PETSc.Scatter().create(b, self._rows, self._b, None)
+        self._local = None
+        self._outcome = (1, PETSc.KSP.ConvergedReason.CONVERGED_ITS)
+        self._comm = comm
+
+    def set_matrix(self, A) -> None:
+        """Gather ``A`` to the owner (collective)."""
+        if self._local is None:
+            self._local = A.createSubMatrices(self._rows, self._rows)[0]
+        else:
+            A.createSubMatrices(self._rows, self._rows, submats=[self._local])
+        if self.mine:
+            self.ksp.setOperators(self._local)
+
+    def send(self, b) -> None:
+        self._scatter.begin(b, self._b, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
+
+    def receive(self, b) -> None:
+        self._scatter.end(b, self._b, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
+
+    def solve(self) -> None:
+        """The owner's serial solve (nothing on the other ranks)."""
+        if not self.mine:
+            return
+        try:
+            self.ksp.solve(self._b, self._x)
+        except PETSc.Error as error:
+            self._outcome = (0, -999 - error.ierr)
+        else:
+            self._outcome = (max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason())
+
+    def return_to(self, x) -> None:
+        self._scatter.begin(self._x, x, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.REVERSE)
+
+    def arrive(self, x) -> None:
+        self._scatter.end(self._x, x, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.REVERSE)
+
+    def result(self) -> tuple[int, int]:
+        """(Krylov iterations, converged reason) of the owner's solve, on every rank."""
+        iterations, reason = self._comm.bcast(self._outcome, root=self.owner)
+        if reason <= -999:
+            raise SolverError(f"{self.name}: the linear solve on rank {self.owner} failed (PETSc error {-999 - reason}); "
+                              f"try other options under -{self.ksp.getOptionsPrefix()}")
+        return int(iterations), int(reason)
+
+
+def independent_batches(solvers: list) -> list[list]:
+    """``solvers`` in order, consecutive gathered linear solves that do not read each other's unknowns
+    in one batch: solved at once, each on its own rank (the rest alone)."""
+    batches: list[list] = []
+    for solver in solvers:
+        last = batches[-1] if batches else None
+        if (getattr(solver, "gathered", False) and last and getattr(last[0], "gathered", False)
+                and len(last) < solver.backend.comm.size
+                and not any(earlier.sub.unknown in solver.sub.residual.coefficients() for earlier in last)):
+            last.append(solver)
+        else:
+            batches.append([solver])
+    for batch in batches:
+        for rank, solver in enumerate(batch):
+            if getattr(solver, "gathered", False):
+                solver.owner = rank
+    return batches
+
+
+def solve_in_turn(batches: list[list]):
+    """Solve the batches of :func:`independent_batches` in order; yield (subproblem name, statistics).
+
+    A batch of gathered solves goes in phases: every right-hand side, every send, each owner's
+    solve, every return.  Each rank solves its own system while the others solve theirs; each
+    subproblem is charged an equal share of the batch's solve time.
+    """
+    for batch in batches:
+        if len(batch) == 1:
+            yield batch[0].sub.name, batch[0].solve()
+            continue
+        sides = [solver._right_hand_side() for solver in batch]
+        systems = [solver._gathered(b) for solver, (b, _) in zip(batch, sides)]
+        start = clock_now()
+        for system, (b, _) in zip(systems, sides):
+            system.send(b)
+        for system, (b, _) in zip(systems, sides):
+            system.receive(b)
+        for system in systems:
+            system.solve()
+        for system, (_, target) in zip(systems, sides):
+            system.return_to(target)
+        for system, (_, target) in zip(systems, sides):
+            system.arrive(target)
+        spent = {clock: (time - start[clock]) / len(batch) for clock, time in clock_now().items()}
+        for solver, system in zip(batch, systems):
+            for clock, time in spent.items():
+                solver.linear_solve_seconds[clock] += time
+            iterations, reason = system.result()
+            solver._check_options_used()
+            yield solver.sub.name, solver._finish(iterations, reason)
 
 
 class NewtonSolver(_Solver):

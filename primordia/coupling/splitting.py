@@ -31,7 +31,7 @@ from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
 from primordia.core.validation import number
 from primordia.coupling.solver_options import check_tables
-from primordia.coupling.solvers import accumulate
+from primordia.coupling.solvers import accumulate, solve_in_turn
 from primordia.physics.base import Subproblem
 
 
@@ -126,8 +126,8 @@ class FixedPoint(SplittingScheme):
             for iteration in range(1, self.settings["max_iterations"] + 1):
                 for g, vector in vectors.items():
                     vector.copy(self._work[g][0])
-                for solver in sim.solvers:
-                    accumulate(stats, solver.sub.name, solver.solve())
+                for name, solve in solve_in_turn(sim.batches(sim.solvers)):
+                    accumulate(stats, name, solve)
                 change = max(_relative_change(*self._work[g], vectors[g]) for g in groups)
                 if change < self.settings["tolerance"]:
                     break

@@ -283,8 +283,8 @@ class Chemotaxis(Physics):
                           petsc_options=_coupled_defaults(self.settings["preconditioner"], self.species))
 
 
-#: Up to this many ranks, a constant species matrix is factorised whole on every rank (see _solver_defaults).
-REDUNDANT_RANKS = 8
+#: Up to this many ranks, a constant species matrix is factorised whole by one rank (see _solver_defaults).
+GATHERED_RANKS = 8
 
 
 def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict:
@@ -306,15 +306,18 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
     """Direct solves for constant symmetric matrices on few ranks, Krylov for the rest (overridable).
 
     A constant matrix is factorised once, so in serial each step costs two triangular
-    solves.  On up to ``REDUNDANT_RANKS`` ranks every rank factorises the whole matrix
-    once and solves the whole system (``redundant``: the right-hand side is gathered, the
-    rank's part of the solution kept), the memory of a serial run on every rank.  Measured
-    on example 1a on 2 ranks (``benchmarks/bench_solvers.py --share ex01a --ranks 2``), f and
-    b per step at 171, 342 and 684 cells per side: 2.8, 13.4 and 60 ms each, as in serial,
-    against 12-15, 59-66 and 311-314 ms for CG with BoomerAMG to 1e-12 (7 iterations), and
-    about 21 ms at 171 for MUMPS's distributed triangular solves.  AMG is 4.4 to 5.4 times
-    the redundant solve on 2 ranks; if it scaled perfectly it would catch up near 9 to 11
-    ranks, so from 9 ranks on the symmetric positive definite matrices of the diffusing
+    solves.  On up to ``GATHERED_RANKS`` ranks the whole matrix is gathered to one rank,
+    which factorises it once and solves the whole system (``solve_on_one_rank``); f and b,
+    which do not read each other, are solved at once, f by rank 0 and b by rank 1
+    (:func:`~primordia.coupling.solvers.solve_in_turn`), each rank holding one serial
+    factorisation.  Measured on example 1a on 2 ranks (``benchmarks/bench_scaling.py
+    --examples ex01a --steps 100 --repeats 3 --solves``): f and b 2.3 ms/step each at 171
+    (4.3-4.4 in serial), 15.9 at 342 (29-31 in serial).  Before, every rank factorised both
+    and solved both (``redundant``): 2.8, 13.4 and 60 ms each at 171, 342 and 684 cells per
+    side, as in serial, against 12-15, 59-66 and 311-314 ms for CG with BoomerAMG to 1e-12
+    (7 iterations), and about 21 ms at 171 for MUMPS's distributed triangular solves.  AMG
+    is 4.4 to 5.4 times the redundant solve on 2 ranks; if it scaled perfectly it would catch
+    up near 9 to 11 ranks, so from 9 ranks on the symmetric positive definite matrices of the diffusing
     species get CG with BoomerAMG (set up once, the matrix is constant).  A matrix that
     changes (a growing tissue's metric, example 2a) gets CG with BoomerAMG on any number of
     ranks, one included: a factorisation at every solve costs more than AMG's set-up and
@@ -333,9 +336,7 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # (7.4 against 5.3 ms at 171), so serial keeps block Jacobi.
         return {"ksp_type": "gmres", "pc_type": "asm" if ranks > 1 else "bjacobi", "ksp_rtol": 1e-12,
                 "ksp_atol": 1e-14}
-    if ranks > REDUNDANT_RANKS or not constant:
+    if ranks > GATHERED_RANKS or not constant:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
-    if ranks > 1:
-        return {"ksp_type": "preonly", "pc_type": "redundant", "redundant_pc_type": "lu",
-                "redundant_pc_factor_mat_ordering_type": "nd"}
-    return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+    direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+    return {**direct, "solve_on_one_rank": True} if ranks > 1 else direct

@@ -22,7 +22,8 @@ def _assert_one_line_on_every_rank(result, *fragments):
         assert fragment in lines[0], lines[0]
 
 
-@pytest.mark.parametrize("case", ["out-is-a-file", "boundary-formula", "binary-config", "failed-solve"])
+@pytest.mark.parametrize("case", ["out-is-a-file", "boundary-formula", "binary-config", "failed-solve",
+                                  "unused-option-on-one-rank"])
 def test_bad_input_under_two_ranks(case, small_config, tmp_path):
     (tmp_path / "a_file").write_text("not a directory")
     (tmp_path / "binary.toml").write_bytes(bytes(range(256)))
@@ -34,6 +35,10 @@ def test_bad_input_under_two_ranks(case, small_config, tmp_path):
         "binary-config": ([tmp_path / "binary.toml"], ["not UTF-8"]),
         "failed-solve": ([small_config(), "--set", "solver.chemotaxis_m.ksp_max_it=1", "--set", "time.dt_min=0.1"],
                          ["chemotaxis.m", "linear solver diverged", "time.dt_min = 0.1"]),
+        # b's system is solved whole by rank 1 (f's by rank 0): only that rank's solver reads the options, and
+        # its verdict is every rank's
+        "unused-option-on-one-rank": ([small_config(), "--set", "solver.chemotaxis_b.pc_factor_levels=2"],
+                                      ["solver.chemotaxis_b", "PETSc did not use option 'pc_factor_levels'"]),
     }[case]
     if "--out" not in arguments:
         arguments += ["--out", tmp_path / "out"]

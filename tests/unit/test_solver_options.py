@@ -9,7 +9,7 @@ from petsc4py import PETSc
 
 from primordia.core.errors import ConfigError
 from primordia.coupling.solver_options import (
-    check_tables, check_types, check_used, combine, flatten, option_text, parallel_safe)
+    GATHER, check_tables, check_types, check_used, combine, flatten, option_text, parallel_safe)
 from primordia.coupling.solvers import write_options
 
 
@@ -30,6 +30,7 @@ def test_nested_tables_are_option_prefixes_as_in_firedrake():
     ({"splits": ["u", "p"]}, "solver.x.splits must be a list of lists of field names"),
     ({"rebuild_preconditioner_after": -1}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
     ({"rebuild_preconditioner_after": True}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
+    ({"solve_on_one_rank": "yes"}, "solver.x.solve_on_one_rank must be true or false"),
     (3, "solver.x must be a table"),
 ])
 def test_a_malformed_table_is_one_line(table, fragment):
@@ -67,6 +68,9 @@ def test_a_new_pc_type_of_one_split_drops_that_split_s_settings_only():
 def test_a_direct_solve_gets_a_package_that_works_on_the_ranks_it_has():
     options = {"pc_type": "lu", "fieldsplit_u_pc_type": "lu", "sub_pc_type": "lu", "fieldsplit_p_redundant_pc_type": "lu"}
     assert parallel_safe(options, parallel=False)["pc_factor_mat_solver_type"] == "petsc"
+    # a system gathered to one rank is solved there by a serial factorisation, and the option goes when pc_type does
+    assert parallel_safe({"pc_type": "lu", GATHER: True}, parallel=True)["pc_factor_mat_solver_type"] == "petsc"
+    assert GATHER not in combine({"ksp_type": "preonly", "pc_type": "lu", GATHER: True}, {"pc_type": "hypre"})
     parallel = parallel_safe(options, parallel=True)
     assert parallel["pc_factor_mat_solver_type"] == parallel["fieldsplit_u_pc_factor_mat_solver_type"] == "mumps"
     assert parallel["sub_pc_factor_mat_solver_type"] == "petsc"  # block Jacobi blocks are serial
@@ -129,6 +133,8 @@ BAD_SOLVER_SETTINGS = [
                                              "-chemotaxis_m_ksp_rtoll"]),
     (['solver.chemotaxis_mm.ksp_type="cg"'], ["unknown solver table [solver.chemotaxis_mm]", "chemotaxis_m"]),
     (['solver.chemotaxis_f.pc_factor_mat_solver_type="pardiso"'], ["factor package 'pardiso'"]),
+    (['solver.chemotaxis_f.pc_type="fieldsplit"', "solver.chemotaxis_f.solve_on_one_rank=true"],
+     ["solver.chemotaxis_f.solve_on_one_rank", "whole-matrix preconditioner, not fieldsplit"]),
 ]
 
 
@@ -160,19 +166,20 @@ mg_levels = { ksp_type = "chebyshev", ksp_max_it = 2 }
     assert summary["mean_linear_iterations"]["chemotaxis.f"] > 1  # GMRES + AMG, not the default direct solve
 
 
-def test_a_constant_species_matrix_is_solved_whole_on_every_rank_up_to_eight_ranks():
-    # in parallel a diffusing species' constant matrix is factorised once on every rank (redundant):
-    # measured 4-5x cheaper per step than CG with BoomerAMG on 2 ranks; from 9 ranks on, AMG
-    from primordia.physics.chemotaxis import REDUNDANT_RANKS, _solver_defaults
+def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks():
+    # in parallel a diffusing species' constant matrix is gathered to one rank and factorised there once;
+    # independent species are solved at once on different ranks (solve_in_turn); from 9 ranks on, AMG
+    from primordia.physics.chemotaxis import GATHERED_RANKS, _solver_defaults
     from primordia.physics.kinetics.base import Species
 
     morphogen = Species("f", "a morphogen", diffusivity="D_f")
-    assert _solver_defaults(morphogen, 1, constant=True)["pc_type"] == "lu"
-    for ranks in (2, REDUNDANT_RANKS):
+    assert _solver_defaults(morphogen, 1, constant=True) == {"ksp_type": "preonly", "pc_type": "lu",
+                                                             "pc_factor_mat_ordering_type": "nd"}
+    for ranks in (2, GATHERED_RANKS):
         whole = parallel_safe(_solver_defaults(morphogen, ranks, constant=True), parallel=True)
-        assert (whole["ksp_type"], whole["pc_type"], whole["redundant_pc_type"]) == ("preonly", "redundant", "lu")
-        assert whole["redundant_pc_factor_mat_solver_type"] == "petsc"  # each rank's whole system is serial
-    assert _solver_defaults(morphogen, REDUNDANT_RANKS + 1, constant=True)["pc_type"] == "hypre"
+        assert (whole["ksp_type"], whole["pc_type"], whole[GATHER]) == ("preonly", "lu", True)
+        assert whole["pc_factor_mat_solver_type"] == "petsc"  # the owner's whole system is serial
+    assert _solver_defaults(morphogen, GATHERED_RANKS + 1, constant=True)["pc_type"] == "hypre"
     # a matrix that changes every solve (a growing tissue's metric): AMG, not a factorisation at every solve
     assert [_solver_defaults(morphogen, ranks, constant=False)["pc_type"] for ranks in (1, 2)] == ["hypre", "hypre"]
     cells = Species("m", "cells", diffusivity="D_m", attractant="f")

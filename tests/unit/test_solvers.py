@@ -52,3 +52,35 @@ def test_a_petsc_error_in_an_iterative_solve_is_one_solver_error_not_swallowed()
                                         "ksp_error_if_not_converged": True})
     with pytest.raises(SolverError, match="^raising_test: the linear solve failed"):
         SubproblemSolver(backend, problem).solve()
+
+
+def _fake_solver(name, reads=(), gathered=True, ranks=2):
+    """What independent_batches reads of a solver: whether it is gathered, its unknown, what its residual reads."""
+    from types import SimpleNamespace
+
+    unknown = SimpleNamespace(name=name)
+    residual = SimpleNamespace(coefficients=lambda: [unknown, *reads])
+    return SimpleNamespace(gathered=gathered, owner=0, backend=SimpleNamespace(comm=SimpleNamespace(size=ranks)),
+                           sub=SimpleNamespace(name=name, unknown=unknown, residual=residual))
+
+
+def test_independent_systems_solved_on_one_rank_are_batched_each_to_its_own_rank():
+    """Example 1a in parallel: m (a Krylov solve) and e (a division) alone, f and b (neither reads the
+    other) at once on ranks 0 and 1; a system that reads an earlier one's unknown waits for it."""
+    from primordia.coupling.solvers import independent_batches
+
+    m = _fake_solver("m", gathered=False)
+    e = _fake_solver("e", reads=[m.sub.unknown], gathered=False)
+    f = _fake_solver("f", reads=[e.sub.unknown])
+    b = _fake_solver("b", reads=[m.sub.unknown])
+    batches = independent_batches([m, e, f, b])
+    assert [[s.sub.name for s in batch] for batch in batches] == [["m"], ["e"], ["f", "b"]]
+    assert (f.owner, b.owner) == (0, 1)
+
+    reader = _fake_solver("g", reads=[f.sub.unknown])  # reads f's new value: after f, not beside it
+    assert [[s.sub.name for s in batch] for batch in independent_batches([f, reader, b])] == [["f"], ["g", "b"]]
+    assert (f.owner, reader.owner, b.owner) == (0, 0, 1)
+    # no more systems at once than ranks: a third goes to the next batch, on rank 0 again
+    third = _fake_solver("h")
+    assert [len(batch) for batch in independent_batches([f, b, third])] == [2, 1]
+    assert third.owner == 0
