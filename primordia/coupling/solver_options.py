@@ -46,6 +46,7 @@ from typing import Any
 from petsc4py import PETSc
 
 from primordia.core.errors import ConfigError
+from primordia.core.petsc_library import petsc_library
 
 #: Not a PETSc option: the fields of each split of a fieldsplit preconditioner (lists of field names).
 SPLITS = "splits"
@@ -205,21 +206,9 @@ def _suggestion(value: str, known: Iterable[str]) -> str:
     return f" (did you mean {', '.join(close)}?)" if close else ""
 
 
-_library = None
-
-
-def _petsc_library():
-    """libpetsc through the petsc4py extension (PetscOptionsUsed is not wrapped by petsc4py 3.18)."""
-    global _library
-    if _library is None:
-        _library = ctypes.CDLL(PETSc.__file__)
-        _library.PetscOptionsUsed.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int)]
-    return _library
-
-
 def unused(prefix: str, keys: Iterable[str]) -> list[str]:
     """Those of the options ``prefix + key`` that PETSc never read."""
-    library, names = _petsc_library(), []
+    library, names = petsc_library(), []
     for key in keys:
         flag = ctypes.c_int(0)
         library.PetscOptionsUsed(None, (prefix + key).encode(), ctypes.byref(flag))

@@ -60,3 +60,29 @@ def test_3d_growth_with_the_block_preconditioner_does_not_depend_on_the_ranks(tm
             for key in ("integral", "min", "max"):
                 assert parallel["final"][name][key] == pytest.approx(stats[key], rel=1e-7, abs=1e-10), \
                     (ranks, name, key)
+
+
+@pytest.mark.mpi
+def test_the_fitted_operator_takes_its_values_by_rows_on_two_ranks(tmp_path):
+    """Example 1a's fitted cell-transport operator on 2 ranks: a matrix made from its CSR rows, whose values an
+    update copies in (MatUpdateMPIAIJWithArray), equal, entry by entry, to the values the update computed."""
+    script = f"""
+import numpy as np
+from primordia import Model
+from primordia.core.config import apply_overrides, load_config
+config = apply_overrides(load_config({str(ROOT / "examples/ex01a.toml")!r}),
+                         ["mesh.cells=[12,12]", "time.t_final=0.4", "output.times=[0.4]", "output.pictures=false"])
+sim = Model.from_config(config).run(backend="fenicsx", out={str(tmp_path / "out")!r})
+(operator,) = sim.model.physics_objects[0]._fitted_operators.values()
+assert operator._by_rows, "2 ranks: the operator is a matrix made from its rows"
+operator.update()
+indptr, columns, values = operator.matrix().getValuesCSR()
+np.testing.assert_array_equal(indptr, operator._indptr)
+np.testing.assert_array_equal(columns, operator._columns)
+np.testing.assert_array_equal(values, operator._values)
+assert np.abs(values).max() > 0
+from mpi4py import MPI
+if MPI.COMM_WORLD.rank == 0: print("checked on", MPI.COMM_WORLD.size, "ranks")
+"""
+    done = mpirun(2, sys.executable, "-c", script)
+    assert done.stdout.strip() == "checked on 2 ranks"
