@@ -1,13 +1,14 @@
 """Named scalars per output time in one netCDF file (:class:`ScalarSeries`).
 
 Serial: write on one MPI rank.  The file is rewritten atomically at every row
-(:mod:`primordia.core.atomic_files`).
+(:mod:`primordia.core.atomic_files`), or at most every ``min_interval`` seconds.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import time
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -36,10 +37,20 @@ class ScalarSeries:
     "reason": "..."})`` gives variables ``rejection_time``, ``rejection_dt`` and
     ``rejection_reason`` along the dimension ``rejection`` (numbers as float64,
     text as strings).
+
+    With ``min_interval`` > 0 a row appended less than that many seconds after the last
+    rewrite waits in memory for the next row or event, or for :meth:`flush`: a run that
+    records a row every few milliseconds does not spend its time rewriting the file
+    (12 ms a rewrite for example 1a's series; one row every 10 steps of 20 ms).  The file
+    is still whole at every moment, a few seconds behind at most.
     """
 
-    def __init__(self, path: str | Path, attrs: Mapping[str, Mapping[str, str]] | None = None):
+    def __init__(self, path: str | Path, attrs: Mapping[str, Mapping[str, str]] | None = None,
+                 min_interval: float = 0.0):
         self.path = writable_target(path)
+        self.min_interval = float(min_interval)
+        self._written_at: float | None = None  # time.monotonic() of the last rewrite
+        self._pending = False  # rows appended since the last rewrite
         self._times: list[float] = []
         self._columns: dict[str, list[float]] = {}
         self._attrs: dict[str, dict[str, str]] = {}
@@ -60,7 +71,15 @@ class ScalarSeries:
         self._times.append(t)
         for key, column in self._columns.items():
             column.append(values.get(key, math.nan))
-        self._write()
+        if self._written_at is not None and time.monotonic() - self._written_at < self.min_interval:
+            self._pending = True
+        else:
+            self._write()
+
+    def flush(self) -> None:
+        """Rewrite the file now if rows wait in memory (see ``min_interval``)."""
+        if self._pending:
+            self._write()
 
     def add_event(self, dimension: str, event: Mapping[str, float | str]) -> None:
         """Record one event along ``dimension`` (numbers and strings by name) and rewrite the file."""
@@ -108,6 +127,7 @@ class ScalarSeries:
         dataset = self.dataset()
         with atomic_path(self.path) as temporary:
             dataset.to_netcdf(temporary, engine="scipy")
+        self._written_at, self._pending = time.monotonic(), False
 
     def _check_time(self, t) -> float:
         if not is_number(t):

@@ -223,6 +223,7 @@ class Simulation:
         self.disc.check_contributions()
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name in self.disc.field_names()}
+        self._integral_weights = {name: self._basis_integrals(name) for name in self.disc.field_names()}
         self.diagnostics = [d for physics in self.model.physics_objects for d in physics.diagnostics()]
         self._nonnegative = [(name, physics.name) for physics in self.model.physics_objects
                              for name in physics.nonnegative_fields() if self.disc.is_alone(name)]
@@ -234,6 +235,21 @@ class Simulation:
         # factorisation: two of them at once, 1.74 -> 3.06 GB resident at 171^2 after a checkpoint
         self._collect_petsc_garbage()
         release_free_memory()  # and what they held is the system's again, not the allocator's
+
+    def _basis_integrals(self, name: str):
+        """For a scalar field that is a whole backend function, the integrals of its basis functions (a vector):
+        its integral is then their dot product with its values, exactly, where assembling the integral
+        cost 1.3 ms a field at 171^2 in serial, for every row of the series.  None for the others."""
+        field = self.disc.field(name)
+        if field.ufl_shape or not self.disc.is_alone(name):
+            return None
+        return self.backend.assemble_vector(ufl.TestFunction(field.ufl_function_space()) * self.disc.dx)
+
+    def _integral(self, name: str) -> float:
+        weights = self._integral_weights[name]
+        if weights is None:
+            return self.backend.assemble_scalar(self._integrals[name])
+        return weights.dot(self.backend.petsc_vector(self.disc.field(name)))
 
     @staticmethod
     def _integrand(field):
@@ -695,7 +711,7 @@ class Simulation:
         if self.is_root:
             extremes = {name: (float(np.min(v)), float(np.max(v))) for name, v in values.items()}
         extremes = self.comm.bcast(extremes, root=0)
-        return {name: {"integral": self.backend.assemble_scalar(self._integrals[name]),
+        return {name: {"integral": self._integral(name),
                        "min": extremes[name][0], "max": extremes[name][1]}
                 for name in self.disc.field_names()}
 

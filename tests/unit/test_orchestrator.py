@@ -190,6 +190,19 @@ def test_the_summary_states_the_run(completed):
         assert (stats["min"], stats["max"]) == (float(values[name].min()), float(values[name].max()))
 
 
+def test_a_scalar_field_s_integral_is_its_values_against_its_basis_integrals(completed):
+    """The series' integrals of the species (whole P1 functions) are dot products with the integrals of the
+    basis functions, and equal the assembled integrals."""
+    for name in ("m", "e", "f", "b"):
+        assert completed._integral_weights[name] is not None
+        field = completed.disc.field(name)
+        assembled = completed.backend.assemble_scalar(field * completed.disc.dx)
+        assert completed._integral(name) == pytest.approx(assembled, rel=1e-13)
+    weights = completed._integral_weights["m"]
+    assert weights.sum() == pytest.approx(16.0, rel=1e-13)  # the basis functions sum to 1: the area of (0, 4)^2
+    assert completed.field_statistics()["m"]["integral"] == completed._integral("m")
+
+
 def test_a_completed_run_leaves_a_checkpoint_and_its_outputs(completed):
     written = {path.name for path in completed.out_dir.iterdir()}
     assert {"summary.json", "config.toml", "checkpoint.npz"} <= written

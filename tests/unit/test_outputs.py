@@ -169,6 +169,7 @@ def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_p
     state = series.state()
     run.advance()
     series.record(run)  # written after the checkpoint: gone when the run continues from it
+    series.finish(run, "completed")  # rows recorded soon after a rewrite wait for the next one, or the end
     with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
         np.testing.assert_allclose(data["time"], [0.0, 0.2, 0.4])
         np.testing.assert_allclose(data["m_integral"], [0.0, 3.2, 6.4])

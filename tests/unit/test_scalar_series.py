@@ -66,3 +66,35 @@ def test_scalar_series_rejects_bad_rows(tmp_path, t, row, message):
 def test_scalar_series_needs_an_existing_directory(tmp_path):
     with pytest.raises(PrimordiaError, match="does not exist"):
         ScalarSeries(tmp_path / "missing" / "series.nc")
+
+
+def test_rows_appended_soon_after_a_rewrite_wait_for_the_next_one_or_a_flush(tmp_path, monkeypatch):
+    """A run recording a row every few milliseconds rewrites series.nc at most every min_interval seconds;
+    the file is whole meanwhile, and a flush (the run's end) writes what waits."""
+    import primordia.core.scalar_series as module
+
+    clock = [100.0]
+    monkeypatch.setattr(module.time, "monotonic", lambda: clock[0])
+    path = tmp_path / "series.nc"
+    series = ScalarSeries(path, min_interval=2.0)
+
+    def times():
+        with xr.open_dataset(path, engine="scipy") as data:
+            return list(data["time"].values)
+
+    series.append(0.0, {"m_max": 1.0})  # the first row is written at once
+    clock[0] += 0.5
+    series.append(0.2, {"m_max": 2.0})
+    assert times() == [0.0]
+    clock[0] += 1.6  # 2.1 s after the rewrite
+    series.append(0.4, {"m_max": 3.0})
+    assert times() == [0.0, 0.2, 0.4]
+    clock[0] += 0.1
+    series.append(0.6, {"m_max": 4.0})
+    assert times() == [0.0, 0.2, 0.4]
+    series.flush()
+    assert times() == [0.0, 0.2, 0.4, 0.6]
+    assert leftovers(tmp_path) == []
+    written = path.stat().st_mtime_ns
+    series.flush()  # nothing waits: no rewrite
+    assert path.stat().st_mtime_ns == written
