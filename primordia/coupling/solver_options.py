@@ -217,10 +217,15 @@ def unused(prefix: str, keys: Iterable[str]) -> list[str]:
     return names
 
 
-def check_used(prefix: str, keys: Iterable[str], where: str) -> None:
-    """After a first solve: an option the user gave that PETSc did not read is one line naming it."""
+def check_used(prefix: str, keys: Iterable[str], where: str, comm=None, root: int = 0) -> None:
+    """After a first solve: an option the user gave that PETSc did not read is one line naming it.
+
+    With ``comm``, only rank ``root`` read the options (a system solved on one rank): its verdict
+    is every rank's."""
     keys = [key for key in keys if key not in OWN_OPTIONS]
-    missing = unused(prefix, keys)
+    missing = unused(prefix, keys) if comm is None or comm.rank == root else None
+    if comm is not None:
+        missing = comm.bcast(missing, root=root)
     if missing:
         raise ConfigError(f"{where}: PETSc did not use option '{missing[0]}' (-{prefix}{missing[0]}): unknown, "
                           f"or not read by the chosen solver")

@@ -43,7 +43,7 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    GATHER, REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe, unused)
+    GATHER, REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -236,6 +236,9 @@ class _Solver:
         self._rebuild_after = options.pop(REBUILD, 0) or None  # see NewtonSolver
         gather = bool(options.pop(GATHER, False))
         self._gather = gather and backend.comm.size > 1  # see LinearSolver
+        #: the rank that solves the whole system when it is gathered; set by independent_batches so that
+        #: subproblems solved at once go to different ranks
+        self.owner = 0
         if gather and not subproblem.linear:
             raise ConfigError(f"{self.where}.{GATHER}: a Newton solve is not gathered to one rank; the option "
                               f"is for linear subproblems")
@@ -269,10 +272,17 @@ class _Solver:
             self._split_objects = field_splits(self.backend, self.sub, self._splits, pc, self.where)
 
     def _check_options_used(self) -> None:
-        """After the first solve, every option the user gave has been read by PETSc, or it is a mistake."""
+        """After the first solve, every option the user gave has been read by PETSc, or it is a mistake
+        (a system solved on one rank: that rank's KSP read them, its verdict is every rank's)."""
         if self._unchecked:
             self._unchecked = False
-            check_used(self.sub.prefix, self._user_keys, self.where)
+            check_used(self.sub.prefix, self._user_keys, self.where,
+                       comm=self.backend.comm if self._gather else None, root=self.owner)
+
+    @property
+    def gathered(self) -> bool:
+        """Whether the whole system is solved on one rank (``solve_on_one_rank``, more than one rank)."""
+        return self._gather
 
     def _assemble_jacobian(self):
         """The tangent (with the algebraic operator added) and whether it changed."""
@@ -348,9 +358,6 @@ class LinearSolver(_Solver):
         if REBUILD in self._user_keys:
             raise ConfigError(f"{self.where}.{REBUILD}: a linear subproblem has one Krylov solve per step and "
                               f"no preconditioner to keep; the option is for Newton solves")
-        #: the rank that solves the whole system when it is gathered (``solve_on_one_rank``); set by
-        #: solve_in_turn so that independent subproblems solved at once go to different ranks
-        self.owner = 0
         self._on_one_rank = None
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF if self._gather else backend.comm)
         self.ksp.setOptionsPrefix(subproblem.prefix)
@@ -398,11 +405,6 @@ class LinearSolver(_Solver):
             iterations, reason = max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason()
         return self._finish(iterations, reason)
 
-    @property
-    def gathered(self) -> bool:
-        """Whether the whole system is solved on one rank (``solve_on_one_rank``, more than one rank)."""
-        return self._gather
-
     def _right_hand_side(self):
         """The step's right-hand side and where its solve goes: (b, x) for a constant Jacobian and a direct
         solve, (F(x), increment) otherwise."""
@@ -447,19 +449,6 @@ class LinearSolver(_Solver):
             self._on_one_rank.set_matrix(A)
             self._operators = A
         return self._on_one_rank
-
-    def _check_options_used(self) -> None:
-        if not self._gather:
-            super()._check_options_used()
-            return
-        if self._unchecked:  # only the owner's KSP read them: its verdict, on every rank
-            self._unchecked = False
-            comm = self.backend.comm
-            keys = [key for key in self._user_keys if key not in (SPLITS, REBUILD, GATHER)]
-            missing = comm.bcast(unused(self.sub.prefix, keys) if comm.rank == self.owner else None, root=self.owner)
-            if missing:
-                raise ConfigError(f"{self.where}: PETSc did not use option '{missing[0]}' (-{self.sub.prefix}{missing[0]}): "
-                                  f"unknown, or not read by the chosen solver")
 
     def _solve_diagonal(self, b, solution) -> bool:
         """A diagonal system under the default options: ``solution`` by a division; False otherwise."""
@@ -543,7 +532,7 @@ class _OnOneRank:
         self._x = self._b.duplicate()
         self._scatter = PETSc.Scatter().create(b, self._rows, self._b, None)
         self._local = None
-        self._outcome = (1, PETSc.KSP.ConvergedReason.CONVERGED_ITS)
+        self._outcome = (1, PETSc.KSP.ConvergedReason.CONVERGED_ITS, 0)  # iterations, reason, PETSc error
         self._comm = comm
 
     def set_matrix(self, A) -> None:
@@ -567,10 +556,10 @@ class _OnOneRank:
             return
         try:
             self.ksp.solve(self._b, self._x)
-        except PETSc.Error as error:
-            self._outcome = (0, -999 - error.ierr)
+        except PETSc.Error as error:  # told on every rank by result()
+            self._outcome = (0, 0, error.ierr)
         else:
-            self._outcome = (max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason())
+            self._outcome = (max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason(), 0)
 
     def return_to(self, x) -> None:
         self._scatter.begin(self._x, x, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.REVERSE)
@@ -580,9 +569,9 @@ class _OnOneRank:
 
     def result(self) -> tuple[int, int]:
         """(Krylov iterations, converged reason) of the owner's solve, on every rank."""
-        iterations, reason = self._comm.bcast(self._outcome, root=self.owner)
-        if reason <= -999:
-            raise SolverError(f"{self.name}: the linear solve on rank {self.owner} failed (PETSc error {-999 - reason}); "
+        iterations, reason, error = self._comm.bcast(self._outcome, root=self.owner)
+        if error:
+            raise SolverError(f"{self.name}: the linear solve on rank {self.owner} failed (PETSc error {error}); "
                               f"try other options under -{self.ksp.getOptionsPrefix()}")
         return int(iterations), int(reason)
 
@@ -593,7 +582,7 @@ def independent_batches(solvers: list) -> list[list]:
     batches: list[list] = []
     for solver in solvers:
         last = batches[-1] if batches else None
-        if (getattr(solver, "gathered", False) and last and getattr(last[0], "gathered", False)
+        if (solver.gathered and last and last[0].gathered
                 and len(last) < solver.backend.comm.size
                 and not any(earlier.sub.unknown in solver.sub.residual.coefficients() for earlier in last)):
             last.append(solver)
@@ -601,7 +590,7 @@ def independent_batches(solvers: list) -> list[list]:
             batches.append([solver])
     for batch in batches:
         for rank, solver in enumerate(batch):
-            if getattr(solver, "gathered", False):
+            if solver.gathered:
                 solver.owner = rank
     return batches
 

@@ -199,7 +199,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
 
         An update then writes the entries where PETSc reads them, without a copy
         (``setValuesCSR`` costs as much as the rest of an update); several processes
-        keep ``setValuesCSR``, as PETSc copies arrays into a parallel matrix.
+        take their values row by row instead (:meth:`_rows_of_values`), as PETSc copies arrays into a
+        parallel matrix.
         """
         if stiffness.getComm().getSize() != 1 or self._moving:
             return False
@@ -222,7 +223,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             return False
         same_row = np.diff(self._row) == 0
         ordered = bool(np.all(np.diff(self._columns)[same_row] > 0))
-        if not comm.tompi4py().allreduce(ordered, op=_min_op()):
+        if not all(comm.tompi4py().allgather(ordered)):
             return False
         self._A = PETSc.Mat().createAIJWithArrays(
             stiffness.getSizes(), (self._indptr.astype(PETSc.IntType), self._columns.astype(PETSc.IntType), self._values),
@@ -303,10 +304,4 @@ def _max_op():
     from mpi4py import MPI
 
     return MPI.MAX
-
-
-def _min_op():
-    from mpi4py import MPI
-
-    return MPI.MIN
 
