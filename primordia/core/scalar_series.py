@@ -42,7 +42,9 @@ class ScalarSeries:
     rewrite waits in memory for the next row or event, or for :meth:`flush`: a run that
     records a row every few milliseconds does not spend its time rewriting the file
     (12 ms a rewrite for example 1a's series; one row every 10 steps of 20 ms).  The file
-    is still whole at every moment, a few seconds behind at most.
+    is still whole at every moment; it lacks at most the rows of the last ``min_interval``
+    seconds and of the time to the next row (a slow run, whose rows come further apart,
+    writes each at once).
     """
 
     def __init__(self, path: str | Path, attrs: Mapping[str, Mapping[str, str]] | None = None,
