@@ -221,9 +221,10 @@ class Simulation:
         self._batches: dict[tuple, list[list]] = {}  # the old solvers' batches hold them: dropped first
         self.scheme.build(self)
         self.disc.check_contributions()
-        self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
-                           for name in self.disc.field_names()}
+        # a field's integral (outputs): its values against its basis functions' integrals, else a form
         self._integral_weights = {name: self._basis_integrals(name) for name in self.disc.field_names()}
+        self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
+                           for name, weights in self._integral_weights.items() if weights is None}
         self.diagnostics = [d for physics in self.model.physics_objects for d in physics.diagnostics()]
         self._nonnegative = [(name, physics.name) for physics in self.model.physics_objects
                              for name in physics.nonnegative_fields() if self.disc.is_alone(name)]
