@@ -191,6 +191,13 @@ class AffineResidual:
         # the Jacobian without Dirichlet rows, for F(x) = J x + ... (only with conditions)
         self.full_jacobian = _Matrix(backend, subproblem.jacobian) if subproblem.bcs else self.jacobian
         self._scratch = self._shifted = self._lift = None
+        #: (batch, index) when the assembled remainder is assembled with other subproblems' (batched.py)
+        self.batch = None
+
+    @property
+    def assembled_remainder(self):
+        """The part of the remainder assembled cell by cell (a linear form), or None."""
+        return self._assembled_remainder
 
     def invalidate(self) -> None:
         """Assemble every matrix again at the next solve (dt changed, say)."""
@@ -249,7 +256,11 @@ class AffineResidual:
         for _, part in self.parts:
             part.refresh()
         if self._assembled_remainder is not None:
-            b = backend.assemble_vector(self._assembled_remainder, b=b)
+            if self.batch is None:
+                b = backend.assemble_vector(self._assembled_remainder, b=b)
+            else:
+                batch, index = self.batch
+                b = batch.vector(index, b if b is not None else x.duplicate())
             if self._nodal_remainder is not None:
                 self._nodal_vector = self._nodal_remainder.assemble(b=self._nodal_vector)
                 b.axpy(1.0, self._nodal_vector)

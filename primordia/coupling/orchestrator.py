@@ -39,6 +39,7 @@ from primordia.core.errors import ConfigError, InterruptedRun, PluginError, Prim
 from primordia.core.plugins import choose, get_plugin_manager, registry
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
+from primordia.coupling.batched import batch_remainders
 from primordia.coupling.solvers import SubproblemSolver, accumulate, independent_batches, solve_in_turn
 from primordia.physics.discretisation import Discretisation
 
@@ -639,6 +640,7 @@ class Simulation:
         key = tuple(id(solver) for solver in solvers)
         if key not in self._batches:
             self._batches[key] = independent_batches(solvers)
+            batch_remainders(self.backend, solvers)  # their explicit terms assembled as one form, when they can
         return self._batches[key]
 
     @contextmanager
