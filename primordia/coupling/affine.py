@@ -9,7 +9,8 @@ form:
 where c runs over x itself (B_x = J, a constant Jacobian), its value at the start of the
 step, a solid velocity, another species that enters linearly, and R (what is left, e.g. a
 reaction nonlinear in another field or a time-dependent load) is assembled at every solve,
-or never when nothing is left.  Each B_c is assembled once, and again only when a UFL
+or never when nothing is left (several subproblems' R together, as one form, when they can:
+:mod:`primordia.coupling.batched`).  Each B_c is assembled once, and again only when a UFL
 constant it reads changes value (dt in an adaptive run); a diagonal one (lumped, vertex
 quadrature) is kept as a vector and applied pointwise.  A Jacobian that reads fields but is
 diagonal (a lumped reaction) is assembled as a vector, never as a matrix: the solve is then a
