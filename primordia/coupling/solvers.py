@@ -384,18 +384,7 @@ class LinearSolver(_Solver):
         if self._affine.available and self._solve_diagonal(b, target):
             iterations, reason = 1, PETSc.KSP.ConvergedReason.CONVERGED_ITS
         elif self._gather:
-            gathered = self._gathered(b)
-            start = clock_now()
-            try:
-                gathered.send(b)
-                gathered.receive(b)
-                gathered.solve()
-                gathered.return_to(target)
-                gathered.arrive(target)
-            finally:
-                add_since(self.linear_solve_seconds, start)
-            iterations, reason = gathered.result()
-            self._check_options_used()
+            ((iterations, reason),) = _solve_gathered([self], [(b, target)])
         else:
             A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
             if changed or self._operators is not A:
@@ -596,36 +585,40 @@ def independent_batches(solvers: list) -> list[list]:
 
 
 def solve_in_turn(batches: list[list]):
-    """Solve the batches of :func:`independent_batches` in order; yield (subproblem name, statistics).
-
-    A batch of gathered solves goes in phases: every right-hand side, every send, each owner's
-    solve, every return.  Each rank solves its own system while the others solve theirs; each
-    subproblem is charged an equal share of the batch's solve time.
-    """
+    """Solve the batches of :func:`independent_batches` in order; yield (subproblem name, statistics)."""
     for batch in batches:
         if len(batch) == 1:
             yield batch[0].sub.name, batch[0].solve()
             continue
         sides = [solver._right_hand_side() for solver in batch]
-        systems = [solver._gathered(b) for solver, (b, _) in zip(batch, sides)]
-        start = clock_now()
-        for system, (b, _) in zip(systems, sides):
-            system.send(b)
-        for system, (b, _) in zip(systems, sides):
-            system.receive(b)
-        for system in systems:
-            system.solve()
-        for system, (_, target) in zip(systems, sides):
-            system.return_to(target)
-        for system, (_, target) in zip(systems, sides):
-            system.arrive(target)
-        spent = {clock: (time - start[clock]) / len(batch) for clock, time in clock_now().items()}
-        for solver, system in zip(batch, systems):
-            for clock, time in spent.items():
-                solver.linear_solve_seconds[clock] += time
-            iterations, reason = system.result()
-            solver._check_options_used()
+        for solver, (iterations, reason) in zip(batch, _solve_gathered(batch, sides)):
             yield solver.sub.name, solver._finish(iterations, reason)
+
+
+def _solve_gathered(solvers: list, sides: list) -> list[tuple[int, int]]:
+    """(Krylov iterations, reason) of each of ``solvers``' gathered systems, solved at once for the right-hand
+    sides and targets ``sides``: every send, each owner's solve, every return, so each rank solves its own
+    system while the others solve theirs.  Each solver is charged an equal share of the time."""
+    systems = [solver._gathered(b) for solver, (b, _) in zip(solvers, sides)]
+    start = clock_now()
+    for system, (b, _) in zip(systems, sides):
+        system.send(b)
+    for system, (b, _) in zip(systems, sides):
+        system.receive(b)
+    for system in systems:
+        system.solve()
+    for system, (_, target) in zip(systems, sides):
+        system.return_to(target)
+    for system, (_, target) in zip(systems, sides):
+        system.arrive(target)
+    spent = {clock: (time - start[clock]) / len(solvers) for clock, time in clock_now().items()}
+    results = []
+    for solver, system in zip(solvers, systems):
+        for clock, time in spent.items():
+            solver.linear_solve_seconds[clock] += time
+        results.append(system.result())
+        solver._check_options_used()
+    return results
 
 
 class NewtonSolver(_Solver):
