@@ -145,6 +145,7 @@ class ScalarSeriesNetcdf(Output):
     """
 
     name = "series"
+    series: ScalarSeries | None = None  # made at start or resume (on the root rank)
 
     def start(self, run):
         self.series = ScalarSeries(run.out_dir / "series.nc", min_interval=SERIES_INTERVAL) if run.is_root else None
@@ -176,7 +177,7 @@ class ScalarSeriesNetcdf(Output):
             self.series.restore(state)
 
     def finish(self, run, status):
-        if run.is_root:
+        if self.series is not None:  # None also when a signal stopped the run before start
             self.series.flush()
 
 

@@ -181,6 +181,13 @@ def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_p
     assert leftovers(tmp_path) == []
 
 
+def test_a_series_finished_before_it_started_writes_nothing_and_does_not_fail(tmp_path):
+    """A Ctrl-C during start-up finishes the outputs, some of which never started."""
+    run = StandInRun(tmp_path)
+    ScalarSeriesNetcdf().finish(run, "interrupted")
+    assert not (tmp_path / "series.nc").exists()
+
+
 def test_the_fields_series_lists_every_snapshot(tmp_path):
     import meshio
 
