@@ -16,10 +16,13 @@ is ``-poroelastic_growth_fieldsplit_u_pc_type gamg`` and so on.  ``splits`` says
 which fields (by name, as the physics module declares them) form each split of a
 ``fieldsplit`` preconditioner; a split is named by its fields joined with ``_``
 (``psi_p``), which is the prefix of its options.  Without ``splits`` every field
-is a split of its own.  ``rebuild_preconditioner_after = N``, the other key that is
-not PETSc's, keeps a Newton solve's preconditioner over Newton steps and time steps
-until a Krylov solve needs more than N iterations (see
-:class:`~primordia.coupling.solvers.NewtonSolver`).
+is a split of its own.  ``rebuild_preconditioner_after = N``, another key that is
+not PETSc's, keeps a preconditioner built for an earlier matrix until a Krylov solve
+needs more than N iterations: a Newton solve's over Newton steps and time steps (see
+:class:`~primordia.coupling.solvers.NewtonSolver`), a linear subproblem's over time
+steps when its matrix changes at every step (see
+:class:`~primordia.coupling.solvers.LinearSolver`), where ``"+K"`` also says: more than
+K iterations above the first solve after the last build.
 
 Who wins, from weakest to strongest: the solver layer's defaults, the physics
 module's (``Subproblem.petsc_options``), the config's table, options given
@@ -50,9 +53,11 @@ from primordia.core.petsc_library import petsc_library
 
 #: Not a PETSc option: the fields of each split of a fieldsplit preconditioner (lists of field names).
 SPLITS = "splits"
-#: Not a PETSc option: a Newton solve keeps its preconditioner (a factorisation, an AMG hierarchy) until a
-#: Newton step's Krylov solve takes more than this many iterations, then builds it anew from the current
-#: tangent (0: at every Newton step, PETSc's default; see NewtonSolver).
+#: Not a PETSc option: a solve keeps its preconditioner (a factorisation, an AMG hierarchy) until a Krylov
+#: solve takes more than this many iterations, then builds it anew from the current matrix (0: whenever the
+#: matrix changed, PETSc's default).  A Newton solve keeps it over Newton steps and time steps (see
+#: NewtonSolver), a linear subproblem whose matrix changes at every step over time steps, where the value
+#: may also be "+K": K iterations more than the first solve after the last build (see LinearSolver).
 REBUILD = "rebuild_preconditioner_after"
 #: Not a PETSc option: a linear subproblem's whole system is gathered to one rank and solved there by that
 #: rank's serial KSP (the other options of the table configure it); independent subproblems of a step so
@@ -80,9 +85,7 @@ def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
         elif name == SPLITS:
             flat[name] = _splits(value, f"{where}.{name}")
         elif name == REBUILD:
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ConfigError(f"{where}.{name} must be a number of Krylov iterations (0 or more), got {value!r}")
-            flat[name] = value
+            flat[name] = _rebuild_after(value, f"{where}.{name}")
         elif name == GATHER:
             if not isinstance(value, bool):
                 raise ConfigError(f"{where}.{name} must be true or false, got {value!r}")
@@ -92,6 +95,17 @@ def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
         else:
             flat[name] = value
     return flat
+
+
+def _rebuild_after(value, where: str) -> int | str:
+    """A number of Krylov iterations (0 or more), or ``"+K"``: K more than the first solve after a build."""
+    relative = isinstance(value, str) and value.startswith("+") and value[1:].isdigit()
+    if relative:
+        return f"+{int(value[1:])}"
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ConfigError(f"{where} must be a number of Krylov iterations (0 or more), or \"+K\" for K more "
+                          f"than the first solve after the preconditioner was built, got {value!r}")
+    return value
 
 
 def _splits(value, where: str) -> tuple[tuple[str, ...], ...]:

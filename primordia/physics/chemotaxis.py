@@ -333,9 +333,13 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # ILU on each rank's rows; on several ranks with one layer of overlap (additive Schwarz): per step
         # on 2 ranks at 171, 342, 684 cells per side 4.8, 33.9, 255 ms against 5.6, 39.8, 331 for block
         # Jacobi, whose iterations double on 2 ranks.  On one rank it is the same ILU with more overhead
-        # (7.4 against 5.3 ms at 171), so serial keeps block Jacobi.
+        # (7.4 against 5.3 ms at 171), so serial keeps block Jacobi.  The preconditioner of an earlier
+        # step's matrix is kept until a solve needs one iteration more than the first after its build
+        # (f moves little in a step): additive Schwarz extracts its overlapping blocks and factorises them
+        # at every build.  Example 1a at 171 over 200 steps (bench_scaling.py --steps 200 --repeats 3):
+        # the solve 4.3 -> 3.8 ms/step in serial, 3.8 -> 2.8 on 2 ranks, 12 and 6-9 builds
         return {"ksp_type": "gmres", "pc_type": "asm" if ranks > 1 else "bjacobi", "ksp_rtol": 1e-12,
-                "ksp_atol": 1e-14}
+                "ksp_atol": 1e-14, "rebuild_preconditioner_after": "+1"}
     if ranks > GATHERED_RANKS or not constant:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}

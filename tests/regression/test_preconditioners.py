@@ -134,3 +134,69 @@ def test_cell_density_boomeramg_hmis_reaches_the_direct_solution(backend, tmp_pa
     assert_same_fields(direct, amg, 1e-9)
     assert amg.solvers[0].ksp.getPC().getHYPREType() == "boomeramg"
     assert all(iterations >= 2 for iterations in krylov_iterations(amg, "chemotaxis.m"))  # it iterates
+
+
+# -- the cell density keeps its preconditioner over time steps (rebuild_preconditioner_after = "+1") --------
+def _cell_density_run(backend: str, tmp_path, steps: int, *overrides) -> tuple[Simulation, int]:
+    """Example 1a on a coarse mesh, and how many ILU factorisations its cell-density solves made (the
+    factor matrix's PETSc state moves at each numeric factorisation).  ILU itself stands for the default
+    block Jacobi/ILU, whose one block's factor petsc4py 3.18 cannot reach."""
+    coarse = ["mesh.cells=[24,24]", "time.t_final=100.0", "output.times=[100.0]", 'solver.chemotaxis_m.pc_type="ilu"',
+              'solver.chemotaxis_m.rebuild_preconditioner_after="+1"']
+    model = Model.from_file(EXAMPLES / "ex01a.toml", [*QUIET, *coarse, *overrides])
+    sim = Simulation(model, backend=backend, out_dir=tmp_path / f"m-{backend}-{abs(hash(overrides))}").setup()
+    (solver,) = [s for s in sim.solvers if s.sub.name == "chemotaxis.m"]
+    states = set()
+    for _ in range(steps):
+        sim.step()
+        pc = solver.ksp.getPC()
+        if pc.getType() == "ilu":
+            states.add(pc.getFactorMatrix().stateGet())
+    return sim, len(states)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_cell_density_keeps_its_preconditioner_until_krylov_needs_more_and_reaches_the_same_fields(
+        backend, tmp_path):
+    """The default keeps the ILU of an earlier step's matrix until a solve needs one iteration more than the
+    first after its build; every solve still reaches its tolerance with the current matrix, so the fields
+    are those of a fresh preconditioner at every step and of a direct solve."""
+    steps = 60
+    kept, kept_factorisations = _cell_density_run(backend, tmp_path, steps)
+    fresh, fresh_factorisations = _cell_density_run(backend, tmp_path, steps,
+                                                    "solver.chemotaxis_m.rebuild_preconditioner_after=0")
+    never, never_factorisations = _cell_density_run(backend, tmp_path, steps,
+                                                    "solver.chemotaxis_m.rebuild_preconditioner_after=1000")
+    direct, _ = _cell_density_run(backend, tmp_path, steps, 'solver.chemotaxis_m.ksp_type="preonly"',
+                                  'solver.chemotaxis_m.pc_type="lu"', "solver.chemotaxis_m.rebuild_preconditioner_after=0")
+    (solver,) = [s for s in kept.solvers if s.sub.name == "chemotaxis.m"]
+    assert fresh_factorisations == steps  # PETSc's default: a changed matrix is factorised again
+    assert never_factorisations == 1
+    assert 1 < kept_factorisations < steps / 2, kept_factorisations
+    assert solver.preconditioner_builds == kept_factorisations
+    its = krylov_iterations(kept, "chemotaxis.m")
+    assert max(its) > min(its)  # the kept ILU costs iterations as the matrix moves away from it
+    assert_same_fields(fresh, kept, 1e-10)
+    assert_same_fields(direct, kept, 1e-10)
+    assert_same_fields(direct, never, 1e-10)
+
+
+def test_the_cell_density_keeps_its_preconditioner_by_default(tmp_path):
+    sim = run("ex01a", "fenicsx", tmp_path, 1, "mesh.cells=[6,6]", "time.t_final=0.2", "output.times=[0.2]")
+    (solver,) = [s for s in sim.solvers if s.sub.name == "chemotaxis.m"]
+    assert solver.options["pc_type"] == "bjacobi" and solver._rebuild_after == "+1"
+    assert solver.preconditioner_builds == 1 and solver._kept.keeps()  # built at the first solve, then kept
+    sim.step()
+    assert solver.preconditioner_builds == 1
+
+
+def test_a_relative_rebuild_bound_is_refused_for_newton_and_where_nothing_is_kept(tmp_path):
+    for overrides, fragment in [
+            (['solver.poroelastic_growth.rebuild_preconditioner_after="+2"'], "of a Newton solve is a number"),
+            (['solver.chemotaxis_m.rebuild_preconditioner_after="2"'], "must be a number of Krylov iterations"),
+            (['solver.chemotaxis_m.ksp_type="preonly"', 'solver.chemotaxis_m.pc_type="lu"',
+              'solver.chemotaxis_m.rebuild_preconditioner_after="+1"'], "needs a Krylov method")]:
+        example = "ex02a" if "growth" in overrides[0] else "ex01a"
+        with pytest.raises(ConfigError, match=fragment):
+            run(example, "fenicsx", tmp_path, 1, "mesh.cells=[6,6]", "time.t_final=0.2", "output.times=[0.2]",
+                *overrides)

@@ -6,7 +6,7 @@ import ufl
 
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.core.meshes import rectangle
-from primordia.coupling.solvers import SubproblemSolver
+from primordia.coupling.solvers import KeptPreconditioner, SubproblemSolver
 from primordia.physics.base import Subproblem
 
 
@@ -84,3 +84,26 @@ def test_independent_systems_solved_on_one_rank_are_batched_each_to_its_own_rank
     third = _fake_solver("h")
     assert [len(batch) for batch in independent_batches([f, b, third])] == [2, 1]
     assert third.owner == 0
+
+
+def _builds(rule: KeptPreconditioner, iterations: list[int]) -> list[bool]:
+    """Which of the solves with these iteration counts build the preconditioner under ``rule``."""
+    builds = []
+    for count in iterations:
+        keep = rule.keeps()
+        if not keep:
+            rule.built()
+        builds.append(not keep)
+        rule.solved(count)
+    return builds
+
+
+def test_a_kept_preconditioner_is_built_again_after_a_solve_over_its_bound():
+    # absolute: after a solve with more than 8 iterations
+    assert _builds(KeptPreconditioner(8), [7, 8, 9, 7, 9, 9]) == [True, False, False, True, False, True]
+    # relative: more than one above the first solve after the build (7, then 5)
+    assert _builds(KeptPreconditioner("+1"), [7, 8, 9, 5, 6, 7, 7]) == [True, False, False, True, False, False, True]
+    rule = KeptPreconditioner("+1")
+    _builds(rule, [7])
+    rule.discard()  # dt changed, or a solve failed with the kept one
+    assert not rule.keeps()
