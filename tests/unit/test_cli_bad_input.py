@@ -92,10 +92,11 @@ def test_unknown_command_and_missing_argument_are_usage_errors(primordia_cli):
 
 
 def test_a_diverged_solve_stops_the_run_with_one_line(primordia_cli, small_config, tmp_path):
-    """A real PETSc failure: one GMRES iteration cannot reach the m solve's rtol of 1e-12."""
+    """A real PETSc failure: one unpreconditioned GMRES iteration cannot reach the m solve's rtol of 1e-12
+    (with the default ILU on this small mesh it can, once dt has been halved a few times)."""
     out = tmp_path / "out"
     result = primordia_cli("run", small_config(), "--out", out, "--no-progress",
-                           "--set", "solver.chemotaxis_m.ksp_max_it=1")
+                           "--set", "solver.chemotaxis_m.ksp_max_it=1", "--set", "solver.chemotaxis_m.pc_type=none")
     assert_one_line_error(result, "chemotaxis.m", "linear solver diverged", "chemotaxis_m_")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"].startswith("stopped at t = 0:") and "diverged" in summary["status"]
@@ -368,8 +369,9 @@ def test_a_mesh_file_at_fault_is_named(capsys, small_config, tmp_path, points, t
 
 
 def test_a_blow_up_names_the_time(primordia_cli, small_config, tmp_path):
+    """The first step still converges (the cell density's ILU on an RCM ordering); the second does not."""
     result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
                            "--set", "physics.chemotaxis.flux_scheme=galerkin", "--set", "parameters.alpha=1e8",
                            "--set", "time.adaptive=false")
-    line = assert_one_line_error(result, "t = 0 -> 0.2")
+    line = assert_one_line_error(result, "step 2 (t = 0.2 -> 0.4)")
     assert "chemotaxis.m" in line
