@@ -595,6 +595,21 @@ def test_a_field_read_by_several_forms_is_interpolated_once_while_its_values_sta
     assert not context.coefficient(m, 0).flags.writeable, "a form must not change the values the next one reads"
 
 
+def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
+    """A form assembled at every step adds to the same DOFs: their flattened array is built once per
+    layout of blocks, read-only, and the vector is the one assembled without it."""
+    s = skfem_setup
+    form = s["m"] * s["m"] * s.test("P2") * ufl.dx
+    space = form.arguments()[0].ufl_function_space()
+    first = s.backend.assemble_vector(form).array.copy()
+    kept = dict(space._scatter)
+    assert len(kept) == 1 and not any(indices.flags.writeable for indices in kept.values())
+    np.testing.assert_array_equal(s.backend.assemble_vector(form).array, first)
+    assert space._scatter.keys() == kept.keys() and all(space._scatter[k] is kept[k] for k in kept)
+    space._scatter.clear()
+    np.testing.assert_array_equal(s.backend.assemble_vector(form).array, first)
+
+
 def test_the_fields_kept_at_the_points_hold_at_most_their_limit(skfem_setup, monkeypatch):
     s = skfem_setup
     monkeypatch.setattr(s.mesh, "field_values", skfem_backend._FieldValues())
