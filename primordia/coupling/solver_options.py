@@ -21,8 +21,8 @@ not PETSc's, keeps a preconditioner built for an earlier matrix until a Krylov s
 needs more than N iterations: a Newton solve's over Newton steps and time steps (see
 :class:`~primordia.coupling.solvers.NewtonSolver`), a linear subproblem's over time
 steps when its matrix changes at every step (see
-:class:`~primordia.coupling.solvers.LinearSolver`), where ``"+K"`` also says: more than
-K iterations above the first solve after the last build.
+:class:`~primordia.coupling.solvers.LinearSolver`), where ``"fresh+K"`` also says: more
+than K iterations above the first solve after the last build.
 
 Who wins, from weakest to strongest: the solver layer's defaults, the physics
 module's (``Subproblem.petsc_options``), the config's table, options given
@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import ctypes
 import difflib
+import re
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -57,8 +58,10 @@ SPLITS = "splits"
 #: solve takes more than this many iterations, then builds it anew from the current matrix (0: whenever the
 #: matrix changed, PETSc's default).  A Newton solve keeps it over Newton steps and time steps (see
 #: NewtonSolver), a linear subproblem whose matrix changes at every step over time steps, where the value
-#: may also be "+K": K iterations more than the first solve after the last build (see LinearSolver).
+#: may also be "fresh+K": K iterations more than the first solve after the last build (see LinearSolver).
 REBUILD = "rebuild_preconditioner_after"
+#: How the relative form of REBUILD starts: "fresh+K", the iterations of a fresh preconditioner plus K.
+FRESH = "fresh"
 #: Not a PETSc option: a linear subproblem's whole system is gathered to one rank and solved there by that
 #: rank's serial KSP (the other options of the table configure it); independent subproblems of a step so
 #: marked are solved at once, each on its own rank (see :func:`~primordia.coupling.solvers.solve_in_turn`).
@@ -98,12 +101,15 @@ def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
 
 
 def _rebuild_after(value, where: str) -> int | str:
-    """A number of Krylov iterations (0 or more), or ``"+K"``: K more than the first solve after a build."""
-    relative = isinstance(value, str) and value.startswith("+") and value[1:].isdigit()
+    """A number of Krylov iterations (0 or more), or ``"fresh+K"``: K more than the first solve after a build.
+
+    Not ``"+K"``: TOML reads ``+2`` as the number 2, so ``--set ...=+2`` would silently mean the other rule.
+    """
+    relative = re.fullmatch(r"\s*fresh\s*\+\s*(\d+)\s*", value) if isinstance(value, str) else None
     if relative:
-        return f"+{int(value[1:])}"
+        return f"{FRESH}+{int(relative.group(1))}"
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ConfigError(f"{where} must be a number of Krylov iterations (0 or more), or \"+K\" for K more "
+        raise ConfigError(f"{where} must be a number of Krylov iterations (0 or more), or \"fresh+K\" for K more "
                           f"than the first solve after the preconditioner was built, got {value!r}")
     return value
 

@@ -354,7 +354,7 @@ class LinearSolver(_Solver):
 
     A matrix that changes at every step (the cell density's: its fitted chemotactic flux
     reads f) may keep the preconditioner built for an earlier one, ``rebuild_preconditioner_after
-    = N`` or ``"+K"`` (:class:`KeptPreconditioner`): the Krylov method always solves with
+    = N`` or ``"fresh+K"`` (:class:`KeptPreconditioner`): the Krylov method always solves with
     the current matrix, to the same tolerance, and the preconditioner is built again only
     after a solve needed more than N iterations, or K more than the first solve after the
     last build, and when dt changed.  A solve that fails with a kept preconditioner is
@@ -546,7 +546,7 @@ class LinearSolver(_Solver):
 class KeptPreconditioner:
     """When a linear subproblem builds its preconditioner again (``rebuild_preconditioner_after``).
 
-    ``N``: once a solve needed more than N Krylov iterations.  ``"+K"``: once a solve
+    ``N``: once a solve needed more than N Krylov iterations.  ``"fresh+K"``: once a solve
     needed more than K iterations above the first solve after the last build, which is
     what a fresh preconditioner gives; that count grows with the mesh and the ranks (the
     cell density's block Jacobi/ILU: 4, 5, 7, 11 iterations at 43, 86, 171, 342 cells per
@@ -556,7 +556,7 @@ class KeptPreconditioner:
     """
 
     def __init__(self, after: int | str):
-        self._above = int(after[1:]) if isinstance(after, str) else None
+        self._above = int(after.split("+")[1]) if isinstance(after, str) else None  # "fresh+K"
         self._limit = None if isinstance(after, str) else int(after)
         self._last = None  # iterations of the last solve; None: build at the next
         self._fresh = None  # iterations of the first solve after the last build
@@ -745,7 +745,7 @@ class NewtonSolver(_Solver):
             self._rebuild_after = None
         if isinstance(self._rebuild_after, str):
             raise ConfigError(f"{self.where}.{REBUILD} of a Newton solve is a number of Krylov iterations, got "
-                              f"{self._rebuild_after!r}: \"+K\" is for linear subproblems")
+                              f"{self._rebuild_after!r}: \"fresh+K\" is for linear subproblems")
         self._kept = None  # the preconditioning matrix kept while it works (rebuild_preconditioner_after)
         self._rebuild = False  # refresh it at the next tangent (a Newton solve failed in its linear solve)
         self.preconditioner_builds = 0  # refreshes of the kept preconditioning matrix

@@ -343,7 +343,7 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # order; the solve at 171 3.3 against 4.2 ms/step on fenicsx, 3.4 against 5.2 on skfem, and on 2
         # ranks 8.5 against 9.2 iterations
         return {"ksp_type": "gmres", "pc_type": "asm" if ranks > 1 else "bjacobi", "ksp_rtol": 1e-12,
-                "ksp_atol": 1e-14, "rebuild_preconditioner_after": "+1", "sub_pc_factor_mat_ordering_type": "rcm"}
+                "ksp_atol": 1e-14, "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm"}
     if ranks > GATHERED_RANKS or not constant:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}

@@ -137,13 +137,13 @@ def test_cell_density_boomeramg_hmis_reaches_the_direct_solution(backend, tmp_pa
     assert all(iterations >= 2 for iterations in krylov_iterations(amg, "chemotaxis.m"))  # it iterates
 
 
-# -- the cell density keeps its preconditioner over time steps (rebuild_preconditioner_after = "+1") --------
+# -- the cell density keeps its preconditioner over time steps (rebuild_preconditioner_after = "fresh+1") --------
 def _cell_density_run(backend: str, tmp_path, steps: int, *overrides) -> tuple[Simulation, int]:
     """Example 1a on a coarse mesh, and how many ILU factorisations its cell-density solves made (the
     factor matrix's PETSc state moves at each numeric factorisation).  ILU itself stands for the default
     block Jacobi/ILU, whose one block's factor petsc4py 3.18 cannot reach."""
     coarse = ["mesh.cells=[24,24]", "time.t_final=100.0", "output.times=[100.0]", 'solver.chemotaxis_m.pc_type="ilu"',
-              'solver.chemotaxis_m.rebuild_preconditioner_after="+1"']
+              'solver.chemotaxis_m.rebuild_preconditioner_after="fresh+1"']
     model = Model.from_file(EXAMPLES / "ex01a.toml", [*QUIET, *coarse, *overrides])
     sim = Simulation(model, backend=backend, out_dir=tmp_path / f"m-{backend}-{abs(hash(overrides))}").setup()
     (solver,) = [s for s in sim.solvers if s.sub.name == "chemotaxis.m"]
@@ -186,7 +186,7 @@ def test_the_cell_density_keeps_its_preconditioner_by_default(tmp_path):
     """...and its ILU works on an RCM ordering (fewer GMRES iterations than the backends' DOF orders)."""
     sim = run("ex01a", "fenicsx", tmp_path, 1, "mesh.cells=[6,6]", "time.t_final=0.2", "output.times=[0.2]")
     (solver,) = [s for s in sim.solvers if s.sub.name == "chemotaxis.m"]
-    assert solver.options["pc_type"] == "bjacobi" and solver._rebuild_after == "+1"
+    assert solver.options["pc_type"] == "bjacobi" and solver._rebuild_after == "fresh+1"
     assert solver.options["sub_pc_factor_mat_ordering_type"] == "rcm"
     assert not unused("chemotaxis_m_", ["sub_pc_factor_mat_ordering_type"])  # PETSc read it
     assert solver.preconditioner_builds == 1 and solver._kept.keeps()  # built at the first solve, then kept
@@ -196,10 +196,10 @@ def test_the_cell_density_keeps_its_preconditioner_by_default(tmp_path):
 
 def test_a_relative_rebuild_bound_is_refused_for_newton_and_where_nothing_is_kept(tmp_path):
     for overrides, fragment in [
-            (['solver.poroelastic_growth.rebuild_preconditioner_after="+2"'], "of a Newton solve is a number"),
+            (['solver.poroelastic_growth.rebuild_preconditioner_after="fresh+2"'], "of a Newton solve is a number"),
             (['solver.chemotaxis_m.rebuild_preconditioner_after="2"'], "must be a number of Krylov iterations"),
             (['solver.chemotaxis_m.ksp_type="preonly"', 'solver.chemotaxis_m.pc_type="lu"',
-              'solver.chemotaxis_m.rebuild_preconditioner_after="+1"'], "needs a Krylov method")]:
+              'solver.chemotaxis_m.rebuild_preconditioner_after="fresh+1"'], "needs a Krylov method")]:
         example = "ex02a" if "growth" in overrides[0] else "ex01a"
         with pytest.raises(ConfigError, match=fragment):
             run(example, "fenicsx", tmp_path, 1, "mesh.cells=[6,6]", "time.t_final=0.2", "output.times=[0.2]",

@@ -30,7 +30,8 @@ def test_nested_tables_are_option_prefixes_as_in_firedrake():
     ({"splits": ["u", "p"]}, "solver.x.splits must be a list of lists of field names"),
     ({"rebuild_preconditioner_after": -1}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
     ({"rebuild_preconditioner_after": True}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
-    ({"rebuild_preconditioner_after": "+"}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
+    ({"rebuild_preconditioner_after": "+2"}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
+    ({"rebuild_preconditioner_after": "fresh+"}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
     ({"rebuild_preconditioner_after": "-1"}, "solver.x.rebuild_preconditioner_after must be a number of Krylov"),
     ({"solve_on_one_rank": "yes"}, "solver.x.solve_on_one_rank must be true or false"),
     (3, "solver.x must be a table"),
@@ -191,4 +192,4 @@ def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks
 
 def test_a_rebuild_bound_is_a_number_or_a_number_above_the_fresh_count():
     assert flatten({"rebuild_preconditioner_after": 3}, "solver.x") == {"rebuild_preconditioner_after": 3}
-    assert flatten({"rebuild_preconditioner_after": "+02"}, "solver.x") == {"rebuild_preconditioner_after": "+2"}
+    assert flatten({"rebuild_preconditioner_after": "fresh + 02"}, "solver.x") == {"rebuild_preconditioner_after": "fresh+2"}

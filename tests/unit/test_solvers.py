@@ -102,8 +102,8 @@ def test_a_kept_preconditioner_is_built_again_after_a_solve_over_its_bound():
     # absolute: after a solve with more than 8 iterations
     assert _builds(KeptPreconditioner(8), [7, 8, 9, 7, 9, 9]) == [True, False, False, True, False, True]
     # relative: more than one above the first solve after the build (7, then 5)
-    assert _builds(KeptPreconditioner("+1"), [7, 8, 9, 5, 6, 7, 7]) == [True, False, False, True, False, False, True]
-    rule = KeptPreconditioner("+1")
+    assert _builds(KeptPreconditioner("fresh+1"), [7, 8, 9, 5, 6, 7, 7]) == [True, False, False, True, False, False, True]
+    rule = KeptPreconditioner("fresh+1")
     _builds(rule, [7])
     rule.discard()  # dt changed, or a solve failed with the kept one
     assert not rule.keeps()
