@@ -182,6 +182,18 @@ def test_the_cell_density_keeps_its_preconditioner_until_krylov_needs_more_and_r
     assert_same_fields(direct, never, 1e-10)
 
 
+def test_a_solve_that_fails_with_a_kept_preconditioner_is_solved_again_with_a_fresh_one(tmp_path):
+    """Never rebuilt, the ILU of the first step needs 5 GMRES iterations by step 20 of this run, a fresh
+    one 3 or 4: with at most 4 allowed, those solves fail, are solved again with a fresh ILU, and the
+    run goes on without a rejected step."""
+    sim, factorisations = _cell_density_run("fenicsx", tmp_path, 60, "solver.chemotaxis_m.rebuild_preconditioner_after=1000",
+                                            "solver.chemotaxis_m.ksp_max_it=4")
+    (solver,) = [s for s in sim.solvers if s.sub.name == "chemotaxis.m"]
+    assert sim.rejections == [] and len(krylov_iterations(sim, "chemotaxis.m")) == 60
+    assert factorisations == solver.preconditioner_builds >= 2
+    assert max(krylov_iterations(sim, "chemotaxis.m")) <= 4
+
+
 def test_the_cell_density_keeps_its_preconditioner_by_default(tmp_path):
     """...and its ILU works on an RCM ordering (fewer GMRES iterations than the backends' DOF orders)."""
     sim = run("ex01a", "fenicsx", tmp_path, 1, "mesh.cells=[6,6]", "time.t_final=0.2", "output.times=[0.2]")
