@@ -302,6 +302,7 @@ class SkfemFunctionSpace(ufl.FunctionSpace):
         self.dofs = skfem.assembly.Dofs(mesh.skfem, self.skfem_element)
         self.num_dofs = int(self.dofs.N)
         self.cell_dofs = np.ascontiguousarray(self.dofs.element_dofs.T.astype(np.int64))  # (C, n_local)
+        self._scatter: dict[tuple, np.ndarray] = {}  # scatter_indices of runs of cells, by block layout
         self.value_shape = tuple(element.value_shape())
         self.value_size = int(np.prod(self.value_shape))
         self.blocks = []
@@ -346,10 +347,6 @@ class SkfemFunctionSpace(ufl.FunctionSpace):
             hit = self._scatter[key] = _flat([dofs[:, local] for local in rows])
             hit.flags.writeable = False
         return hit
-
-    @cached_property
-    def _scatter(self) -> dict:
-        return {}
 
     @cached_property
     def basis(self) -> skfem.CellBasis:

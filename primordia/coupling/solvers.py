@@ -43,7 +43,7 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    GATHER, REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
+    FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -379,7 +379,7 @@ class LinearSolver(_Solver):
         # tolerance is then relative to the step's change, not to the whole solution
         self._for_unknown = (self._affine.available and self._affine.constant_jacobian
                              and subproblem.operator is None and self.options.get("ksp_type") == "preonly")
-        self._kept = self._kept_preconditioner()
+        self._rebuild_rule = self._kept_preconditioner()
         self.preconditioner_builds = 0  # solves that built the preconditioner (for a changed matrix)
 
     def _kept_preconditioner(self) -> "KeptPreconditioner | None":
@@ -388,8 +388,7 @@ class LinearSolver(_Solver):
             return None
         refusal = None
         if str(self.options.get("ksp_type")) == "preonly":
-            refusal = ("needs a Krylov method (ksp_type \"gmres\", ...): with ksp_type = \"preonly\" the "
-                       "preconditioner is the whole solve, and a kept one would solve with an old matrix")
+            refusal = f"{NEEDS_KRYLOV} the preconditioner is the whole solve, and a kept one would solve with an old matrix"
         elif self._gather:
             refusal = f"does not apply to a system solved on one rank ({GATHER})"
         if refusal is None:
@@ -401,8 +400,8 @@ class LinearSolver(_Solver):
     def step_size_changed(self) -> None:
         super().step_size_changed()
         self._affine.invalidate()
-        if self._kept is not None:
-            self._kept.discard()  # the matrix holds 1/dt: an old preconditioner would be far off
+        if self._rebuild_rule is not None:
+            self._rebuild_rule.discard()  # the matrix holds 1/dt: an old preconditioner would be far off
 
     def solve(self) -> SolveStats:
         b, target = self._right_hand_side()
@@ -418,24 +417,26 @@ class LinearSolver(_Solver):
             kept = self._keep_preconditioner(changed)
             self._solve_linear(b, target)
             if kept and self.ksp.getConvergedReason() < 0:  # too old for this matrix: once more with a fresh one
-                self._kept.discard()
+                self._rebuild_rule.discard()
                 self._keep_preconditioner(changed)
                 self._solve_linear(b, target)
             iterations, reason = max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason()
-            if self._kept is not None:
-                self._kept.solved(iterations)
+            if self._rebuild_rule is not None:
+                self._rebuild_rule.solved(iterations)
         return self._finish(iterations, reason)
 
     def _keep_preconditioner(self, changed: bool) -> bool:
         """Whether this solve keeps the preconditioner of an earlier matrix (``rebuild_preconditioner_after``);
         PETSc builds it again from a changed matrix otherwise."""
-        if self._kept is None:
+        rule = self._rebuild_rule
+        if rule is None:
             return False
-        keep = self._kept.keeps()
+        keep = rule.keeps()
         self.ksp.getPC().setReusePreconditioner(keep)
         if not keep:
-            self._kept.built()
-            self.preconditioner_builds += changed
+            rule.built()
+            if changed:  # PETSc sets a preconditioner up again only for a changed matrix
+                self.preconditioner_builds += 1
         return keep
 
     def _right_hand_side(self):
@@ -543,6 +544,10 @@ class LinearSolver(_Solver):
                               f"try other options under -{self.sub.prefix}") from None
 
 
+#: Why rebuild_preconditioner_after cannot apply to a direct solve (the start of the one-line refusal).
+NEEDS_KRYLOV = 'needs a Krylov method (ksp_type "gmres", ...): with ksp_type = "preonly"'
+
+
 class KeptPreconditioner:
     """When a linear subproblem builds its preconditioner again (``rebuild_preconditioner_after``).
 
@@ -556,11 +561,11 @@ class KeptPreconditioner:
     """
 
     def __init__(self, after: int | str):
-        self._above = int(after.split("+")[1]) if isinstance(after, str) else None  # "fresh+K"
-        self._limit = None if isinstance(after, str) else int(after)
+        relative = isinstance(after, str)  # "fresh+K", as solver_options normalises it
+        self._above = int(after[len(FRESH) + 1:]) if relative else None
+        self._limit = None if relative else int(after)
         self._last = None  # iterations of the last solve; None: build at the next
-        self._fresh = None  # iterations of the first solve after the last build
-        self._just_built = False
+        self._fresh = None  # iterations of the first solve after the last build; None until it is done
 
     def keeps(self) -> bool:
         """Whether the next solve keeps the preconditioner (never the first, nor after :meth:`discard`)."""
@@ -570,12 +575,12 @@ class KeptPreconditioner:
         return self._last <= limit
 
     def built(self) -> None:
-        self._just_built = True
+        self._fresh = None
 
     def solved(self, iterations: int) -> None:
         self._last = iterations
-        if self._just_built:
-            self._fresh, self._just_built = iterations, False
+        if self._fresh is None:
+            self._fresh = iterations
 
     def discard(self) -> None:
         """Build the preconditioner at the next solve (dt changed, a solve failed with the kept one)."""
@@ -740,8 +745,7 @@ class NewtonSolver(_Solver):
             # the preconditioner is the whole solve: kept, it would freeze the tangent (and a single
             # application never counts more than one iteration)
             if REBUILD in self._user_keys:
-                raise ConfigError(f"{self.where}.{REBUILD} needs a Krylov method (ksp_type \"gmres\", ...): "
-                                  f"with ksp_type = \"preonly\" a kept preconditioner would freeze the tangent")
+                raise ConfigError(f"{self.where}.{REBUILD} {NEEDS_KRYLOV} a kept preconditioner would freeze the tangent")
             self._rebuild_after = None
         if isinstance(self._rebuild_after, str):
             raise ConfigError(f"{self.where}.{REBUILD} of a Newton solve is a number of Krylov iterations, got "

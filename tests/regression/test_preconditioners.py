@@ -159,8 +159,8 @@ def _cell_density_run(backend: str, tmp_path, steps: int, *overrides) -> tuple[S
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_the_cell_density_keeps_its_preconditioner_until_krylov_needs_more_and_reaches_the_same_fields(
         backend, tmp_path):
-    """The default keeps the ILU of an earlier step's matrix until a solve needs one iteration more than the
-    first after its build; every solve still reaches its tolerance with the current matrix, so the fields
+    """With the default bound (``"fresh+1"``) the ILU of an earlier step's matrix is kept until a solve needs
+    one iteration more than the first after its build; every solve still reaches its tolerance with the current matrix, so the fields
     are those of a fresh preconditioner at every step and of a direct solve."""
     steps = 60
     kept, kept_factorisations = _cell_density_run(backend, tmp_path, steps)
@@ -201,7 +201,7 @@ def test_the_cell_density_keeps_its_preconditioner_by_default(tmp_path):
     assert solver.options["pc_type"] == "bjacobi" and solver._rebuild_after == "fresh+1"
     assert solver.options["sub_pc_factor_mat_ordering_type"] == "rcm"
     assert not unused("chemotaxis_m_", ["sub_pc_factor_mat_ordering_type"])  # PETSc read it
-    assert solver.preconditioner_builds == 1 and solver._kept.keeps()  # built at the first solve, then kept
+    assert solver.preconditioner_builds == 1 and solver._rebuild_rule.keeps()  # built at the first solve, then kept
     sim.step()
     assert solver.preconditioner_builds == 1
 
