@@ -299,7 +299,8 @@ class FenicsxBackend(Backend):
         bs = function.function_space.dofmap.index_map_bs
         function.x.array.reshape(-1, bs)[:] = np.asarray(values).reshape(len(values), bs)[original]
 
-    def vertex_values(self, function, component=None):
+    def _owned_vertex_values(self, function, component=None):
+        """(P1 space, values at this rank's own vertices (n_owned, block size)) of a field or its component."""
         if component is not None:
             part, dofs = self._component(function, component)
             part.x.array[:] = function.x.array[dofs]
@@ -310,17 +311,28 @@ class FenicsxBackend(Backend):
             p1.interpolate(function)
             function = p1
         bs = space.dofmap.index_map_bs
-        owned = space.dofmap.index_map.size_local
-        original = self._vertex_map(space)[:owned]
-        values = function.x.array.reshape(-1, bs)[:owned]
+        return space, function.x.array.reshape(-1, bs)[:space.dofmap.index_map.size_local]
+
+    def vertex_values(self, function, component=None):
+        space, values = self._owned_vertex_values(function, component)
+        original = self._vertex_map(space)[:len(values)]
         gathered = self.comm.gather((original, values.copy()), root=0)
         if self.comm.rank != 0:
             return None
+        bs = values.shape[1]
         n_vertices = space.mesh.mesh_data.num_vertices
         result = np.empty((n_vertices, bs))
         for indices, vals in gathered:
             result[indices] = vals
         return result[:, 0] if bs == 1 else result
+
+    def vertex_extrema(self, function, component=None) -> tuple[float, float]:
+        from mpi4py import MPI
+
+        values = self._owned_vertex_values(function, component)[1]
+        low = float(values.min()) if values.size else np.inf
+        high = float(values.max()) if values.size else -np.inf
+        return self.comm.allreduce(low, op=MPI.MIN), self.comm.allreduce(high, op=MPI.MAX)
 
     def collect_garbage(self) -> None:
         super().collect_garbage()

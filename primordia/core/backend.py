@@ -170,6 +170,17 @@ class Backend(ABC):
         fields are interpolated to P1 first.
         """
 
+    def vertex_extrema(self, function, component: int | None = None) -> tuple[float, float]:
+        """The least and the largest of :meth:`vertex_values` (every component of a vector), on every rank
+        (collective).
+
+        This default gathers the values to rank 0; a parallel backend reduces each rank's own vertices
+        instead, so that a row of the series does not move whole fields to one rank.
+        """
+        values = self.vertex_values(function, component)
+        extrema = (float(np.min(values)), float(np.max(values))) if self.is_root() else None
+        return self.comm.bcast(extrema, root=0) if self.comm.size > 1 else extrema
+
     # -- sizes --------------------------------------------------------------------------
     @abstractmethod
     def num_cells(self, mesh) -> int:

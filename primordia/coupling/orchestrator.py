@@ -708,15 +708,16 @@ class Simulation:
         return self._vertex_cache[1]
 
     def field_statistics(self) -> dict[str, dict[str, float]]:
-        """Integral (of the magnitude, for vectors), min and max over the vertices of every field."""
-        values = self.vertex_values()
-        extremes = None
-        if self.is_root:
-            extremes = {name: (float(np.min(v)), float(np.max(v))) for name, v in values.items()}
-        extremes = self.comm.bcast(extremes, root=0)
-        return {name: {"integral": self._integral(name),
-                       "min": extremes[name][0], "max": extremes[name][1]}
-                for name in self.disc.field_names()}
+        """Integral (of the magnitude, for vectors), min and max over the vertices of every field.
+
+        The extrema are reduced over the ranks' own vertices (``vertex_extrema``): gathering every field to
+        rank 0 for them took 1.2 ms of each row's 4.3 at 171^2 (example 1a), on 2 ranks as in serial.
+        """
+        statistics = {}
+        for name in self.disc.field_names():
+            low, high = self.backend.vertex_extrema(*self.disc.function_of(name))
+            statistics[name] = {"integral": self._integral(name), "min": low, "max": high}
+        return statistics
 
     def diagnostic_values(self) -> dict[str, float]:
         """The physics modules' derived quantities (integrals, extrema), by their recorded names."""

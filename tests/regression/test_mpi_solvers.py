@@ -86,3 +86,39 @@ if MPI.COMM_WORLD.rank == 0: print("checked on", MPI.COMM_WORLD.size, "ranks")
 """
     done = mpirun(2, sys.executable, "-c", script)
     assert done.stdout.strip() == "checked on 2 ranks"
+
+
+@pytest.mark.mpi
+def test_vertex_extrema_on_two_ranks_are_those_of_the_gathered_vertex_values():
+    """The series' min and max are reduced over each rank's own vertices: on 2 ranks they must be the
+    extrema of the whole field gathered on rank 0, for a P1 field and both parts of a Taylor-Hood one."""
+    script = """
+import numpy as np, ufl
+from mpi4py import MPI
+from primordia.backends.fenicsx import FenicsxBackend
+from primordia.core.meshes import rectangle
+backend = FenicsxBackend()
+mesh = backend.create_mesh(rectangle((0, 0), (1, 1), (9, 7)))
+cell = mesh.ufl_domain().ufl_cell()
+scalar = backend.function(backend.function_space(mesh, ufl.FiniteElement("Lagrange", cell, 1)), "s")
+backend.interpolate(scalar, lambda x: np.sin(7 * x[0]) * x[1])
+mixed = backend.function(backend.function_space(mesh, ufl.MixedElement(
+    [ufl.VectorElement("Lagrange", cell, 2), ufl.FiniteElement("Lagrange", cell, 1)])), "w")
+backend.interpolate_component(mixed, 0, lambda x: np.stack([np.cos(5 * x[0]), x[1] - 3 * x[0]]))
+backend.interpolate_component(mixed, 1, lambda x: x[0] * x[1] - 0.25)
+comm = MPI.COMM_WORLD
+wrong = []  # every rank runs every collective, then all report: an assertion on one rank would hang the other
+for function, component in [(scalar, None), (mixed, 0), (mixed, 1)]:
+    values = backend.vertex_values(function, component)
+    whole = comm.bcast((values.min(), values.max()) if comm.rank == 0 else None)
+    extrema = backend.vertex_extrema(function, component)
+    if extrema != whole:
+        wrong.append((component, extrema, whole))
+    owned = function.function_space.dofmap.index_map.size_local
+    if comm.allreduce(owned) == owned:
+        wrong.append("the vertices are not split between the ranks")
+wrong = comm.gather(wrong)
+if comm.rank == 0: print("checked on", comm.size, "ranks", wrong)
+"""
+    done = mpirun(2, sys.executable, "-c", script)
+    assert done.stdout.strip() == "checked on 2 ranks [[], []]"

@@ -155,6 +155,21 @@ def test_mixed_components(backend, data):
     np.testing.assert_allclose(pressure, data.points[:, 0] * data.points[:, 1], rtol=1e-13, atol=1e-14)
 
 
+def test_vertex_extrema_are_those_of_the_vertex_values(backend, data):
+    """A scalar P1 field, a P2 vector and a mixed field's components: the series' min and max."""
+    mesh = backend.create_mesh(data)
+    scalar = backend.function(lagrange(backend, mesh), "s")
+    backend.set_vertex_values(scalar, np.random.default_rng(1).uniform(-3.0, 2.0, data.num_vertices))
+    vector = backend.function(lagrange(backend, mesh, degree=2, vector=True), "v")
+    backend.interpolate(vector, lambda x: np.stack([np.sin(3 * x[i]) - i for i in range(data.gdim)]))
+    mixed = backend.function(taylor_hood(backend, mesh), "w")
+    backend.interpolate_component(mixed, 0, lambda x: np.stack([x[i] - 2 * i for i in range(data.gdim)]))
+    backend.interpolate_component(mixed, 1, lambda x: np.cos(x[0] * x[1]))
+    for function, component in [(scalar, None), (vector, None), (mixed, 0), (mixed, 1)]:
+        values = backend.vertex_values(function, component)
+        assert backend.vertex_extrema(function, component) == (values.min(), values.max())
+
+
 def test_petsc_vector_shares_memory(backend, data):
     mesh = backend.create_mesh(data)
     field = backend.function(lagrange(backend, mesh), "field")
