@@ -301,11 +301,10 @@ class Simulation:
                 fields[key] = owned  # serial: the backend's own DOF order, which a restart repeats
                 continue
             # in parallel the mesh partition differs from run to run: DOFs are stored in an order of their own
-            parts = self.comm.gather((self._dof_keys(key, function), owned), root=0)
+            order = self._checkpoint_order(key, function)
+            parts = self.comm.gather(owned, root=0)
             if self.is_root:
-                keys = np.concatenate([k for k, _ in parts])
-                order = np.argsort(_rows(keys), kind="stable")
-                fields[key], layout[key] = np.concatenate([v for _, v in parts])[order], keys[order]
+                fields[key], layout[key] = np.concatenate(parts)[order[0]], order[1]
         physics = self.comm.gather({p.name: p.state() for p in self.model.physics_objects}, root=0)
         self._checkpoint_step = self.step_index
         self._last_checkpoint_wall = clock.perf_counter()
@@ -388,6 +387,23 @@ class Simulation:
         self._checkpoint_step = self.step_index
         self.disc.set_time(self.time, self.last_dt)
         self._state_version += 1
+
+    def _checkpoint_order(self, key: str, function) -> tuple[np.ndarray, np.ndarray] | None:
+        """On rank 0, (the permutation from the ranks' owned DOFs, gathered in rank order, to the order of their
+        keys; the keys in that order) of ``key``'s group; None elsewhere.  Collective the first time for a group,
+        then kept: the partition holds for the run, and sorting the keys of each of example 1a's eight state
+        vectors at 171^2 took 24 ms of a 49 ms checkpoint on 2 ranks."""
+        group = key.partition("/")[0]
+        cache = self.__dict__.setdefault("_checkpoint_orders", {})
+        if group not in cache:
+            parts = self.comm.gather(self._dof_keys(key, function), root=0)
+            if self.is_root:
+                keys = np.concatenate(parts)
+                order = np.argsort(_rows(keys), kind="stable")
+                cache[group] = (order, keys[order])
+            else:
+                cache[group] = None
+        return cache[group]
 
     def _dof_keys(self, key: str, function) -> np.ndarray:
         """(field, component, node coordinates in units of 1e-9 of the domain) of each owned DOF, as integers.
