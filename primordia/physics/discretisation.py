@@ -359,8 +359,9 @@ class Discretisation:
         for name in groups or self._groups:
             group = self._groups[name]
             if group.rate is not None:
-                rate = self.backend.local_array(group.rate)
-                rate[:] = (self.backend.local_array(group.current) - self.backend.local_array(group.previous)) / dt
+                rate = self.backend.local_array(group.rate)  # in place: the same numbers, no temporaries
+                np.subtract(self.backend.local_array(group.current), self.backend.local_array(group.previous), out=rate)
+                np.divide(rate, dt, out=rate)
 
     def set_time(self, t: float, dt: float) -> None:
         self.time = t
