@@ -383,6 +383,12 @@ class SkfemFunctionSpace(ufl.FunctionSpace):
             local.append(int(hit[0]))
         return np.array(local)
 
+    @cached_property
+    def vertex_dofs(self) -> dict[int, np.ndarray]:
+        """Each block's DOFs at the mesh vertices, each once, by the block's component."""
+        return {block.component: np.unique(block.cell_dofs[:, self.vertex_local_dofs(block)])
+                for block in self.blocks}
+
     def facet_local_dofs(self, block: _Block) -> list[np.ndarray]:
         """Local DOFs (within the block) on each local facet: barycentric coordinate lf is zero."""
         locations = block.element.doflocs
@@ -1051,6 +1057,14 @@ class SkfemBackend(Backend):
                 local = space.vertex_local_dofs(block)
                 result[data.cells, block.component - components.start] = function.array[block.cell_dofs[:, local]]
         return result[:, 0] if shape == () else result
+
+    def vertex_extrema(self, function, component=None) -> tuple[float, float]:
+        """Of the vertex DOFs' values themselves, without building :meth:`vertex_values`' array (which goes
+        through every cell's vertices: 1 ms a field at 171^2, 0.05-0.2 ms this way)."""
+        space = function.function_space
+        components, _ = space.sub_space(component)
+        values = np.concatenate([function.array[dofs] for c, dofs in space.vertex_dofs.items() if c in components])
+        return float(values.min()), float(values.max())
 
     def extrema(self, expression, mesh) -> tuple[float, float]:
         from ufl.algorithms.apply_algebra_lowering import apply_algebra_lowering
