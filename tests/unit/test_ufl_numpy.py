@@ -597,7 +597,8 @@ def test_a_field_read_by_several_forms_is_interpolated_once_while_its_values_sta
 
 def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
     """A form assembled at every step adds to the same DOFs: their flattened array is built once per
-    layout of blocks, read-only, and the vector is the one assembled without it."""
+    layout of blocks, read-only, and the vector taken through the kept array is the one assembled through
+    a freshly built one."""
     s = skfem_setup
     form = s["m"] * s["m"] * s.test("P2") * ufl.dx
     space = form.arguments()[0].ufl_function_space()
