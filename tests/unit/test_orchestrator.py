@@ -203,6 +203,24 @@ def test_a_scalar_field_s_integral_is_its_values_against_its_basis_integrals(com
     assert completed.field_statistics()["m"]["integral"] == completed._integral("m")
 
 
+def test_field_statistics_are_computed_once_per_state(watching, tmp_path, monkeypatch):
+    """A row of the series and the summary written with it ask for them in turn: the second is served, and
+    the next accepted step computes them again, from its own fields."""
+    sim = Simulation(model(t_final=0.4), backend="fenicsx", out_dir=tmp_path).setup()
+    asked = []
+    extrema = sim.backend.vertex_extrema
+    monkeypatch.setattr(sim.backend, "vertex_extrema", lambda *args: asked.append(args) or extrema(*args))
+    first = sim.field_statistics()  # the series' first row computed them at set-up
+    assert sim.field_statistics() == first and asked == []
+    sim.step()
+    later = sim.field_statistics()
+    assert sim.field_statistics() == later and len(asked) == len(first)
+    for name, stats in later.items():
+        assert (stats["min"], stats["max"]) == extrema(*sim.disc.function_of(name))
+        assert stats["integral"] == sim._integral(name)
+    assert later != first
+
+
 def test_a_completed_run_leaves_a_checkpoint_and_its_outputs(completed):
     written = {path.name for path in completed.out_dir.iterdir()}
     assert {"summary.json", "config.toml", "checkpoint.npz"} <= written
