@@ -37,6 +37,7 @@ from ufl.algorithms.apply_derivatives import apply_derivatives
 from ufl.corealg.traversal import unique_pre_traversal
 
 from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand
+from primordia.coupling.nodal_program import NodalProgram
 
 #: Node types an integrand single-valued at the vertices may not contain (after lowering).
 _NOT_NODAL = (uc.Derivative, uc.GeometricQuantity, uc.Argument, uc.Restricted, uc.ExprList, uc.ExprMapping)
@@ -165,6 +166,10 @@ class _NodeContext:
     def constant(self, constant) -> np.ndarray:
         return np.asarray(constant.value, dtype=float)
 
+    def field(self, function) -> np.ndarray:
+        """A P1 field's values at the owned DOFs (a view, read-only)."""
+        return self.backend.petsc_vector(function).getArray(readonly=True)
+
     def geometry(self, quantity: str) -> np.ndarray | None:
         return self.coordinates[:, :, None] if quantity == "SpatialCoordinate" else None
 
@@ -214,6 +219,7 @@ class NodalGroup:
         self._integrands: list = []  # every member's, in order
         self._expression = None  # the same, as one vector
         self._context = None
+        self._program = None  # the members' integrands compiled (NodalProgram); False: the interpreter's
         self._values = None  # (terms, owned DOFs) of the last evaluation
         self._served: set[int] = set()  # the members it served, by their first term
 
@@ -229,6 +235,7 @@ class NodalGroup:
         self._integrands += [_shared_subexpressions(value, self._canonical) for value in values]
         self._expression = ufl.as_vector(self._integrands) if len(self._integrands) > 1 else self._integrands[0]
         self._values = None
+        self._program = None
         return first
 
     def expire(self) -> None:
@@ -240,10 +247,18 @@ class NodalGroup:
         if self._values is None or first in self._served:
             if self._context is None:
                 self._context = _NodeContext(self.backend, self.space)
-            size = self._context.size
-            with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
-                evaluated = evaluate_integrand(self._expression, self._context)
-            self._values = np.broadcast_to(np.reshape(evaluated, (len(self._integrands), -1)), (len(self._integrands), size))
+            if self._program is None:
+                context = self._context
+                self._program = NodalProgram.compile(self._integrands, context.coordinates, context.field,
+                                                     context.constant) or False
+            if self._program:
+                self._values = self._program.run()
+            else:
+                size = self._context.size
+                with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
+                    evaluated = evaluate_integrand(self._expression, self._context)
+                self._values = np.broadcast_to(np.reshape(evaluated, (len(self._integrands), -1)),
+                                               (len(self._integrands), size))
             self._served = set()
         self._served.add(first)
         return self._values[first:first + count]

@@ -4,11 +4,14 @@ import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
+from ufl.algorithms.apply_algebra_lowering import apply_algebra_lowering
 
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.backends.skfem import SkfemBackend
 from primordia.core.meshes import box, rectangle
-from primordia.coupling.nodal import NodalGroup, _shared_subexpressions, nodal_form
+from primordia.backends.ufl_numpy import evaluate_integrand
+from primordia.coupling.nodal import NodalGroup, _NodeContext, _shared_subexpressions, nodal_form
+from primordia.coupling.nodal_program import NodalProgram
 
 BACKENDS = {"fenicsx": lambda: FenicsxBackend(MPI.COMM_WORLD), "skfem": lambda: SkfemBackend()}
 
@@ -84,6 +87,61 @@ def test_forms_evaluated_together_equal_their_assembly_and_follow_the_fields(bac
     backend.local_array(m)[:] *= 2.0
     group.expire()  # the start of a solve
     assert np.allclose(second.assemble().getArray(), backend.assemble_vector(diagonal).getArray(), rtol=1e-13)
+
+
+def _interpreted(integrands, context) -> np.ndarray:
+    with np.errstate(all="ignore"):
+        values = evaluate_integrand(ufl.as_vector(integrands), context)
+    return np.broadcast_to(np.reshape(values, (len(integrands), -1)), (len(integrands), context.size))
+
+
+def test_the_compiled_program_gives_the_interpreters_numbers_bit_for_bit(backend):
+    """Every node kind the program compiles, against the UFL interpreter it replaces: literal
+    powers (numpy's fast cases), constants read at each run, the coordinates, conditionals of
+    arrays and of scalars, math functions, min/max, abs, and a field as a whole integrand."""
+    mesh = backend.create_mesh(rectangle((0, 0), (2, 1), (7, 5)))
+    m, e = _p1_fields(backend, mesh, "me")
+    x = ufl.SpatialCoordinate(mesh)
+    t, k = backend.constant(mesh, 3.0), backend.constant(mesh, (0.5, 2.0))
+    hill = m ** 2 / (1 + m ** 2)
+    integrands = [
+        -(0.05 * 0.5 * (1.0 + ufl.tanh(5.0 * (t - x[1] / 0.04))) * hill - e * (hill + 1 - hill)) + e / t,
+        ufl.conditional(ufl.lt(x[0], 0.4 * t), m ** 0.5, e ** -1.0) + ufl.conditional(ufl.gt(t, 2.0), 1.0, 2.0),
+        ufl.conditional(ufl.And(ufl.ge(m, 1.0), ufl.Not(ufl.eq(e, 0.0))), ufl.exp(-m), abs(e - 1.0)),
+        ufl.max_value(m, k[1]) * ufl.min_value(e, k[0]) + m ** 3.0 + m ** t + ufl.atan_2(m, e) + ufl.ln(m) * ufl.erf(e),
+        m,
+        t * k[0] + 2.0,
+    ]
+    context = _NodeContext(backend, m.ufl_function_space())
+    program = NodalProgram.compile(integrands, context.coordinates, context.field, context.constant)
+    assert program is not None
+    for time in (3.0, 1.5):  # a changed constant is read at the next run, and the fields are
+        t.value = time
+        backend.local_array(m)[:] *= 1.1
+        expected = _interpreted(integrands, context)
+        got = program.run()
+        assert got.shape == expected.shape
+        assert np.array_equal(got, expected)
+    # buffers are shared by values that do not overlap in time (here 51 instructions, 14 buffers), and the
+    # integrands are computed into the result but for the two that are read whole (m and a constant)
+    arrays = [buffer for buffer in program._buffers if buffer is not None]
+    assert len({id(buffer) for buffer in arrays}) < len(arrays) / 2
+    assert len(program._copies) == 2
+
+
+def test_an_integrand_the_program_does_not_know_keeps_the_interpreter(backend):
+    mesh = backend.create_mesh(rectangle((0, 0), (2, 1), (6, 4)))
+    m, e = _p1_fields(backend, mesh, "me")
+    context = _NodeContext(backend, m.ufl_function_space())
+    k = backend.constant(mesh, (0.5, 2.0))
+    contracted = apply_algebra_lowering(ufl.dot(k, ufl.as_vector([m, e * e])))  # nodal, but a sum over an index
+    assert NodalProgram.compile([m * 2.0, contracted], context.coordinates, context.field, context.constant) is None
+    v = ufl.TestFunction(m.ufl_function_space())
+    form = (m * 2.0 + ufl.dot(k, ufl.as_vector([m, e * e]))) * v * backend.lumped_dx(mesh)
+    nodal = nodal_form(backend, form)
+    assert nodal is not None
+    assert np.allclose(nodal.assemble().getArray(), backend.assemble_vector(form).getArray(), rtol=1e-13)
+    assert nodal._group._program is False  # the interpreter evaluated it
 
 
 def test_equal_subexpressions_become_one_node():

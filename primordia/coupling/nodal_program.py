@@ -1,0 +1,265 @@
+"""Scalar integrands at the nodes as a straight-line program of numpy operations.
+
+:class:`~primordia.coupling.nodal.NodalGroup` evaluates the lumped reactions of the species
+(seed (2.3b)-(2.3d)) at the owned DOFs every solve.  The UFL interpreter
+(:mod:`primordia.backends.ufl_numpy`) does that correctly for any integrand, but at a cost that
+dominates here: it walks the tree each time (about 40 nodes for the e solve of example 1a),
+carries the test, trial and point axes that a nodal value does not have, and allocates every
+intermediate array.  At the seed's 171^2 mesh the e solve's remainder and Jacobian diagonal
+took 1.06 ms a step that way, most of it neither arithmetic nor memory traffic.
+
+:meth:`NodalProgram.compile` turns the integrands once into a list of numpy calls:
+
+* the tree is walked once; subexpressions made one node (``_shared_subexpressions``) are one
+  instruction;
+* what reads only literals is folded; what reads only the coordinates and literals (the
+  priming wave's ``x[1] / omega_3``) is computed once, as the interpreter's coordinates are
+  fixed too; what reads constants but no array (``c_0``, the time) stays a scalar;
+* every array instruction writes into a buffer of its own kind, reused once its value is no
+  longer read (liveness over the straight-line program);
+* ``a ** 2.0`` becomes ``np.square``, as numpy's ``**`` does for the interpreter: the same
+  numbers, without ``np.power``'s general loop (ten times slower at this size).
+
+The results equal the interpreter's bit for bit: the same operations in the same order, on
+the same float64 values.  An integrand with a node this program does not know (anything
+with a shape or free indices, a derivative, an argument) gives ``None`` from ``compile``, and
+the caller keeps the interpreter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from ufl import classes as uc
+
+from primordia.backends.ufl_numpy import _CONDITIONS, _MATH_FUNCTIONS
+
+#: How a node's value is known: at compile time, per run as a scalar, or per run as an array.
+FOLDED, SCALAR, ARRAY = "folded", "scalar", "array"
+
+
+class _Unsupported(Exception):
+    """A node the program cannot evaluate; :meth:`NodalProgram.compile` returns None."""
+
+
+def _power(exponent: float) -> Callable:
+    """``base ** exponent`` for a literal exponent, with numpy's own fast cases of ``**``."""
+    special = {2.0: np.square, 0.5: np.sqrt, -1.0: np.reciprocal}
+    if exponent in special:
+        ufunc = special[exponent]
+        return lambda base, out=None: ufunc(base, out=out)
+    if exponent == 1.0:
+        return lambda base, out=None: np.positive(base, out=out)
+    if exponent == 0.0:
+        return lambda base, out=None: np.power(base, 0.0, out=out)
+    return lambda base, out=None: np.power(base, exponent, out=out)
+
+
+def _conditional(mask, yes, no, out=None):
+    if out is None:
+        return yes if mask else no
+    np.copyto(out, no)
+    np.copyto(out, yes, where=mask)
+    return out
+
+
+def _first(value, out=None):
+    """Conj, Real, Variable: the operand itself (a copy into ``out`` when it is an array)."""
+    if out is None:
+        return value
+    np.copyto(out, value)
+    return out
+
+
+def _erf(value, out=None):
+    from scipy.special import erf
+
+    return erf(value, out=out) if out is not None else erf(value)
+
+
+_BINARY = {uc.Sum: np.add, uc.Product: np.multiply, uc.Division: np.divide, uc.Atan2: np.arctan2,
+           uc.MinValue: np.minimum, uc.MaxValue: np.maximum, **_CONDITIONS}
+
+
+class NodalProgram:
+    """Scalar integrands evaluated at ``size`` nodes as one straight-line numpy program.
+
+    ``read_field(function)`` gives a field's owned values (a 1D array of ``size``), and
+    ``read_constant(constant)`` a constant's value (an array, indexed for a component); both
+    are called at every :meth:`run`, so the program follows the fields and the time.
+    """
+
+    def __init__(self, roots: Sequence, coordinates: np.ndarray, read_field: Callable, read_constant: Callable):
+        self.size = coordinates.shape[1]
+        self._coordinates = coordinates
+        self._read_field, self._read_constant = read_field, read_constant
+        self._slots: dict[int, int] = {}  # node id -> register
+        self._kinds: dict[int, str] = {}
+        self._registers: list = []
+        self._loads: list[tuple[int, Callable, object]] = []  # (register, reader, what): fields and constants
+        self._code: list[tuple[Callable, int, tuple[int, ...], object]] = []  # (function, target, operands, buffer kind)
+        for root in roots:
+            self._compile(root)
+        self._roots = [self._slots[id(root)] for root in roots]
+        self._buffers = self._allocate()
+
+    @classmethod
+    def compile(cls, roots: Sequence, coordinates: np.ndarray, read_field: Callable,
+                read_constant: Callable) -> NodalProgram | None:
+        """The program of ``roots`` (scalar UFL integrands), or None when one has a node it cannot run."""
+        try:
+            return cls(roots, coordinates, read_field, read_constant)
+        except _Unsupported:
+            return None
+
+    # -- compiling --------------------------------------------------------------------------
+    def _register(self, node, kind: str, value=None) -> int:
+        self._slots[id(node)] = len(self._registers)
+        self._kinds[id(node)] = kind
+        self._registers.append(value)
+        return self._slots[id(node)]
+
+    def _compile(self, root) -> None:
+        stack = [root]
+        while stack:
+            node = stack[-1]
+            if id(node) in self._slots:
+                stack.pop()
+                continue
+            pending = [op for op in self._operands(node) if id(op) not in self._slots]
+            if pending:
+                stack.extend(pending)
+                continue
+            stack.pop()
+            self._instruction(node)
+
+    @staticmethod
+    def _operands(node) -> tuple:
+        if isinstance(node, uc.MultiIndex) or node.ufl_shape or node.ufl_free_indices:
+            raise _Unsupported(type(node).__name__)
+        if isinstance(node, (uc.Indexed, uc.Terminal)):
+            return ()  # an Indexed is read whole (a component of a constant or of the coordinates)
+        if isinstance(node, uc.Variable):
+            return node.ufl_operands[:1]
+        return node.ufl_operands
+
+    def _instruction(self, node) -> None:
+        if isinstance(node, uc.ScalarValue) and not isinstance(node, uc.ComplexValue):
+            self._register(node, FOLDED, np.float64(node.value()))
+        elif isinstance(node, uc.Zero):
+            self._register(node, FOLDED, np.float64(0.0))
+        elif isinstance(node, uc.Constant):
+            self._loads.append((self._register(node, SCALAR), self._constant_reader(()), node))
+        elif isinstance(node, uc.Coefficient):
+            self._loads.append((self._register(node, ARRAY), self._read_field, node))
+        elif isinstance(node, uc.Indexed):
+            self._component(node)
+        elif type(node) in _BINARY:
+            self._operation(node, _BINARY[type(node)])
+        elif isinstance(node, uc.Power):
+            base, exponent = node.ufl_operands
+            if isinstance(exponent, uc.ScalarValue) and not isinstance(exponent, uc.ComplexValue):
+                self._operation(node, _power(float(exponent.value())), operands=(base,))
+            else:
+                self._operation(node, np.power)
+        elif type(node) in _MATH_FUNCTIONS:
+            self._operation(node, _MATH_FUNCTIONS[type(node)])
+        elif isinstance(node, uc.Abs):
+            self._operation(node, np.absolute)
+        elif isinstance(node, uc.Erf):
+            self._operation(node, _erf)
+        elif isinstance(node, uc.NotCondition):
+            self._operation(node, np.logical_not)
+        elif isinstance(node, uc.Conditional):
+            self._operation(node, _conditional)
+        elif isinstance(node, (uc.Conj, uc.Real, uc.Variable)):
+            self._operation(node, _first, operands=node.ufl_operands[:1])
+        else:
+            raise _Unsupported(type(node).__name__)
+
+    def _constant_reader(self, index: tuple) -> Callable:
+        read = self._read_constant
+        return lambda constant: np.float64(np.asarray(read(constant), dtype=float)[index])
+
+    def _component(self, node) -> None:
+        expression, multiindex = node.ufl_operands
+        if not all(isinstance(i, uc.FixedIndex) for i in multiindex):
+            raise _Unsupported("Indexed by a free index")
+        index = tuple(int(i) for i in multiindex)
+        if isinstance(expression, uc.SpatialCoordinate) and len(index) == 1:
+            self._register(node, FOLDED, np.ascontiguousarray(self._coordinates[index[0]], dtype=float))
+        elif isinstance(expression, uc.Constant):
+            self._loads.append((self._register(node, SCALAR), self._constant_reader(index), expression))
+        else:
+            raise _Unsupported(f"Indexed {type(expression).__name__}")
+
+    def _operation(self, node, function: Callable, operands: Sequence | None = None) -> None:
+        operands = tuple(node.ufl_operands if operands is None else operands)
+        slots = tuple(self._slots[id(op)] for op in operands)
+        kinds = {self._kinds[id(op)] for op in operands}
+        is_array = ARRAY in kinds or any(isinstance(self._registers[s], np.ndarray) and self._registers[s].ndim
+                                         for s in slots)
+        if kinds == {FOLDED}:  # literals, and the coordinates: computed once, here
+            with np.errstate(all="ignore"):
+                self._register(node, FOLDED, function(*(self._registers[s] for s in slots)))
+            return
+        if not is_array:
+            self._code.append((function, self._register(node, SCALAR), slots, None))
+            return
+        boolean = isinstance(node, uc.Condition)
+        self._code.append((function, self._register(node, ARRAY), slots, bool if boolean else float))
+
+    def _allocate(self) -> list:
+        """A buffer for each array instruction: a row of the result for the integrands themselves, and
+        otherwise one shared by instructions whose values do not overlap in time."""
+        self._result = np.empty((len(self._roots), self.size))
+        computed = {target for _, target, _, dtype in self._code if dtype is float}
+        rows = {}  # register -> the row of the result it is computed into
+        for index, slot in enumerate(self._roots):
+            if slot in computed:
+                rows.setdefault(slot, index)
+        last_read = {}
+        for position, (_, _, operands, _) in enumerate(self._code):
+            for slot in operands:
+                last_read[slot] = position
+        free: dict[type, list[np.ndarray]] = {float: [], bool: []}
+        held: dict[int, np.ndarray] = {}
+        buffers = []
+        for position, (_, target, operands, dtype) in enumerate(self._code):
+            if dtype is None:
+                buffers.append(None)
+                continue
+            if target in rows:
+                buffers.append(self._result[rows[target]])
+            else:
+                # taken before the operands' buffers are given back: no instruction writes over what it
+                # reads (a conditional copies one branch in, then the other)
+                held[target] = free[dtype].pop() if free[dtype] else np.empty(self.size, dtype=dtype)
+                buffers.append(held[target])
+            for slot in set(operands):
+                if last_read[slot] == position and slot in held:
+                    released = held.pop(slot)
+                    free[bool if released.dtype == bool else float].append(released)
+        # what is not computed into its row (a field, a constant, a value read twice) is copied in
+        self._copies = [(self._result[index], slot) for index, slot in enumerate(self._roots) if rows.get(slot) != index]
+        return buffers
+
+    # -- running ----------------------------------------------------------------------------
+    def run(self) -> np.ndarray:
+        """The integrands' values at the nodes, (number of integrands, size).
+
+        The same array every time: the next run overwrites it.
+        """
+        registers = self._registers
+        for slot, reader, what in self._loads:
+            registers[slot] = reader(what)
+        with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
+            for (function, target, operands, _), buffer in zip(self._code, self._buffers):
+                if buffer is None:
+                    registers[target] = function(*[registers[s] for s in operands])
+                else:
+                    registers[target] = function(*[registers[s] for s in operands], out=buffer)
+        for row, slot in self._copies:
+            row[...] = registers[slot]
+        return self._result
