@@ -227,3 +227,51 @@ def test_an_interrupted_summary_write_leaves_the_previous_summary(tmp_path, monk
     assert leftovers(tmp_path) == []
     summary.finish(run, "completed")
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "completed"
+
+
+# ---------------------------------------------------------------------------
+# pictures shared out over the ranks
+# ---------------------------------------------------------------------------
+class _TwoRanks:
+    """rank 0 of a two-rank communicator whose scatter keeps what each rank was given."""
+
+    size, rank = 2, 0
+
+    def __init__(self):
+        self.shares = None
+
+    def scatter(self, shares, root=0):
+        self.shares = shares
+        return shares[0]
+
+
+class _Root:
+    def __init__(self, comm, mesh_data=None):
+        self.comm, self.is_root, self.mesh_data = comm, True, mesh_data
+
+
+def test_the_pictures_of_one_moment_are_shared_out_largest_first():
+    from primordia.core.outputs import _draw_shared
+
+    drawn = []
+    draw = lambda path, mesh, **arguments: drawn.append(path)  # noqa: E731
+    comm = _TwoRanks()
+    # example 1a's end: m's grid of four snapshots and the four fields; then one with three small ones
+    _draw_shared(_Root(comm), lambda: [(4, draw, "m_snapshots.png", {}), (4, draw, "final_fields.png", {})])
+    assert [[path for _, _, path, _ in share] for share in comm.shares] == [["m_snapshots.png"], ["final_fields.png"]]
+    assert drawn == ["m_snapshots.png"]  # rank 0 draws its own share only
+    _draw_shared(_Root(comm), lambda: [(1, draw, "a", {}), (3, draw, "b", {}), (1, draw, "c", {}), (1, draw, "d", {})])
+    assert [[path for _, _, path, _ in share] for share in comm.shares] == [["b"], ["a", "c", "d"]]
+
+
+def test_a_failure_listing_the_pictures_still_hands_the_other_ranks_their_share():
+    """Rank 0 failing before the scatter would leave rank 1 waiting in it forever."""
+    from primordia.core.outputs import _draw_shared
+
+    def pictures():
+        raise KeyError("m")
+
+    comm = _TwoRanks()
+    with pytest.raises(KeyError):
+        _draw_shared(_Root(comm), pictures)
+    assert comm.shares == [[], []]
