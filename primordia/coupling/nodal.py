@@ -280,14 +280,18 @@ class NodalForm:
         self._masses = [mass.getArray(readonly=True).copy() for mass in masses]
         self._group = group
         self._first = group.join(self, [value for _, value in terms])
+        self._term = None  # scratch of assemble, for a form over several measures
 
     def assemble(self, b=None):
         """The assembled vector (PETSc Vec of the owned DOFs; ``b`` is filled when given)."""
         values = self._group.values(self._first, len(self._masses))
-        total = self._masses[0] * values[0]
-        for lumped_mass, value in zip(self._masses[1:], values[1:]):
-            total += lumped_mass * value
         if b is None:
             b = self._template.duplicate()
-        b.setArray(total)
+        total = b.getArray()  # written in place: no temporaries, no copy
+        np.multiply(self._masses[0], values[0], out=total)
+        if len(self._masses) > 1:
+            if self._term is None:
+                self._term = np.empty_like(total)
+            for lumped_mass, value in zip(self._masses[1:], values[1:]):
+                total += np.multiply(lumped_mass, value, out=self._term)
         return b

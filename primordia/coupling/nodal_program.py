@@ -82,6 +82,34 @@ _BINARY = {uc.Sum: np.add, uc.Product: np.multiply, uc.Division: np.divide, uc.A
            uc.MinValue: np.minimum, uc.MaxValue: np.maximum, **_CONDITIONS}
 
 
+def _negated(node):
+    """``a`` when ``node`` is UFL's ``-a`` (the product of -1 and ``a``), else None."""
+    if isinstance(node, uc.Product):
+        factor, other = node.ufl_operands
+        if isinstance(factor, uc.ScalarValue) and not isinstance(factor, uc.ComplexValue) and factor.value() == -1:
+            return other
+    return None
+
+
+def _difference(node) -> tuple | None:
+    """(a, b) when the sum ``node`` is UFL's ``a - b``, ``a + (-1 b)`` in either order, else None.
+
+    In IEEE arithmetic a + (-b) is a - b exactly: one operation less, the same number.
+    """
+    first, second = node.ufl_operands
+    if _negated_once(second) is not None:
+        return first, _negated_once(second)
+    if _negated_once(first) is not None:
+        return second, _negated_once(first)
+    return None
+
+
+def _negated_once(node):
+    """``a`` when ``node`` is ``-a`` and ``a`` is not itself a negation (``-(-a)`` is ``a``), else None."""
+    inner = _negated(node)
+    return inner if inner is not None and _negated(inner) is None else None
+
+
 class NodalProgram:
     """Scalar integrands evaluated at ``size`` nodes as one straight-line numpy program.
 
@@ -142,6 +170,10 @@ class NodalProgram:
             return ()  # an Indexed is read whole (a component of a constant or of the coordinates)
         if isinstance(node, uc.Variable):
             return node.ufl_operands[:1]
+        if _negated(node) is not None and _negated(_negated(node)) is not None:
+            return (_negated(_negated(node)),)
+        if isinstance(node, uc.Sum) and _difference(node) is not None:
+            return _difference(node)
         return node.ufl_operands
 
     def _instruction(self, node) -> None:
@@ -155,6 +187,11 @@ class NodalProgram:
             self._loads.append((self._register(node, ARRAY), self._read_field, node))
         elif isinstance(node, uc.Indexed):
             self._component(node)
+        elif _negated(node) is not None and _negated(_negated(node)) is not None:  # -(-a): a itself
+            inner = _negated(_negated(node))
+            self._slots[id(node)], self._kinds[id(node)] = self._slots[id(inner)], self._kinds[id(inner)]
+        elif isinstance(node, uc.Sum) and _difference(node) is not None:  # a + (-1 b): a - b, the same number
+            self._operation(node, np.subtract, operands=_difference(node))
         elif type(node) in _BINARY:
             self._operation(node, _BINARY[type(node)])
         elif isinstance(node, uc.Power):

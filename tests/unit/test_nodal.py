@@ -111,6 +111,7 @@ def test_the_compiled_program_gives_the_interpreters_numbers_bit_for_bit(backend
         ufl.max_value(m, k[1]) * ufl.min_value(e, k[0]) + m ** 3.0 + m ** t + ufl.atan_2(m, e) + ufl.ln(m) * ufl.erf(e),
         m,
         t * k[0] + 2.0,
+        -(-(m * e)) - 2.0 * m + (-e + 3.0),  # -(-a) is a; a + (-1 b) is a - b, in either order
     ]
     context = _NodeContext(backend, m.ufl_function_space())
     program = NodalProgram.compile(integrands, context.coordinates, context.field, context.constant)
@@ -122,11 +123,16 @@ def test_the_compiled_program_gives_the_interpreters_numbers_bit_for_bit(backend
         got = program.run()
         assert got.shape == expected.shape
         assert np.array_equal(got, expected)
-    # buffers are shared by values that do not overlap in time (here 51 instructions, 14 buffers), and the
-    # integrands are computed into the result but for the two that are read whole (m and a constant)
+    # buffers are shared by values that do not overlap in time, and the integrands are computed into the
+    # result but for the two that are read whole (m and a constant)
     arrays = [buffer for buffer in program._buffers if buffer is not None]
     assert len({id(buffer) for buffer in arrays}) < len(arrays) / 2
     assert len(program._copies) == 2
+    # the last integrand: -(-a) is a, and a + (-1 b) is a - b: no multiplication by -1 is left
+    last = NodalProgram.compile(integrands[-1:], context.coordinates, context.field, context.constant)
+    assert sorted(function.__name__ for function, *_ in last._code) == ["add", "multiply", "multiply", "subtract",
+                                                                       "subtract"]
+    assert np.array_equal(last.run(), expected[-1:])
 
 
 def test_an_integrand_the_program_does_not_know_keeps_the_interpreter(backend):
