@@ -400,7 +400,13 @@ class Simulation:
         group = key.partition("/")[0]
         cache = self._checkpoint_orders
         if group not in cache:
-            parts = self.comm.gather(self._dof_keys(key, function), root=0)
+            mine = self._dof_keys(key, function)
+            # groups laid out alike (example 1a's four species) share their keys (_dof_keys), and so their order
+            alike = next((other for other, keys in self._dof_key_cache.items() if keys is mine and other in cache), None)
+            if alike is not None:
+                cache[group] = cache[alike]
+                return cache[group]
+            parts = self.comm.gather(mine, root=0)
             if self.is_root:
                 keys = np.concatenate(parts)
                 order = np.argsort(_rows(keys), kind="stable")
@@ -421,6 +427,18 @@ class Simulation:
             return cache[group]
         fields, gdim = self.disc.group_fields(group), self.mesh_data.gdim
         space = function.ufl_function_space()
+        # a group of one field whose DOFs are another such group's (the species of example 1a) has its keys:
+        # the same markers, components and coordinates.  All ranks decide together (the next step gathers).
+        for other, keys in cache.items():
+            others = self.disc.group_fields(other)
+            alike = (len(fields) == len(others) == 1
+                     and self.disc.field(fields[0]).ufl_shape == self.disc.field(others[0]).ufl_shape
+                     and self.backend.shares_dofs(space, self.disc.group_function(other).ufl_function_space()))
+            if self.comm.size > 1:
+                alike = self.comm.allreduce(alike, op=_mpi_min())
+            if alike:
+                cache[group] = keys
+                return keys
         scratch = self.backend.function(space, "dof_keys")
         owned = self.backend.petsc_vector(scratch).getLocalSize()
         scale = 1e-9 * float(np.max(np.ptp(self.mesh_data.points, axis=0)))
@@ -887,6 +905,12 @@ def _mpi_max():
     from mpi4py import MPI
 
     return MPI.MAX
+
+
+def _mpi_min():
+    from mpi4py import MPI
+
+    return MPI.MIN
 
 
 class _NoBar:
