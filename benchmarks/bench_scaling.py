@@ -20,8 +20,13 @@ split its work perfectly would reach at most RANKS x (alone / at once), the "cei
 speedup near the ceiling means the parallel algorithm loses little; the gap to RANKS is the
 machine's, not the code's.
 
+``--as-shipped`` runs each example as its TOML file states it (its mesh, its time span, its outputs and
+pictures: what ``primordia run examples/EX.toml`` does) and prints instead the wall time of the whole
+command, from start to exit, and its speedup: set-up, imports, every output and picture included.
+
     .venv/bin/python benchmarks/bench_scaling.py                         # examples 1a, 2a, 4 (small)
     .venv/bin/python benchmarks/bench_scaling.py --examples ex04_small --set 'mesh.cells=[40,40,4]' --steps 3
+    .venv/bin/python benchmarks/bench_scaling.py --examples ex01a --as-shipped --repeats 3   # the full 2,600 steps
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,16 +52,26 @@ CASES = {
 WHOLE, LATER = "ms_per_step", "ms_per_step_after_first"
 
 
-def run(example: str, ranks: int, steps: int | None, extra: list[str], out: Path) -> dict:
-    return finish(example, ranks, start(example, ranks, steps, extra, out), out)
+#: summary key of --as-shipped: the command's wall time in seconds
+COMMAND = "command_s"
 
 
-def start(example: str, ranks: int, steps: int | None, extra: list[str], out: Path) -> subprocess.Popen:
+def run(example: str, ranks: int, steps: int | None, extra: list[str], out: Path, shipped: bool = False) -> dict:
+    began = time.perf_counter()
+    summary = finish(example, ranks, start(example, ranks, steps, extra, out, shipped), out)
+    summary[COMMAND] = time.perf_counter() - began
+    return summary
+
+
+def start(example: str, ranks: int, steps: int | None, extra: list[str], out: Path,
+          shipped: bool = False) -> subprocess.Popen:
     cells, dt, default_steps = CASES[example]
     steps = steps or default_steps
-    command = [sys.executable, "-m", "primordia.cli", "run", str(ROOT / f"examples/{example}.toml"), "--out", str(out),
-               "--set", f"mesh.cells={cells}", "--set", f"time.t_final={steps * dt}",
-               "--set", f"output.times=[{steps * dt}]", "--set", "output.pictures=false", "--no-progress", "--overwrite", *extra]
+    command = [sys.executable, "-m", "primordia.cli", "run", str(ROOT / f"examples/{example}.toml"), "--out", str(out)]
+    if not shipped:
+        command += ["--set", f"mesh.cells={cells}", "--set", f"time.t_final={steps * dt}",
+                    "--set", f"output.times=[{steps * dt}]", "--set", "output.pictures=false"]
+    command += ["--no-progress", "--overwrite", *extra]
     if ranks > 1:
         command = ["mpirun", "-n", str(ranks), *command]
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
@@ -98,9 +114,13 @@ def main() -> None:
                         help="run each rank count this many times, alternating; print the medians and the range")
     parser.add_argument("--ceiling", action="store_true",
                         help="also run RANKS serial copies at once and print the speedup the machine allows")
+    parser.add_argument("--as-shipped", action="store_true",
+                        help="run each example as its TOML states it and time the whole command")
     args = parser.parse_args()
     extra = [a for s in args.set for a in ("--set", s)]
     n = args.ranks
+    if args.as_shipped:
+        return as_shipped(args, extra)
     print(f"{'':>21} {'--- the whole run (first step amortised) ---':>46}   {'--- the steps after the first ---':>46}")
     print(f"{'example':>11} {'dofs':>9} {'1 rank ms/step':>15} {f'{n} ranks ms/step':>16} {'speedup':>8}   "
           f"{'1 rank ms/step':>15} {f'{n} ranks ms/step':>16} {'speedup':>8} {'max rel. difference':>20}"
@@ -132,6 +152,29 @@ def main() -> None:
             for ranks, summary in ((1, _median_run(serials)), (n, _median_run(parallels))):
                 shares = ", ".join(f"{name} {ms:.1f}" for name, ms in summary["linear_solve_ms_per_step"].items())
                 print(f"{'':>11} linear solves on {ranks} rank(s), ms/step: {shares}", flush=True)
+
+
+def as_shipped(args, extra: list[str]) -> None:
+    """Each example as shipped: the command's wall time on 1 and on RANKS ranks, and the speedup."""
+    n = args.ranks
+    print(f"{'example':>11} {'dofs':>9} {'steps':>6} {'1 rank s':>9} {f'{n} ranks s':>10} {'speedup':>8}   "
+          f"{'ms/step after the first':>24} {'max rel. difference':>20}", flush=True)
+    for example in args.examples:
+        out = Path(f"/tmp/primordia-bench-scaling/{example}-shipped")
+        serials, parallels = [], []
+        for _ in range(args.repeats):  # alternating, so that a slow spell of the machine touches all
+            serials.append(run(example, 1, None, extra, out / "np1", shipped=True))
+            parallels.append(run(example, n, None, extra, out / f"np{n}", shipped=True))
+        serial, parallel = _median(serials, COMMAND), _median(parallels, COMMAND)
+        later = f"{_median(serials, LATER):.1f} / {_median(parallels, LATER):.1f}"
+        print(f"{example:>11} {serials[0]['dofs_total']:>9} {serials[0]['steps']:>6} {serial:>9.1f} {parallel:>10.1f} "
+              f"{serial / parallel:>8.2f}   {later:>24} "
+              f"{largest_difference(_median_run(serials), _median_run(parallels)):>20.1e}", flush=True)
+        if args.repeats > 1:
+            speedups = [s[COMMAND] / p[COMMAND] for s, p in zip(serials, parallels)]
+            print(f"{'':>11} {args.repeats} runs each: 1 rank {_span(serials, COMMAND)} s, {n} ranks "
+                  f"{_span(parallels, COMMAND)} s; speedups of the alternating pairs "
+                  f"{', '.join(f'{x:.2f}' for x in speedups)}", flush=True)
 
 
 def _median(summaries: list[dict], key: str) -> float:
