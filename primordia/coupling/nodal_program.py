@@ -18,7 +18,9 @@ took 1.06 ms a step that way, most of it neither arithmetic nor memory traffic.
 * every array instruction writes into a buffer of its own kind, reused once its value is no
   longer read (liveness over the straight-line program);
 * ``a ** 2.0`` becomes ``np.square``, as numpy's ``**`` does for the interpreter: the same
-  numbers, without ``np.power``'s general loop (ten times slower at this size).
+  numbers, without ``np.power``'s general loop (ten times slower at this size);
+* UFL's ``a - b``, which it writes ``a + (-1 b)``, is one subtraction, and ``-(-a)`` is ``a``:
+  exact in IEEE arithmetic (e's program of example 1a: 30 -> 25 instructions).
 
 The results equal the interpreter's bit for bit: the same operations in the same order, on
 the same float64 values.  An integrand with a node this program does not know (anything
