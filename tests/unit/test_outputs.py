@@ -275,3 +275,28 @@ def test_a_failure_listing_the_pictures_still_hands_the_other_ranks_their_share(
     with pytest.raises(KeyError):
         _draw_shared(_Root(comm), pictures)
     assert comm.shares == [[], []]
+
+
+def test_a_run_stopped_early_draws_the_grid_of_the_snapshots_it_reached(tmp_path, monkeypatch):
+    """The grid of the snapshot times is drawn when the run ends, and a run that stops (here a Ctrl-C
+    after its third step) ends too: its grid holds the snapshots before the stop."""
+    from primordia.coupling.orchestrator import Simulation
+
+    model = Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03}, mesh=MESH, dt=0.2, t_final=1.0,
+                  output={"times": [0.2, 0.4, 0.8], "pictures": True})
+    sim = Simulation(model, backend="skfem", out_dir=tmp_path).setup()
+    step = Simulation.step
+
+    def interrupted(self):
+        if self.step_index == 3:
+            raise KeyboardInterrupt
+        step(self)
+
+    monkeypatch.setattr(Simulation, "step", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        sim.run()
+    assert sim.status.startswith("interrupted at t = 0.6")
+    pictures = {path.name for path in tmp_path.glob("*.png")}
+    assert pictures == {"m_t0000.20.png", "m_t0000.40.png", "m_snapshots.png", "final_fields.png"}
+    (output,) = [o for o in sim.outputs if o.name == "pictures"]
+    assert list(output.snapshots["m"]) == ["m, t = 0.2", "m, t = 0.4"]
