@@ -259,6 +259,13 @@ FORMS = {
                   ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))
         + ufl.inner(ufl.dot(ufl.Identity(s.gdim) + ufl.grad(s["u"]), ufl.grad(ufl.split(s.trial("Taylor-Hood"))[0])),
                     ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))) * ufl.dx,
+    # sums over the rows of a mixed test function's vector part, grad([v[0], v[1]]): unrolled where nothing
+    # else reads the summed index (example 1b's active-stress load, the traction), left whole where a field does
+    "sums over a mixed argument's rows": lambda s: (
+        ufl.inner(s["m"] * ufl.Identity(s.gdim), ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))
+        + ufl.inner(ufl.grad(s["u"]), ufl.grad(ufl.split(s.test("Taylor-Hood"))[0]))
+        + ufl.dot(s["u"], ufl.split(s.test("Taylor-Hood"))[0]) * s["m"]) * ufl.dx
+        + ufl.dot(ufl.as_vector([0.0] * (s.gdim - 1) + [s["m"]]), ufl.split(s.test("Taylor-Hood"))[0]) * ufl.ds,
     "tensor field": lambda s: ufl.inner(ufl.dot(s["T"], s["T"].T), ufl.grad(s.test("vector P1"))) * ufl.dx,
     # math functions
     "exp ln": lambda s: ufl.exp(-s["m"]) * ufl.ln(1 + s["c"] ** 2) * s.test("P2") * ufl.dx,
@@ -678,12 +685,29 @@ def test_an_integrand_rewired_by_ufl_after_its_analysis_still_assembles():
     assert backend.assemble_vector(form).array == pytest.approx(first, rel=1e-14)
 
 
+def test_a_sum_over_a_mixed_arguments_rows_is_unrolled_only_where_nothing_else_reads_its_index(skfem_setup):
+    """``inner(m I, grad v_u)`` on a Taylor-Hood test function is m (dv_0/dx_0 + dv_1/dx_1): no list tensor
+    left, each term one component's derivative; ``inner(grad u, grad v_u)`` keeps its sum (grad u reads the
+    index too).  Both assemble to the forms evaluated as written (to round-off)."""
+    from ufl.corealg.traversal import unique_pre_traversal
+
+    s = skfem_setup
+    v = ufl.split(s.test("Taylor-Hood"))[0]
+    load = ufl.inner(s["m"] * ufl.Identity(s.gdim), ufl.grad(v)) * ufl.dx
+    kept = ufl.inner(ufl.grad(s["u"]), ufl.grad(v)) * ufl.dx
+    (plan,) = preprocess_form(load)
+    assert not [o for o in unique_pre_traversal(plan.integrand) if isinstance(o, ufl.classes.ListTensor)]
+    assert isinstance(plan.integrand, ufl.classes.Sum), plan.integrand
+    (plan,) = preprocess_form(kept)
+    assert [o for o in unique_pre_traversal(plan.integrand) if isinstance(o, ufl.classes.ListTensor)]
+    for form in (load, kept):
+        assert_as_written(s, form, "_sum_over_rows")
+
+
 def test_sums_over_the_identity_are_eliminated_and_their_value_kept(skfem_setup):
     """``inner(m I, grad v)`` is evaluated as m div v: no identity is left where it is summed over, and the
     vector is the one of the form evaluated as written (to round-off)."""
     from ufl.corealg.traversal import unique_pre_traversal
-
-    from primordia.backends import ufl_numpy
 
     s = skfem_setup
     v = s.test("vector P2")
@@ -693,11 +717,18 @@ def test_sums_over_the_identity_are_eliminated_and_their_value_kept(skfem_setup)
     identities = [o for o in unique_pre_traversal(plan.integrand)
                   if isinstance(o, ufl.classes.Identity)]
     assert not identities, plan.integrand
-    contracted = s.backend.assemble_vector(form).array.copy()
-    written = ufl_numpy.contract_identities
+    assert_as_written(s, form, "contract_identities")
+
+
+def assert_as_written(s, form, rewrite: str) -> None:
+    """The vector of ``form`` equals, to round-off, the one assembled with ``ufl_numpy``'s ``rewrite`` left out."""
+    from primordia.backends import ufl_numpy
+
+    rewritten = s.backend.assemble_vector(form).array.copy()
+    kept = getattr(ufl_numpy, rewrite)
     try:
-        ufl_numpy.contract_identities = lambda expression: expression
+        setattr(ufl_numpy, rewrite, lambda expression: expression)
         as_written = s.backend.assemble_vector(ufl.replace(form, {})).array  # a new form: planned again
     finally:
-        ufl_numpy.contract_identities = written
-    assert np.abs(contracted - as_written).max() <= 1e-13 * np.abs(as_written).max()
+        setattr(ufl_numpy, rewrite, kept)
+    assert np.abs(rewritten - as_written).max() <= 1e-13 * np.abs(as_written).max()
