@@ -556,6 +556,24 @@ _ARGS, _POINTS = "AB", "YZ"
 _INDEX_LETTERS = string.ascii_lowercase + "CDEFGHIJKLMNOPQRSTUVWX"
 
 
+def post_order(root, done, operands: Callable = lambda node: node.ufl_operands):
+    """Each node under ``root`` (itself included) whose id is not in ``done``, after its ``operands``, without
+    recursion.  The caller puts a node's id in ``done`` before asking for the next, so a subexpression shared
+    in the tree comes once."""
+    stack = [root]
+    while stack:
+        node = stack[-1]
+        if id(node) in done:
+            stack.pop()
+            continue
+        pending = [op for op in operands(node) if id(op) not in done]
+        if pending:
+            stack.extend(pending)
+            continue
+        stack.pop()
+        yield node
+
+
 class _Analysis:
     """What evaluating an integrand needs to know beforehand, from one pass over its nodes.
 
@@ -577,17 +595,7 @@ class _Analysis:
         self.orders: dict[tuple[int, int | None], set[int]] = {}
         uses: dict[int, int] = {}
         self.memoised: set[int] = set()
-        stack = [root]
-        while stack:
-            node = stack[-1]
-            if id(node) in self.masks:
-                stack.pop()
-                continue
-            pending = [op for op in node.ufl_operands if id(op) not in self.masks]
-            if pending:
-                stack.extend(pending)
-                continue
-            stack.pop()
+        for node in post_order(root, self.masks):
             self.nodes.append(node)
             self.masks[id(node)] = mask = self._mask(node)
             for op in node.ufl_operands:

@@ -36,7 +36,7 @@ from ufl.algorithms.apply_algebra_lowering import apply_algebra_lowering
 from ufl.algorithms.apply_derivatives import apply_derivatives
 from ufl.corealg.traversal import unique_pre_traversal
 
-from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand
+from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, post_order
 from primordia.coupling.nodal_program import NodalProgram
 
 #: Node types an integrand single-valued at the vertices may not contain (after lowering).
@@ -183,17 +183,7 @@ def _shared_subexpressions(expression, canonical: dict):
     production, its loss and the Jacobian's diagonal, each written out by the kinetics.
     """
     mapped: dict[int, object] = {}  # by the id of a node of ``expression``: its representative
-    stack = [expression]
-    while stack:
-        node = stack[-1]
-        if id(node) in mapped:
-            stack.pop()
-            continue
-        pending = [op for op in node.ufl_operands if id(op) not in mapped]
-        if pending:
-            stack.extend(pending)
-            continue
-        stack.pop()
+    for node in post_order(expression, mapped):
         operands = tuple(mapped[id(op)] for op in node.ufl_operands)
         rebuilt = node
         if any(new is not old for new, old in zip(operands, node.ufl_operands)):

@@ -35,7 +35,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from ufl import classes as uc
 
-from primordia.backends.ufl_numpy import _CONDITIONS, _MATH_FUNCTIONS
+from primordia.backends.ufl_numpy import _CONDITIONS, _MATH_FUNCTIONS, post_order
 
 #: How a node's value is known: at compile time, per run as a scalar, or per run as an array.
 FOLDED, SCALAR, ARRAY = "folded", "scalar", "array"
@@ -151,17 +151,7 @@ class NodalProgram:
         return self._slots[id(node)]
 
     def _compile(self, root) -> None:
-        stack = [root]
-        while stack:
-            node = stack[-1]
-            if id(node) in self._slots:
-                stack.pop()
-                continue
-            pending = [op for op in self._operands(node) if id(op) not in self._slots]
-            if pending:
-                stack.extend(pending)
-                continue
-            stack.pop()
+        for node in post_order(root, self._slots, self._operands):
             self._instruction(node)
 
     @staticmethod
