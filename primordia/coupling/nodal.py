@@ -244,11 +244,9 @@ class NodalGroup:
             if self._program:
                 self._values = self._program.run()
             else:
-                size = self._context.size
-                with np.errstate(all="ignore"):  # as the interpreter: a NaN shows in the result, not as a warning
-                    evaluated = evaluate_integrand(self._expression, self._context)
+                evaluated = evaluate_integrand(self._expression, self._context)  # a NaN shows, unwarned
                 self._values = np.broadcast_to(np.reshape(evaluated, (len(self._integrands), -1)),
-                                               (len(self._integrands), size))
+                                               (len(self._integrands), self._context.size))
             self._served = set()
         self._served.add(first)
         return self._values[first:first + count]

@@ -66,22 +66,40 @@ def _conditional(mask, yes, no, out=None):
     return out
 
 
-def _first(value, out=None):
-    """Conj, Real, Variable: the operand itself (a copy into ``out`` when it is an array)."""
-    if out is None:
-        return value
-    np.copyto(out, value)
-    return out
-
-
-def _erf(value, out=None):
-    from scipy.special import erf
-
-    return erf(value, out=out) if out is not None else erf(value)
-
-
 _BINARY = {uc.Sum: np.add, uc.Product: np.multiply, uc.Division: np.divide, uc.Atan2: np.arctan2,
            uc.MinValue: np.minimum, uc.MaxValue: np.maximum, **_CONDITIONS}
+_UNARY = {**_MATH_FUNCTIONS, uc.Abs: np.absolute, uc.NotCondition: np.logical_not}
+
+#: The "operation" of a node whose value is one of its operands' (-(-a), Conj, Real, Variable): no instruction.
+_ALIAS = object()
+
+
+def _operation_of(node) -> tuple:
+    """(the numpy function, its operands) that compute an operator node, or (``_ALIAS``, (a,)) when the
+    node's value is a's.  The one place that says what each operator is: the operands to compile first and
+    the instruction both come from here."""
+    inner = _negated(node)
+    if inner is not None and _negated(inner) is not None:
+        return _ALIAS, (_negated(inner),)  # -(-a): a itself
+    if isinstance(node, (uc.Conj, uc.Real, uc.Variable)):  # the identity on real scalars (a Variable's label aside)
+        return _ALIAS, node.ufl_operands[:1]
+    if isinstance(node, uc.Sum) and _difference(node) is not None:
+        return np.subtract, _difference(node)  # a + (-1 b): a - b, the same number
+    if isinstance(node, uc.Power):
+        base, exponent = node.ufl_operands
+        if isinstance(exponent, uc.ScalarValue) and not isinstance(exponent, uc.ComplexValue):
+            return _power(float(exponent.value())), (base,)
+        return np.power, node.ufl_operands
+    if isinstance(node, uc.Erf):
+        from scipy.special import erf  # a ufunc, as the interpreter's; imported only when an integrand needs it
+
+        return erf, node.ufl_operands
+    if isinstance(node, uc.Conditional):
+        return _conditional, node.ufl_operands
+    function = _UNARY.get(type(node)) or _BINARY.get(type(node))
+    if function is None:
+        raise _Unsupported(type(node).__name__)
+    return function, node.ufl_operands
 
 
 def _negated(node):
@@ -160,13 +178,7 @@ class NodalProgram:
             raise _Unsupported(type(node).__name__)
         if isinstance(node, (uc.Indexed, uc.Terminal)):
             return ()  # an Indexed is read whole (a component of a constant or of the coordinates)
-        if isinstance(node, uc.Variable):
-            return node.ufl_operands[:1]
-        if _negated(node) is not None and _negated(_negated(node)) is not None:
-            return (_negated(_negated(node)),)
-        if isinstance(node, uc.Sum) and _difference(node) is not None:
-            return _difference(node)
-        return node.ufl_operands
+        return _operation_of(node)[1]
 
     def _instruction(self, node) -> None:
         if isinstance(node, uc.ScalarValue) and not isinstance(node, uc.ComplexValue):
@@ -179,33 +191,15 @@ class NodalProgram:
             self._loads.append((self._register(node, ARRAY), self._read_field, node))
         elif isinstance(node, uc.Indexed):
             self._component(node)
-        elif _negated(node) is not None and _negated(_negated(node)) is not None:  # -(-a): a itself
-            inner = _negated(_negated(node))
-            self._slots[id(node)], self._kinds[id(node)] = self._slots[id(inner)], self._kinds[id(inner)]
-        elif isinstance(node, uc.Sum) and _difference(node) is not None:  # a + (-1 b): a - b, the same number
-            self._operation(node, np.subtract, operands=_difference(node))
-        elif type(node) in _BINARY:
-            self._operation(node, _BINARY[type(node)])
-        elif isinstance(node, uc.Power):
-            base, exponent = node.ufl_operands
-            if isinstance(exponent, uc.ScalarValue) and not isinstance(exponent, uc.ComplexValue):
-                self._operation(node, _power(float(exponent.value())), operands=(base,))
-            else:
-                self._operation(node, np.power)
-        elif type(node) in _MATH_FUNCTIONS:
-            self._operation(node, _MATH_FUNCTIONS[type(node)])
-        elif isinstance(node, uc.Abs):
-            self._operation(node, np.absolute)
-        elif isinstance(node, uc.Erf):
-            self._operation(node, _erf)
-        elif isinstance(node, uc.NotCondition):
-            self._operation(node, np.logical_not)
-        elif isinstance(node, uc.Conditional):
-            self._operation(node, _conditional)
-        elif isinstance(node, (uc.Conj, uc.Real, uc.Variable)):
-            self._operation(node, _first, operands=node.ufl_operands[:1])
-        else:
+        elif isinstance(node, uc.Terminal):
             raise _Unsupported(type(node).__name__)
+        else:
+            function, operands = _operation_of(node)
+            if function is _ALIAS:
+                (inner,) = operands
+                self._slots[id(node)], self._kinds[id(node)] = self._slots[id(inner)], self._kinds[id(inner)]
+            else:
+                self._operation(node, function, operands)
 
     def _constant_reader(self, index: tuple) -> Callable:
         read = self._read_constant
@@ -223,8 +217,7 @@ class NodalProgram:
         else:
             raise _Unsupported(f"Indexed {type(expression).__name__}")
 
-    def _operation(self, node, function: Callable, operands: Sequence | None = None) -> None:
-        operands = tuple(node.ufl_operands if operands is None else operands)
+    def _operation(self, node, function: Callable, operands: Sequence) -> None:
         slots = tuple(self._slots[id(op)] for op in operands)
         kinds = {self._kinds[id(op)] for op in operands}
         is_array = ARRAY in kinds or any(isinstance(self._registers[s], np.ndarray) and self._registers[s].ndim

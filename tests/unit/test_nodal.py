@@ -113,6 +113,7 @@ def test_the_compiled_program_gives_the_interpreters_numbers_bit_for_bit(backend
         t * k[0] + 2.0,
         -(-(m * e)) - 2.0 * m + (-e + 3.0),  # -(-a) is a; a + (-1 b) is a - b, in either order
     ]
+    integrands.insert(-1, ufl.conj(m) * ufl.real(e) + ufl.variable(m * e))  # the operand's value itself
     context = _NodeContext(backend, m.ufl_function_space())
     program = NodalProgram.compile(integrands, context.coordinates, context.field, context.constant)
     assert program is not None
