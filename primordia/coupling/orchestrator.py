@@ -78,9 +78,8 @@ class Simulation:
         self._state_version = 0  # counts accepted sub-steps and restores: vertex values are cached per version
         self._vertex_cache: tuple[int, dict] | None = None
         self._statistics_cache: tuple[int, dict] | None = None  # field_statistics, per version likewise
-        # parallel checkpoints, by state group: each owned DOF's key, and rank 0's order of the gathered keys
-        self._dof_key_cache: dict[str, np.ndarray] = {}
-        self._checkpoint_orders: dict[str, tuple[np.ndarray, np.ndarray] | None] = {}
+        # parallel checkpoints: each state group's DOF layout (_DofLayout; groups laid out alike share one)
+        self._dof_layouts: dict[str, _DofLayout] = {}
         self._solver_dt = model.dt
         self._wall_before = 0.0  # wall time of the earlier parts of a restarted run
         self._checkpoint_step: int | None = None
@@ -364,7 +363,7 @@ class Simulation:
             owned = self.backend.petsc_vector(function)
             values = tree["fields"].get(key)
             if values is not None and self.comm.size > 1:
-                stored, mine = _rows(tree["layout"][key]), _rows(self._dof_keys(key, function))
+                stored, mine = _rows(tree["layout"][key]), _rows(self._dof_layout(key, function).keys)
                 at = np.minimum(np.searchsorted(stored, mine), len(stored) - 1)
                 wrong |= not np.array_equal(stored[at], mine)
                 values = values[at]
@@ -393,43 +392,35 @@ class Simulation:
         self._state_version += 1
 
     def _checkpoint_order(self, key: str, function) -> tuple[np.ndarray, np.ndarray] | None:
-        """On rank 0, (the permutation from the ranks' owned DOFs, gathered in rank order, to the order of their
-        keys; the keys in that order) of ``key``'s group; None elsewhere.  Collective the first time for a group,
-        then kept: the partition holds for the run, and sorting the keys of each of example 1a's eight state
-        vectors at 171^2 took 24 ms of a 49 ms checkpoint on 2 ranks."""
-        group = key.partition("/")[0]
-        cache = self._checkpoint_orders
-        if group not in cache:
-            mine = self._dof_keys(key, function)
-            # groups laid out alike (example 1a's four species) share their keys (_dof_keys), and so their order
-            alike = next((other for other, keys in self._dof_key_cache.items() if keys is mine and other in cache), None)
-            if alike is not None:
-                cache[group] = cache[alike]
-                return cache[group]
-            parts = self.comm.gather(mine, root=0)
+        """:attr:`_DofLayout.order` of ``key``'s group.  Collective the first time for a layout, then kept: the
+        partition holds for the run, and sorting the keys of each of example 1a's eight state vectors at 171^2
+        took 24 ms of a 49 ms checkpoint on 2 ranks."""
+        layout = self._dof_layout(key, function)
+        if not layout.sorted:
+            parts = self.comm.gather(layout.keys, root=0)
             if self.is_root:
                 keys = np.concatenate(parts)
                 order = np.argsort(_rows(keys), kind="stable")
-                cache[group] = (order, keys[order])
-            else:
-                cache[group] = None
-        return cache[group]
+                layout.order = (order, keys[order])
+            layout.sorted = True
+        return layout.order
 
-    def _dof_keys(self, key: str, function) -> np.ndarray:
-        """(field, component, node coordinates in units of 1e-9 of the domain) of each owned DOF, as integers.
+    def _dof_layout(self, key: str, function) -> "_DofLayout":
+        """The layout of ``key``'s group, whose keys are (field, component, node coordinates in units of 1e-9 of
+        the domain) of each owned DOF, as integers.
 
         The same DOF has the same key whatever the mesh partition: found by interpolating a
         marker, the component index and each coordinate into a scratch function of the space.
         """
         group = key.partition("/")[0]
-        cache = self._dof_key_cache
+        cache = self._dof_layouts
         if group in cache:
             return cache[group]
         fields, gdim = self.disc.group_fields(group), self.mesh_data.gdim
         space = function.ufl_function_space()
         # a group of one field whose DOFs are another such group's (the species of example 1a) has its keys:
         # the same markers, components and coordinates.  All ranks decide together (the next step gathers).
-        for other, keys in cache.items():
+        for other, layout in cache.items():
             others = self.disc.group_fields(other)
             alike = (len(fields) == len(others) == 1
                      and self.disc.field(fields[0]).ufl_shape == self.disc.field(others[0]).ufl_shape
@@ -437,8 +428,8 @@ class Simulation:
             if self.comm.size > 1:
                 alike = self.comm.allreduce(alike, op=_mpi_min())
             if alike:
-                cache[group] = keys
-                return keys
+                cache[group] = layout
+                return layout
         scratch = self.backend.function(space, "dof_keys")
         owned = self.backend.petsc_vector(scratch).getLocalSize()
         scale = 1e-9 * float(np.max(np.ptp(self.mesh_data.points, axis=0)))
@@ -463,8 +454,8 @@ class Simulation:
             for axis in range(gdim):
                 coordinate = interpolated(index, size, lambda x, axis=axis: ones * x[axis][None, :])
                 keys[mine, 2 + axis] = np.round(coordinate[mine] / scale).astype(np.int64)
-        cache[group] = keys
-        return keys
+        cache[group] = _DofLayout(keys)
+        return cache[group]
 
     # -- time loop ------------------------------------------------------------------------
     def run(self, progress: bool = False) -> "Simulation":
@@ -893,6 +884,20 @@ def release_free_memory() -> bool:
     trim.argtypes, trim.restype = [ctypes.c_size_t], ctypes.c_int
     trim(0)
     return True
+
+
+@dataclasses.dataclass(eq=False)
+class _DofLayout:
+    """A state group's DOFs as a parallel checkpoint stores them (``Simulation._dof_layout``).
+
+    ``keys``: this rank's owned DOFs' keys.  ``order``, once ``sorted``: on rank 0, the permutation from the
+    ranks' owned DOFs, gathered in rank order, to the order of their keys, and the keys in that order; None
+    elsewhere.
+    """
+
+    keys: np.ndarray
+    sorted: bool = False
+    order: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _rows(keys: np.ndarray) -> np.ndarray:
