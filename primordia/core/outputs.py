@@ -212,7 +212,8 @@ class Pictures(Output):
                                         "(default: the first field)", names_fields=True),
     }
 
-    def start(self, run):
+    def __init__(self):
+        # the snapshot fields at each time, by field and label (for the grids at the end); rank 0's
         self.snapshots: dict[str, dict[str, object]] = {}
         self.snapshot_displacements: dict[str, dict[str, object]] = {}
 
@@ -252,11 +253,10 @@ class Pictures(Output):
 
         def pictures():
             scale = run.model.output["displacement_scale"]
-            displacements = getattr(self, "snapshot_displacements", {})
-            for name, frames in getattr(self, "snapshots", {}).items():  # none when stopped before start
+            for name, frames in self.snapshots.items():
                 yield len(frames), plot_fields_grid, run.out_dir / f"{name}_snapshots.png", dict(
-                    fields=frames, title=f"{name} at the snapshot times", displacements=displacements.get(name),
-                    displacement_scale=scale)
+                    fields=frames, title=f"{name} at the snapshot times",
+                    displacements=self.snapshot_displacements.get(name), displacement_scale=scale)
             fields = {(f"|{name}|" if v.ndim == 2 else name): self._scalar(v) for name, v in values.items()}
             displacement = values.get(run.displacement_field)
             yield len(fields), plot_fields_grid, run.out_dir / "final_fields.png", dict(

@@ -84,8 +84,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._prepare_pairs()
         self._in_place = self._share_values(stiffness)
         self._by_rows = not self._in_place and self._rows_of_values(stiffness)
-        self._shift = None  # the diagonal added by shifted() (a Vec), until the next update
-        self._shift_vector = None  # its storage, kept from step to step
+        self._shifted = False  # whether the values hold the diagonal of shifted(), until the next update
+        self._shift = None  # that diagonal (a Vec, made once)
         if self.negative_weights and not self._moving:
             warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
                           "the exponentially fitted flux no longer guarantees a non-negative density",
@@ -254,7 +254,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         bernoulli(peclet, out=table[:n_edges])
         np.add(table[:n_edges], peclet, out=table[n_edges:])  # B(-x) = B(x) + x
         self._entries.mult(self._table_vector, self._values_vector)  # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
-        self._shift = None  # every value was just rewritten
+        self._shifted = False  # every value was just rewritten
         if self._by_rows:
             update_mpiaij_values(self._A, self._values)
         elif not self._in_place:
@@ -262,10 +262,10 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._A.assemble()  # also marks the matrix changed, for the solver's preconditioner
 
     def matrix(self):
-        if self._shift is not None:  # A again, without the diagonal of shifted()
+        if self._shifted:  # A again, without the diagonal of shifted()
             self._shift.scale(-1.0)
             self._A.setDiagonal(self._shift, addv=PETSc.InsertMode.ADD_VALUES)
-            self._shift = None
+            self._shifted = False
             self._A.assemble()
         return self._A
 
@@ -278,12 +278,12 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         """
         if not self._in_place:
             return None
-        if self._shift is not None:
+        if self._shifted:
             self.matrix()
-        if self._shift_vector is None:
-            self._shift_vector = diagonal.duplicate()
-        diagonal.copy(self._shift_vector)
-        self._shift = self._shift_vector
+        if self._shift is None:
+            self._shift = diagonal.duplicate()
+        diagonal.copy(self._shift)
+        self._shifted = True
         self._A.setDiagonal(self._shift, addv=PETSc.InsertMode.ADD_VALUES)
         self._A.assemble()  # marks the matrix changed
         return self._A
