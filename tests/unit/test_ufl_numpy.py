@@ -602,6 +602,34 @@ def test_a_field_read_by_several_forms_is_interpolated_once_while_its_values_sta
     assert not context.coefficient(m, 0).flags.writeable, "a form must not change the values the next one reads"
 
 
+def test_a_p1_gradient_on_a_run_of_cells_is_the_gathered_one(skfem_setup):
+    """Over a run of cells the gradient of a P1 part (one value per cell) is one sparse product with
+    the DOF values (SkfemMesh.constant_gradient_operator); it equals the gather, reference product and
+    mapping that cells given one by one still take, for a P1 field, the components of a vector P1 one
+    and the P1 parts of a mixed field (DOFs after the P2 ones), and reads nothing of the other parts."""
+    s = skfem_setup
+    backend, mesh = s.backend, s.mesh
+    form = s["m"] * s.test("P1") * ufl.dx
+    (plan,) = preprocess_form(form)
+    rule = backend._rule(mesh, plan)
+    cells = np.arange(s.data.num_cells)
+    run = skfem_backend._Chunk(mesh, rule, slice(0, len(cells)), None)
+    one_by_one = skfem_backend._Chunk(mesh, rule, cells, None)
+    for name in ("m", "u1", "growth"):
+        function = s[name]
+        blocks = [block for block in function.function_space.blocks if type(block.element) is type(
+            function.function_space.blocks[-1].element)]
+        for block in blocks:
+            ours = run._interpolate(function.array, block, 1)
+            assert ours.shape == (s.gdim, 1, len(cells))
+            np.testing.assert_allclose(ours, one_by_one._interpolate(function.array, block, 1),
+                                       rtol=1e-13, atol=1e-13 * np.abs(ours).max())
+            others = function.array.copy()
+            others[np.setdiff1d(np.arange(others.size), block.cell_dofs)] = np.nan
+            np.testing.assert_array_equal(run._interpolate(others, block, 1), ours)
+    assert len(mesh._gradient_operators) >= 1 + s.gdim + 2
+
+
 def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
     """A form assembled at every step adds to the same DOFs: their flattened array is built once per
     layout of blocks, read-only, and the vector taken through the kept array is the one assembled through
