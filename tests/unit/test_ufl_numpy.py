@@ -8,6 +8,7 @@ DOFs of one backend onto the other's (by component and node coordinates).
 
 from __future__ import annotations
 
+import gc
 import math
 import sys
 from dataclasses import dataclass, field
@@ -628,6 +629,15 @@ def test_a_p1_gradient_on_a_run_of_cells_is_the_gathered_one(skfem_setup):
             others[np.setdiff1d(np.arange(others.size), block.cell_dofs)] = np.nan
             np.testing.assert_array_equal(run._interpolate(others, block, 1), ours)
     assert len(mesh._gradient_operators) >= 1 + s.gdim + 2
+
+    kept = len(mesh._gradient_operators)
+    space = backend.function_space(mesh, ufl.FiniteElement("Lagrange", s.domain.ufl_cell(), 1))
+    function = backend.function(space, "short-lived")
+    run._interpolate(function.array, space.blocks[0], 1)
+    assert len(mesh._gradient_operators) == kept + 1
+    del space, function
+    gc.collect()
+    assert len(mesh._gradient_operators) == kept, "an operator outlived its space's DOF layout"
 
 
 def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
