@@ -341,9 +341,16 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # works on a reverse Cuthill-McKee ordering of each block: in serial at 43, 86, 171, 342 cells per
         # side 4.0, 4.9, 6.7, 11.1 GMRES iterations against 4.9, 5.8, 7.7, 11.6 with the backend's DOF
         # order; the solve at 171 3.3 against 4.2 ms/step on fenicsx, 3.4 against 5.2 on skfem, and on 2
-        # ranks 8.5 against 9.2 iterations
-        return {"ksp_type": "gmres", "pc_type": "asm" if ranks > 1 else "bjacobi", "ksp_rtol": 1e-12,
-                "ksp_atol": 1e-14, "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm"}
+        # ranks 8.5 against 9.2 iterations.  Two layers of overlap: over 1,200 steps of example 1a at 171
+        # on 2 ranks 7.52 GMRES iterations a solve against 8.47 with one (7.2 in serial), 2.83-2.97
+        # against 3.21-3.30 ms/step; at 342 over 400 steps 11.3 against 12.3 iterations, 18.1-19.2
+        # against 20.0-21.0 ms; three layers 7.36 iterations at 171, no faster
+        if ranks > 1:
+            preconditioner = {"pc_type": "asm", "pc_asm_overlap": 2}
+        else:
+            preconditioner = {"pc_type": "bjacobi"}
+        return {"ksp_type": "gmres", **preconditioner, "ksp_rtol": 1e-12, "ksp_atol": 1e-14,
+                "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm"}
     if ranks > GATHERED_RANKS or not constant:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}

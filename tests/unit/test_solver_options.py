@@ -186,8 +186,12 @@ def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks
     # a matrix that changes every solve (a growing tissue's metric): AMG, not a factorisation at every solve
     assert [_solver_defaults(morphogen, ranks, constant=False)["pc_type"] for ranks in (1, 2)] == ["hypre", "hypre"]
     cells = Species("m", "cells", diffusivity="D_m", attractant="f")
-    # rebuilt every step: no factorisation to keep; ILU, with one layer of overlap between ranks
+    # rebuilt every step: no factorisation to keep; ILU, with two layers of overlap between ranks
     assert [_solver_defaults(cells, ranks, constant=False)["pc_type"] for ranks in (1, 2, 16)] == ["bjacobi", "asm", "asm"]
+    assert [_solver_defaults(cells, ranks, constant=False).get("pc_asm_overlap") for ranks in (1, 2, 16)] == [None, 2, 2]
+    # another preconditioner set by the user takes none of additive Schwarz's settings with it
+    chosen = combine(_solver_defaults(cells, 2, constant=False), {"pc_type": "bjacobi"})
+    assert "pc_asm_overlap" not in chosen and chosen["pc_type"] == "bjacobi"
 
 
 def test_a_rebuild_bound_is_a_number_or_a_number_above_the_fresh_count():
