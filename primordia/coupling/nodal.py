@@ -268,7 +268,8 @@ class NodalForm:
         self._masses = [mass.getArray(readonly=True).copy() for mass in masses]
         self._group = group
         self._first = group.join(self, [value for _, value in terms])
-        self._term = None  # scratch of assemble, for a form over several measures
+        # scratch of assemble for a form over several measures (one term at a time)
+        self._term = np.empty_like(self._masses[0]) if len(self._masses) > 1 else None
 
     def assemble(self, b=None):
         """The assembled vector (PETSc Vec of the owned DOFs; ``b`` is filled when given)."""
@@ -277,9 +278,6 @@ class NodalForm:
             b = self._template.duplicate()
         total = b.getArray()  # written in place: no temporaries, no copy
         np.multiply(self._masses[0], values[0], out=total)
-        if len(self._masses) > 1:
-            if self._term is None:
-                self._term = np.empty_like(total)
-            for lumped_mass, value in zip(self._masses[1:], values[1:]):
-                total += np.multiply(lumped_mass, value, out=self._term)
+        for lumped_mass, value in zip(self._masses[1:], values[1:]):
+            total += np.multiply(lumped_mass, value, out=self._term)
         return b
