@@ -132,9 +132,11 @@ class _FieldValues:
         self._entries: OrderedDict[tuple, tuple] = OrderedDict()
         self._bytes = 0
 
-    def get(self, function: "SkfemFunction", derivatives: int, rule: "_Rule", cells: slice, compute) -> np.ndarray:
-        """The values ``compute()`` gives for ``function`` on ``cells`` at ``rule``'s points, reused when current."""
-        key = (id(function), derivatives, id(rule), cells.start, cells.stop)
+    def get(self, function: "SkfemFunction", derivatives: int, rule: "_Rule", cells: slice, compute,
+            components: tuple[int, int] | None = None) -> np.ndarray:
+        """The values ``compute()`` gives for ``function`` (or its flat value ``components``, first and stop)
+        on ``cells`` at ``rule``'s points, reused when current."""
+        key = (id(function), derivatives, id(rule), cells.start, cells.stop, components)
         entry = self._entries.get(key)
         if entry is not None and entry[0] is function and entry[1] is rule and np.array_equal(entry[2], function.array):
             self._entries.move_to_end(key)
@@ -622,17 +624,45 @@ class _Chunk:
                 self._field_cache[key] = compute()
         return self._field_cache[key]
 
-    def _field_values(self, function, derivatives: int) -> np.ndarray:
-        """(*value_shape, *(gdim,) * k, E, Q or 1): the field's k-th derivatives at the points, a view of point-major data."""
+    def coefficient_components(self, function, derivatives: int, components: slice) -> np.ndarray | None:
+        """A run of a field's flat value components, (n, *(gdim,) * k, E, Q): only their blocks are
+        interpolated (a form that reads u of a (u, p) field does not interpolate p).  Sliced from the
+        whole field's values when this chunk holds them already."""
+        if not isinstance(function, SkfemFunction):
+            return None
         space = function.function_space
-        parts = [self._interpolate(function.array, block, derivatives) for block in space.blocks]
-        if len(parts) == 1 and not space.value_shape:  # a scalar field: its one part, no copy
-            return np.swapaxes(parts[0], -1, -2)
+        self._check_space(space)
+        whole = self._field_cache.get((id(function), derivatives))
+        if whole is not None:
+            return whole.reshape((-1,) + whole.shape[len(space.value_shape):])[components]
+        key = (id(function), derivatives, components.start, components.stop)
+        if key not in self._field_cache:
+            compute = functools.partial(self._field_values, function, derivatives, components)
+            if isinstance(self.cells, slice):
+                self._field_cache[key] = self.mesh.field_values.get(function, derivatives, self.rule, self.cells,
+                                                                    compute, (components.start, components.stop))
+            else:
+                self._field_cache[key] = compute()
+        return self._field_cache[key]
+
+    def _field_values(self, function, derivatives: int, components: slice | None = None) -> np.ndarray:
+        """(*value_shape, *(gdim,) * k, E, Q or 1): the field's k-th derivatives at the points, a view of
+        point-major data; with ``components``, those flat components only, (n, *(gdim,) * k, E, Q or 1)."""
+        space = function.function_space
+        first, stop = (0, space.value_size) if components is None else (components.start, components.stop)
+        blocks = [block for block in space.blocks if first <= block.component < stop]
+        if len(blocks) != stop - first:
+            raise PrimordiaError(f"components {first} to {stop - 1} of a field with {space.value_size}")
+        parts = [self._interpolate(function.array, block, derivatives) for block in blocks]
+        if len(parts) == 1 and (components is not None or not space.value_shape):  # one part: no copy
+            part = np.swapaxes(parts[0], -1, -2)
+            return part if components is None else part[None]
         points = max(part.shape[-2] for part in parts)
-        values = np.empty((space.value_size,) + parts[0].shape[:-2] + (points, self.num_entities))
-        for block, part in zip(space.blocks, parts):
-            values[block.component] = part
-        return np.swapaxes(values.reshape(space.value_shape + values.shape[1:]), -1, -2)
+        values = np.empty((stop - first,) + parts[0].shape[:-2] + (points, self.num_entities))
+        for block, part in zip(blocks, parts):
+            values[block.component - first] = part
+        shape = space.value_shape if components is None else (stop - first,)
+        return np.swapaxes(values.reshape(shape + values.shape[1:]), -1, -2)
 
     def _interpolate(self, values: np.ndarray, block: _Block, derivatives: int) -> np.ndarray:
         """(*(gdim,) * k, Q or 1, E): k-th derivatives of the block's component of a field with DOF ``values``.

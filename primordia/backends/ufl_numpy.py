@@ -432,6 +432,12 @@ class QuadratureContext(Protocol):
     def coefficient(self, function, derivatives: int) -> np.ndarray:
         """Values or derivatives of a field: (*value_shape, *(gdim,) * derivatives, E, Q)."""
 
+    def coefficient_components(self, function, derivatives: int, components: slice) -> np.ndarray | None:
+        """Optional: a run of a field's flat value components, (n, *(gdim,) * derivatives, E, Q), or ``None``
+        when the context cannot give them alone.  The evaluator asks for them where an integrand reads
+        fixed components (``u[0]``, ``grad(w)[1, j]``, the u of ``split(w)``), so a context need not
+        interpolate the components no form reads (the pressure of a (u, p) rate that only advects)."""
+
     def constant(self, constant) -> np.ndarray:
         """The value of a ``ufl.Constant``, of shape ``constant.ufl_shape``."""
 
@@ -524,10 +530,16 @@ def _swap_points(array: np.ndarray) -> np.ndarray:
 
 def _modified_argument(o) -> tuple[uc.Argument | None, int]:
     """The argument of ``o`` = grad(...(grad(argument))) and the number of grads; (None, 0) otherwise."""
+    return _modified_terminal(o, uc.Argument)
+
+
+def _modified_terminal(o, kind: type) -> tuple:
+    """The terminal of ``o`` = grad(...(grad(terminal))) when it is a ``kind``, and the number of grads;
+    (None, 0) otherwise."""
     derivatives = 0
     while isinstance(o, uc.Grad):
         o, derivatives = o.ufl_operands[0], derivatives + 1
-    return (o, derivatives) if isinstance(o, uc.Argument) else (None, 0)
+    return (o, derivatives) if isinstance(o, kind) else (None, 0)
 
 
 def _dense_argument_block(context: QuadratureContext, argument: uc.Argument) -> ArgumentBlock:
@@ -621,9 +633,10 @@ class _Analysis:
             self.orders.setdefault((argument.number(), component), set()).add(derivatives)
 
 
-def _fixed_component(argument: uc.Argument, multiindex) -> int | None:
-    """The flat value component ``argument[multiindex]`` (or of its derivatives) picks, if fixed."""
-    shape = argument.ufl_shape
+def _fixed_component(terminal, multiindex) -> int | None:
+    """The flat value component ``terminal[multiindex]`` (or of its derivatives) picks, if fixed
+    (an argument or a coefficient)."""
+    shape = terminal.ufl_shape
     fixed = multiindex.indices()[: len(shape)]
     if not shape or not all(isinstance(index, uc.FixedIndex) for index in fixed):
         return None
@@ -741,6 +754,32 @@ class _Evaluator:
             return np.zeros((1, 1) + o.ufl_shape + tuple(o.ufl_index_dimensions) + (1, 1))
         return result
 
+    def _coefficient_component(self, expression, multiindex) -> np.ndarray | None:
+        """``expression`` = grad^k(f) of a field f with ``multiindex`` fixing f's value component:
+        that component alone from the context, (1, 1, *(gdim,) * k, Q, E); ``None`` otherwise."""
+        function, _ = _modified_terminal(expression, uc.Coefficient)
+        component = None if function is None else _fixed_component(function, multiindex)
+        if component is None:
+            return None
+        values = self._coefficient_rows(expression, slice(component, component + 1))
+        return None if values is None else values[:, :, 0]
+
+    def _coefficient_rows(self, expression, rows: slice) -> np.ndarray | None:
+        """``expression`` = grad^k(f) of a field f: its ``rows`` along f's first value axis from the context,
+        (1, 1, n_rows, *f's other value axes, *(gdim,) * k, Q, E) (what ``value(expression)[:, :, rows]``
+        is); ``None`` when it is not such an expression or the context does not give parts of fields."""
+        ask = getattr(self.context, "coefficient_components", None)
+        function, derivatives = _modified_terminal(expression, uc.Coefficient)
+        if ask is None or function is None:
+            return None
+        rest = function.ufl_shape[1:]
+        size = math.prod(rest)
+        values = ask(function, derivatives, slice(rows.start * size, rows.stop * size))
+        if values is None:
+            return None
+        values = values.reshape((rows.stop - rows.start,) + rest + values.shape[1:])
+        return _swap_points(values)[None, None]
+
     def _other_component(self, expression, multiindex) -> bool:
         """Whether ``expression[multiindex]`` is a component of an argument other than its current block's."""
         argument, _ = _modified_argument(expression)
@@ -837,12 +876,16 @@ class _Evaluator:
         expression, multiindex = o.ufl_operands
         if self._mask(expression) and self._other_component(expression, multiindex):
             return None
-        array = self._value(expression)
+        array, picked = self._coefficient_component(expression, multiindex), 0
+        if array is not None:  # the value-shape indices are already applied
+            picked = len(_modified_terminal(expression, uc.Coefficient)[0].ufl_shape)
+        else:
+            array = self._value(expression)
         if array is None:
             return None
         slicer = [slice(None)] * array.ndim
         kept = []
-        for position, index in enumerate(multiindex):
+        for position, index in enumerate(multiindex[picked:]):
             if isinstance(index, uc.FixedIndex):
                 slicer[2 + position] = int(index)
             else:
@@ -884,7 +927,8 @@ class _Evaluator:
     def list_tensor(self, o):
         rows = _rows_of(o)
         if rows is not None and not self._mask(rows[0]):  # a field of a mixed function: a view
-            return self._value(rows[0])[:, :, rows[1]]
+            part = self._coefficient_rows(*rows)  # only its components, if the context can
+            return self._value(rows[0])[:, :, rows[1]] if part is None else part
         parts = [self._value(op) for op in o.ufl_operands]
         if all(part is None for part in parts):
             return None

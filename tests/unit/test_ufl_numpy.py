@@ -640,6 +640,55 @@ def test_a_p1_gradient_on_a_run_of_cells_is_the_gathered_one(skfem_setup):
     assert len(mesh._gradient_operators) == kept, "an operator outlived its space's DOF layout"
 
 
+def test_a_form_reading_some_components_of_a_field_interpolates_only_theirs(skfem_setup, monkeypatch):
+    """Where an integrand reads fixed components of a field (u of split(w), grad(w)[k, j], w[k]), the
+    chunk interpolates only those components' blocks, and the vector is the one assembled from the
+    whole field's values (the protocol without ``coefficient_components``); a form that also reads the
+    whole field has its components sliced from it."""
+    s = skfem_setup
+    growth = s["growth"]                                   # (u, psi, p): P2 vector, P1, P1
+    u, psi, p = ufl.split(growth)
+    gdim, v = s.gdim, s.test("P2")
+    read = {                                               # form -> the flat components it reads
+        "u of split": (ufl.inner(u, u) * v * ufl.dx, set(range(gdim))),
+        "grad p": (ufl.inner(ufl.grad(p), ufl.grad(v)) * ufl.dx, {gdim + 1}),
+        "one component": (growth[gdim - 1] * psi * v * ufl.dx, {gdim - 1, gdim}),
+        "grad of a component": (ufl.grad(growth)[0, 1] * v * ufl.dx, {0}),
+    }
+    interpolated = []
+    interpolate = skfem_backend._Chunk._interpolate
+
+    def spy(chunk, values, block, derivatives):
+        if values is growth.array:
+            interpolated.append(block.component)
+        return interpolate(chunk, values, block, derivatives)
+
+    def whole_field_only(chunk, function, derivatives, components):
+        return None
+
+    for name, (form, components) in read.items():
+        monkeypatch.setattr(s.mesh, "field_values", skfem_backend._FieldValues())  # nothing kept from before
+        monkeypatch.setattr(skfem_backend._Chunk, "_interpolate", spy)
+        interpolated.clear()
+        ours = s.backend.assemble_vector(form).array.copy()
+        assert set(interpolated) == components, name
+        monkeypatch.setattr(skfem_backend._Chunk, "coefficient_components", whole_field_only)
+        monkeypatch.setattr(s.mesh, "field_values", skfem_backend._FieldValues())
+        interpolated.clear()
+        whole = s.backend.assemble_vector(form).array
+        assert set(interpolated) == set(range(gdim + 2)), name
+        np.testing.assert_allclose(ours, whole, rtol=1e-14, atol=1e-14 * np.abs(whole).max(), err_msg=name)
+        monkeypatch.undo()
+
+    both = (ufl.inner(growth, growth) + growth[0] * p) * v * ufl.dx  # the whole field first, then parts of it
+    (plan,) = preprocess_form(both)
+    chunk = skfem_backend._Chunk(s.mesh, s.backend._rule(s.mesh, plan), slice(0, s.data.num_cells), None)
+    whole = chunk.coefficient(growth, 0)
+    part = chunk.coefficient_components(growth, 0, slice(gdim, gdim + 2))
+    assert np.shares_memory(part, whole), "components of a field already at the points are sliced from it"
+    np.testing.assert_array_equal(part, whole[gdim:gdim + 2])
+
+
 def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
     """A form assembled at every step adds to the same DOFs: their flattened array is built once per
     layout of blocks, read-only, and the vector taken through the kept array is the one assembled through
