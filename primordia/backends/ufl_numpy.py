@@ -492,35 +492,68 @@ def _integrated(integrand, context: QuadratureContext, weights: np.ndarray):
     """The integrand's evaluator on the chunk, and (test block, trial block, element tensors) per pair."""
     with np.errstate(all="ignore"):
         evaluator = _Evaluator(context, integrand)
-        return evaluator, [(test, trial, _block_tensor(contributions, weights))
-                           for test, trial, contributions in evaluator.block_pairs()]
+        sums = {}  # the point sums of argument-free factors, shared by the block pairs
+        return evaluator, [(test, trial, _block_tensor(contributions, weights, sums))
+                           for test, trial, contributions in evaluator.block_pairs(factored=True)]
 
 
-def _block_tensor(contributions: list[tuple[np.ndarray, np.ndarray, np.ndarray]], weights: np.ndarray) -> np.ndarray:
+def _block_tensor(contributions: list[tuple], weights: np.ndarray, sums: dict | None = None) -> np.ndarray:
     """Element tensors (E, n_i, n_j) of a block pair: the sum over its (value, test table, trial table)
-    contributions, one per pair of derivative orders, of
+    contributions, one per pair of derivative orders (and per term of a factored sum), of
     ``sum_{a,b,q} value[a,b,q,e] weights[e,q] test_table[i,a,e,q] trial_table[j,b,e,q]``.
 
     When no table depends on the entity (cells), this is one matrix product of the
     weighted values (E, a b q) with a constant (a b q, i j) matrix, the products of
-    the reference tables: the work per cell of a compiled kernel.
+    the reference tables: the work per cell of a compiled kernel.  A :class:`_Factored`
+    value whose tables do not vary over the points has its argument-free factor summed
+    over them first (``sums`` keeps those sums for the other block pairs), as a form
+    compiler takes a cellwise-constant factor out of its quadrature loop.
     """
     entities, points = weights.shape
+    weighted = [(_weighted(value, weights, {} if sums is None else sums, test_table, trial_table), test_table, trial_table)
+                for value, test_table, trial_table in contributions]
     if any(table.shape[2] > 1 for _, *tables in contributions for table in tables):
-        return sum(np.einsum("abqe,iaeq,jbeq->eij", value * weights.T, test_table, trial_table, optimize=True)
-                   for value, test_table, trial_table in contributions)
-    references, weighted = [], []
-    for value, test_table, trial_table in contributions:
+        return sum(np.einsum("abqe,iaeq,jbeq->eij", value, test_table, trial_table, optimize=True)
+                   for value, test_table, trial_table in weighted)
+    references, rows = [], []
+    for value, test_table, trial_table in weighted:
         (n_test, test_directions), (n_trial, trial_directions) = test_table.shape[:2], trial_table.shape[:2]
-        test_table = np.broadcast_to(test_table[:, :, 0], (n_test, test_directions, points))
-        trial_table = np.broadcast_to(trial_table[:, :, 0], (n_trial, trial_directions, points))
+        summed = value.shape[-2]  # the points, or 1 for a factored value summed over them
+        test_table = np.broadcast_to(test_table[:, :, 0], (n_test, test_directions, summed))
+        trial_table = np.broadcast_to(trial_table[:, :, 0], (n_trial, trial_directions, summed))
         references.append(np.einsum("iaq,jbq->ijabq", test_table, trial_table).reshape(n_test * n_trial, -1))
-        value = np.broadcast_to(value * weights.T, (test_directions, trial_directions, points, entities))
-        weighted.append(value.reshape(-1, entities))
-    weighted = weighted[0] if len(weighted) == 1 else np.concatenate(weighted)
+        value = np.broadcast_to(value, (test_directions, trial_directions, summed, entities))
+        rows.append(value.reshape(-1, entities))
+    weighted = rows[0] if len(rows) == 1 else np.concatenate(rows)
     references = references[0] if len(references) == 1 else np.concatenate(references, axis=1)
     product = weighted.T @ references.T   # BLAS reads them transposed
     return product.reshape(entities, n_test, n_trial)
+
+
+@dataclass(frozen=True)
+class _Factored:
+    """A term of an integrand, ``argument * free``, kept as its two factors: ``argument`` (A, B, 1, E)
+    reads the arguments and is the same at every point (a P1 gradient, its map), ``free`` (1, 1, Q, E)
+    reads none and varies over the points (a nonlinear function of the fields)."""
+
+    argument: np.ndarray
+    free: np.ndarray
+
+    def product(self) -> np.ndarray:
+        return self.argument * self.free
+
+
+def _weighted(value, weights: np.ndarray, sums: dict, *tables) -> np.ndarray:
+    """``value * weights`` (A, B, Q, E); a :class:`_Factored` value whose tables are the same at every
+    point summed over the points first, (A, B, 1, E): sum_q argument free w_q = argument sum_q free w_q."""
+    if not isinstance(value, _Factored):
+        return value * weights.T
+    if any(table.shape[3] > 1 for table in tables):
+        return value.product() * weights.T
+    hit = sums.get(id(value.free))
+    if hit is None or hit[0] is not value.free:  # keyed by the array, kept alive with its sum
+        hit = sums[id(value.free)] = (value.free, (value.free[0, 0] * weights.T).sum(axis=0))
+    return value.argument * hit[1]
 
 
 def _swap_points(array: np.ndarray) -> np.ndarray:
@@ -709,22 +742,54 @@ class _Evaluator:
             self._factors[key] = part.block.factors(part.derivatives)
         return self._factors[key]
 
-    def block_pairs(self):
+    def block_pairs(self, factored: bool = False):
         """Yield (test block, trial block, contributions) for every block pair on which the integrand
         does not vanish: one (value, test table, trial table) per pair of derivative orders, the
-        value (test directions, trial directions, Q, E)."""
+        value (test directions, trial directions, Q, E).  ``factored``: the terms of the integrand
+        that :meth:`_terms` keeps as :class:`_Factored` come as contributions of their own."""
         for test_block, test_parts in _by_block(self.parts[0]):
             for trial_block, trial_parts in _by_block(self.parts[1]):
                 contributions = []
                 for test_index in test_parts:
                     for trial_index in trial_parts:
                         self._pair = (test_index, trial_index)
-                        value = self._value(self.integrand)
-                        if value is not None:
-                            tables = self.factors(0, test_index)[0], self.factors(1, trial_index)[0]
-                            contributions.append((value, *tables))
+                        values = self._factored_terms(self.integrand) if factored else [self._value(self.integrand)]
+                        tables = None
+                        for value in values:
+                            if value is not None:
+                                tables = tables or (self.factors(0, test_index)[0], self.factors(1, trial_index)[0])
+                                contributions.append((value, *tables))
                 if contributions:
                     yield test_block, trial_block, contributions
+
+    def _factored_terms(self, o) -> list:
+        """The integrand's value as :meth:`_terms`, its terms that are not :class:`_Factored` added into one."""
+        terms = self._terms(o)
+        arrays = [term for term in terms if not isinstance(term, _Factored)]
+        if len(arrays) == len(terms):
+            return [functools.reduce(operator.add, arrays)] if arrays else []
+        factored = [term for term in terms if isinstance(term, _Factored)]
+        return factored + ([functools.reduce(operator.add, arrays)] if arrays else [])
+
+    def _terms(self, o) -> list:
+        """The value of the integrand ``o`` on the current pair as a list of terms to sum: the terms of a
+        root sum, and a root product of an argument factor that is the same at every point with an
+        argument-free one that is not as :class:`_Factored` (so that the free factor is summed over the
+        points before it meets the argument: 1b's active stress tau(m) div v, v P1)."""
+        if isinstance(o, uc.Sum):
+            return [term for op in o.ufl_operands for term in self._terms(op)]
+        if isinstance(o, uc.Product) and not o.ufl_free_indices:
+            a, b = o.ufl_operands
+            if bool(self._mask(a)) != bool(self._mask(b)):
+                values = self._factor_values((a, b))
+                if values is None:
+                    return []
+                argument, free = values if self._mask(a) else values[::-1]
+                if argument.shape[-2] == 1 and free.shape[-2] > 1 and free.shape[:2] == (1, 1):
+                    return [_Factored(argument, free)]
+                return [values[0] * values[1]]
+        value = self._value(o)
+        return [] if value is None else [value]
 
     # -- memoised evaluation -----------------------------------------------------------------
     def _mask(self, o) -> int:

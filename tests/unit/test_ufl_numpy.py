@@ -21,6 +21,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from primordia.backends import skfem as skfem_backend
+from primordia.backends import ufl_numpy
 from primordia.backends.fenicsx import FenicsxBackend
 from primordia.backends.skfem import SkfemBackend
 from primordia.backends.ufl_numpy import (
@@ -268,6 +269,15 @@ FORMS = {
         + ufl.dot(s["u"], ufl.split(s.test("Taylor-Hood"))[0]) * s["m"]) * ufl.dx
         + ufl.dot(ufl.as_vector([0.0] * (s.gdim - 1) + [s["m"]]), ufl.split(s.test("Taylor-Hood"))[0]) * ufl.ds,
     "tensor field": lambda s: ufl.inner(ufl.dot(s["T"], s["T"].T), ufl.grad(s.test("vector P1"))) * ufl.dx,
+    # a field's function times a P1 gradient (the same at every point): summed over the points first
+    # (_Factored), on cells and on facets, in a vector, a matrix and a sum of such terms (1b's active stress)
+    "cellwise-constant argument factors": lambda s: (
+        s["m"] / (1.0 + s["m"] ** 2) * ufl.div(s.test("vector P1")) * ufl.dx
+        + ufl.exp(-s["c"]) * ufl.grad(s.test("vector P1"))[0, s.gdim - 1] * ufl.dx
+        + s["m"] ** 2 * ufl.dot(ufl.grad(s.test("vector P1"))[s.gdim - 1, :], ufl.FacetNormal(s.mesh)) * ufl.ds),
+    "cellwise-constant argument factors, matrix": lambda s: (
+        ufl.exp(-s["m"]) * ufl.inner(ufl.grad(s.trial("P1")), ufl.grad(s.test("P1"))) * ufl.dx
+        + s["c"] * s.trial("P1") * s.test("P1") * ufl.dx),
     # math functions
     "exp ln": lambda s: ufl.exp(-s["m"]) * ufl.ln(1 + s["c"] ** 2) * s.test("P2") * ufl.dx,
     "tanh sqrt power": lambda s: (ufl.tanh(s["c"]) + ufl.sqrt(s["m"]) + s["m"] ** 3 + s["c"] ** 1.5
@@ -687,6 +697,39 @@ def test_a_form_reading_some_components_of_a_field_interpolates_only_theirs(skfe
     part = chunk.coefficient_components(growth, 0, slice(gdim, gdim + 2))
     assert np.shares_memory(part, whole), "components of a field already at the points are sliced from it"
     np.testing.assert_array_equal(part, whole[gdim:gdim + 2])
+
+
+def test_an_argument_factor_the_same_at_every_point_meets_the_point_sum_of_the_rest(skfem_setup, monkeypatch):
+    """A root product (or sum of them) of an argument factor that does not vary over the points (a P1
+    gradient) with an argument-free one that does is integrated as argument * sum_q free w_q (_Factored),
+    on cells and facets; the element tensors are those of the product taken point by point, and the
+    factored path is taken (its point sums are computed once per free factor and chunk)."""
+    s = skfem_setup
+    sums = []
+    weighted = ufl_numpy._weighted
+
+    def spy(value, weights, kept, *tables):
+        if isinstance(value, ufl_numpy._Factored) and all(table.shape[3] == 1 for table in tables):
+            sums.append(id(value.free) not in kept)
+        return weighted(value, weights, kept, *tables)
+
+    for name in ("cellwise-constant argument factors", "cellwise-constant argument factors, matrix"):
+        form = FORMS[name](s)
+        linear = len(form.arguments()) == 1
+        assemble = s.backend.assemble_vector if linear else s.backend.assemble_matrix
+        monkeypatch.setattr(ufl_numpy, "_weighted", spy)
+        sums.clear()
+        ours = assemble(form)
+        assert sums and any(sums), f"{name}: the factored path was not taken"
+        assert sum(sums) <= 3, f"{name}: a free factor's point sum was computed again for another block pair"
+        monkeypatch.setattr(ufl_numpy._Evaluator, "_terms", lambda self, o: [self._value(o)])
+        plain = assemble(form)
+        monkeypatch.undo()
+        if linear:
+            ours, plain = ours.array, plain.array
+        else:
+            ours, plain = ours.getValuesCSR()[2], plain.getValuesCSR()[2]
+        np.testing.assert_allclose(ours, plain, rtol=1e-13, atol=1e-13 * np.abs(plain).max(), err_msg=name)
 
 
 def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
