@@ -63,6 +63,11 @@ class ScalarSeries:
     def times(self) -> list[float]:
         return list(self._times)
 
+    @property
+    def written_at(self) -> float | None:
+        """``time.monotonic()`` of the file's last rewrite (None before the first)."""
+        return self._written_at
+
     def append(self, t: float, row: Mapping[str, float], attrs: Mapping[str, Mapping[str, str]] | None = None) -> None:
         """Add the scalars of ``row`` at time ``t`` and rewrite the file."""
         t = self._check_time(t)

@@ -102,7 +102,8 @@ def wait_for_checkpoint(process: subprocess.Popen, out: Path, step: int, timeout
 
 
 def wait_for_steps(process: subprocess.Popen, out: Path, steps: int, timeout: float = 240) -> None:
-    """Wait until the run's summary reports ``steps`` steps (it is rewritten at every record)."""
+    """Wait until the run's summary reports ``steps`` steps (rewritten at a series time at most every
+    SUMMARY_INTERVAL seconds, or with series.nc)."""
     deadline = time.monotonic() + timeout
     while True:
         try:

@@ -181,6 +181,50 @@ def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_p
     assert leftovers(tmp_path) == []
 
 
+def test_the_summary_is_rewritten_with_the_series_not_at_every_row(tmp_path, monkeypatch):
+    """At a series time summary.json is rewritten when series.nc just was (at most every SERIES_INTERVAL
+    seconds) or SUMMARY_INTERVAL after its own last rewrite; so it never describes fewer steps than
+    series.nc, and a fast run does not pay two fsyncs and the run's statistics at every row."""
+    import primordia.core.outputs as outputs
+    import primordia.core.scalar_series as scalar_series
+
+    clock = [100.0]
+    for module in (outputs, scalar_series):
+        monkeypatch.setattr(module.time, "monotonic", lambda: clock[0])
+    run, series, summary = StandInRun(tmp_path), ScalarSeriesNetcdf(), Summary()
+    run.outputs = [series, summary]
+
+    def steps():
+        with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
+            written = int(data["step"].values[-1])
+        return written, json.loads((tmp_path / "summary.json").read_text())["steps"]
+
+    for output in run.outputs:
+        output.start(run)
+    assert steps() == (0, 0)
+    def record():
+        run.advance()
+        for output in run.outputs:
+            output.record(run)
+
+    apart = outputs.SUMMARY_INTERVAL / 4
+    for _ in range(3):  # rows closer than SUMMARY_INTERVAL: the series waits, and so does the summary
+        clock[0] += apart
+        record()
+        assert steps() == (0, 0)
+    clock[0] += apart  # SUMMARY_INTERVAL after its start: the summary alone
+    record()
+    assert steps() == (0, 4)
+    while clock[0] + apart < 100.0 + outputs.SERIES_INTERVAL:  # the series waits; the summary every interval
+        clock[0] += apart
+        record()
+        written, described = steps()
+        assert written == 0 and run.step_index - 3 <= described <= run.step_index
+    clock[0] += apart
+    record()
+    assert steps() == (run.step_index, run.step_index)  # the series is rewritten: the summary with it
+
+
 def test_a_series_finished_before_it_started_writes_nothing_and_does_not_fail(tmp_path):
     """A Ctrl-C during start-up finishes the outputs, some of which never started."""
     run = StandInRun(tmp_path)
