@@ -596,6 +596,7 @@ class _Part:
 #: The part of an absent argument (a linear form has no trial function): one DOF, value 1.
 _ABSENT = _Part(ArgumentBlock(0, np.zeros(1, dtype=np.int64), lambda derivatives: (np.ones((1, 1, 1, 1)), None)), 0)
 _MISSING = object()
+_ZERO_PART = object()  # an argument's component in another derivative order than its current part's: it vanishes
 
 _ARGS, _POINTS = "AB", "YZ"
 _INDEX_LETTERS = string.ascii_lowercase + "CDEFGHIJKLMNOPQRSTUVWX"
@@ -829,6 +830,20 @@ class _Evaluator:
         values = self._coefficient_rows(expression, slice(component, component + 1))
         return None if values is None else values[:, :, 0]
 
+    def _argument_component(self, expression, multiindex) -> np.ndarray | None:
+        """``expression`` = grad^k(v) with ``multiindex`` fixing v's value component to its current block's:
+        the block's map alone, (A, B, *(gdim,) * k, Q, E), not placed among zeros for the other components
+        (:meth:`argument`); ``None`` otherwise (the caller has ruled out the other components' blocks)."""
+        argument, derivatives = _modified_argument(expression)
+        number = argument.number()
+        part = self.parts[number][self._pair[number]]
+        if part.block.component is None or _fixed_component(argument, multiindex) != part.block.component:
+            return None
+        if derivatives != part.derivatives:
+            return _ZERO_PART
+        mapping = _swap_points(self.factors(number, self._pair[number])[1])
+        return mapping[:, None] if number == 0 else mapping[None, :]
+
     def _coefficient_rows(self, expression, rows: slice) -> np.ndarray | None:
         """``expression`` = grad^k(f) of a field f: its ``rows`` along f's first value axis from the context,
         (1, 1, n_rows, *f's other value axes, *(gdim,) * k, Q, E) (what ``value(expression)[:, :, rows]``
@@ -944,6 +959,11 @@ class _Evaluator:
         array, picked = self._coefficient_component(expression, multiindex), 0
         if array is not None:  # the value-shape indices are already applied
             picked = len(_modified_terminal(expression, uc.Coefficient)[0].ufl_shape)
+        elif (self._mask(expression) and _modified_argument(expression)[0] is not None
+              and (array := self._argument_component(expression, multiindex)) is not None):
+            if array is _ZERO_PART:
+                return None
+            picked = len(_modified_argument(expression)[0].ufl_shape)
         else:
             array = self._value(expression)
         if array is None:

@@ -732,6 +732,40 @@ def test_an_argument_factor_the_same_at_every_point_meets_the_point_sum_of_the_r
         np.testing.assert_allclose(ours, plain, rtol=1e-13, atol=1e-13 * np.abs(plain).max(), err_msg=name)
 
 
+def test_a_fixed_component_of_a_mixed_argument_is_its_block_alone(skfem_setup, monkeypatch):
+    """v[k] or grad(v)[k, j] of a test or trial function on a mixed space, k fixed: on k's block the
+    evaluator takes the block's map alone instead of placing it among zeros for the other components
+    (Evaluator.argument); the element tensors are those of the whole argument indexed."""
+    s = skfem_setup
+    u, p = ufl.split(s.test("Taylor-Hood"))
+    du, dp = ufl.split(s.trial("Taylor-Hood"))
+    forms = {
+        "vector": (s["m"] * ufl.grad(u)[0, s.gdim - 1] + ufl.exp(s["c"]) * u[s.gdim - 1] + s["m"] * p) * ufl.dx
+                  + s["m"] * u[0] * ufl.ds,
+        "matrix": (ufl.grad(du)[1, 0] * ufl.grad(u)[1, 0] + s["c"] * dp * ufl.div(u) + du[0] * p) * ufl.dx,
+    }
+    whole = []
+    argument = ufl_numpy._Evaluator.argument
+
+    def spy(self, o, derivatives=0):
+        whole.append(o.number())
+        return argument(self, o, derivatives)
+
+    for name, form in forms.items():
+        assemble = s.backend.assemble_vector if name == "vector" else s.backend.assemble_matrix
+        monkeypatch.setattr(ufl_numpy._Evaluator, "argument", spy)
+        whole.clear()
+        ours = assemble(form)
+        assert not whole, f"{name}: a fixed component was placed among zeros"  # div(u): its rows are unrolled
+        monkeypatch.setattr(ufl_numpy._Evaluator, "_argument_component", lambda self, e, m: None)
+        whole.clear()
+        plain = assemble(form)
+        assert whole, "the reference path places the components among zeros"
+        monkeypatch.undo()
+        ours, plain = (ours.array, plain.array) if name == "vector" else (ours.getValuesCSR()[2], plain.getValuesCSR()[2])
+        np.testing.assert_allclose(ours, plain, rtol=1e-13, atol=1e-13 * np.abs(plain).max(), err_msg=name)
+
+
 def test_the_dofs_a_vector_form_adds_to_are_kept_for_its_next_assembly(skfem_setup):
     """A form assembled at every step adds to the same DOFs: their flattened array is built once per
     layout of blocks, read-only, and the vector taken through the kept array is the one assembled through
