@@ -549,7 +549,10 @@ def _weighted(value, weights: np.ndarray, sums: dict, *tables) -> np.ndarray:
     if not isinstance(value, _Factored):
         return value * weights.T
     if any(table.shape[3] > 1 for table in tables):
-        return value.product() * weights.T
+        weighted = value.free * weights.T
+        if value.argument.size == 1 and value.argument.flat[0] == 1.0:  # a value's map: the identity
+            return np.broadcast_to(weighted, np.broadcast_shapes(value.argument.shape, weighted.shape))
+        return np.multiply(weighted, value.argument, out=weighted if value.argument.size == 1 else None)
     hit = sums.get(id(value.free))
     if hit is None or hit[0] is not value.free:  # keyed by the array, kept alive with its sum
         hit = sums[id(value.free)] = (value.free, (value.free[0, 0] * weights.T).sum(axis=0))
