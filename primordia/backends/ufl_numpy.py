@@ -38,7 +38,19 @@ the same for every cell, as in FFCx's argument factorisation.  A node that
 vanishes on a pair (a component of a mixed argument other than the block's, a
 derivative order other than the part's) evaluates to ``None`` and prunes what
 depends on it, so a mixed space costs what its coupled blocks cost, and never a
-dense, mostly zero, array.
+dense, mostly zero, array: a fixed component of a mixed argument (``v[k]``,
+``grad(v)[k, j]``) is its block's map alone, and a context that gives parts of
+fields (``coefficient_components``) is asked only for the components read.
+
+Terms the same at every point
+-----------------------------
+A root term ``A * f`` (or a sum of them) whose argument factor A does not vary
+over the points (a P1 gradient and its map) and whose factor f reads no argument
+but does (a nonlinear function of the fields) is kept as its two factors
+(:class:`_Factored`); where the reference tables do not vary over the points either,
+its element tensors are A (sum_q f w_q) contracted with them, f summed over the
+points once for every block pair, as a form compiler takes a cellwise-constant
+factor out of its quadrature loop.
 
 Quadrature
 ----------
@@ -826,12 +838,13 @@ class _Evaluator:
     def _coefficient_component(self, expression, multiindex) -> np.ndarray | None:
         """``expression`` = grad^k(f) of a field f with ``multiindex`` fixing f's value component:
         that component alone from the context, (1, 1, *(gdim,) * k, Q, E); ``None`` otherwise."""
-        function, _ = _modified_terminal(expression, uc.Coefficient)
-        component = None if function is None else _fixed_component(function, multiindex)
+        ask = getattr(self.context, "coefficient_components", None)
+        function, derivatives = _modified_terminal(expression, uc.Coefficient)
+        component = None if ask is None or function is None else _fixed_component(function, multiindex)
         if component is None:
             return None
-        values = self._coefficient_rows(expression, slice(component, component + 1))
-        return None if values is None else values[:, :, 0]
+        values = ask(function, derivatives, slice(component, component + 1))  # a flat component
+        return None if values is None else _swap_points(values[0])[None, None]
 
     def _argument_component(self, expression, multiindex) -> np.ndarray | None:
         """``expression`` = grad^k(v) with ``multiindex`` fixing v's value component to its current block's:

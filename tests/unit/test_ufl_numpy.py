@@ -664,12 +664,16 @@ def test_a_form_reading_some_components_of_a_field_interpolates_only_theirs(skfe
         "grad p": (ufl.inner(ufl.grad(p), ufl.grad(v)) * ufl.dx, {gdim + 1}),
         "one component": (growth[gdim - 1] * psi * v * ufl.dx, {gdim - 1, gdim}),
         "grad of a component": (ufl.grad(growth)[0, 1] * v * ufl.dx, {0}),
+        # a tensor field: flat components k = i gdim + j
+        "tensor components": ((s["T"][1, 0] + ufl.grad(s["T"])[0, gdim - 1, 1]) * v * ufl.dx, {gdim, gdim - 1}),
+        "tensor row": (ufl.inner(ufl.as_vector([s["T"][1, j] for j in range(gdim)]), ufl.grad(v)) * ufl.dx,
+                       set(range(gdim, 2 * gdim))),
     }
     interpolated = []
     interpolate = skfem_backend._Chunk._interpolate
 
     def spy(chunk, values, block, derivatives):
-        if values is growth.array:
+        if values is growth.array or values is s["T"].array:
             interpolated.append(block.component)
         return interpolate(chunk, values, block, derivatives)
 
@@ -686,7 +690,7 @@ def test_a_form_reading_some_components_of_a_field_interpolates_only_theirs(skfe
         monkeypatch.setattr(s.mesh, "field_values", skfem_backend._FieldValues())
         interpolated.clear()
         whole = s.backend.assemble_vector(form).array
-        assert set(interpolated) == set(range(gdim + 2)), name
+        assert set(interpolated) == set(range(gdim * gdim if "tensor" in name else gdim + 2)), name
         np.testing.assert_allclose(ours, whole, rtol=1e-14, atol=1e-14 * np.abs(whole).max(), err_msg=name)
         monkeypatch.undo()
 
