@@ -522,7 +522,8 @@ def _block_tensor(contributions: list[tuple], weights: np.ndarray, sums: dict | 
     compiler takes a cellwise-constant factor out of its quadrature loop.
     """
     entities, points = weights.shape
-    weighted = [(_weighted(value, weights, {} if sums is None else sums, test_table, trial_table), test_table, trial_table)
+    sums = {} if sums is None else sums
+    weighted = [(_weighted(value, weights, sums, test_table, trial_table), test_table, trial_table)
                 for value, test_table, trial_table in contributions]
     if any(table.shape[2] > 1 for _, *tables in contributions for table in tables):
         return sum(np.einsum("abqe,iaeq,jbeq->eij", value, test_table, trial_table, optimize=True)
