@@ -509,7 +509,7 @@ def _integrated(integrand, context: QuadratureContext, weights: np.ndarray):
                            for test, trial, contributions in evaluator.block_pairs(factored=True)]
 
 
-def _block_tensor(contributions: list[tuple], weights: np.ndarray, sums: dict | None = None) -> np.ndarray:
+def _block_tensor(contributions: list[tuple], weights: np.ndarray, sums: dict) -> np.ndarray:
     """Element tensors (E, n_i, n_j) of a block pair: the sum over its (value, test table, trial table)
     contributions, one per pair of derivative orders (and per term of a factored sum), of
     ``sum_{a,b,q} value[a,b,q,e] weights[e,q] test_table[i,a,e,q] trial_table[j,b,e,q]``.
@@ -521,8 +521,7 @@ def _block_tensor(contributions: list[tuple], weights: np.ndarray, sums: dict | 
     over them first (``sums`` keeps those sums for the other block pairs), as a form
     compiler takes a cellwise-constant factor out of its quadrature loop.
     """
-    entities, points = weights.shape
-    sums = {} if sums is None else sums
+    entities = weights.shape[0]
     weighted = [(_weighted(value, weights, sums, test_table, trial_table), test_table, trial_table)
                 for value, test_table, trial_table in contributions]
     if any(table.shape[2] > 1 for _, *tables in contributions for table in tables):
@@ -552,9 +551,6 @@ class _Factored:
     argument: np.ndarray
     free: np.ndarray
 
-    def product(self) -> np.ndarray:
-        return self.argument * self.free
-
 
 def _weighted(value, weights: np.ndarray, sums: dict, *tables) -> np.ndarray:
     """``value * weights`` (A, B, Q, E); a :class:`_Factored` value whose tables are the same at every
@@ -563,9 +559,10 @@ def _weighted(value, weights: np.ndarray, sums: dict, *tables) -> np.ndarray:
         return value * weights.T
     if any(table.shape[3] > 1 for table in tables):
         weighted = value.free * weights.T
-        if value.argument.size == 1 and value.argument.flat[0] == 1.0:  # a value's map: the identity
-            return np.broadcast_to(weighted, np.broadcast_shapes(value.argument.shape, weighted.shape))
-        return np.multiply(weighted, value.argument, out=weighted if value.argument.size == 1 else None)
+        if value.argument.size > 1:
+            return weighted * value.argument
+        factor = float(value.argument.flat[0])  # a value's map: 1 (the identity)
+        return weighted if factor == 1.0 else np.multiply(weighted, factor, out=weighted)
     hit = sums.get(id(value.free))
     if hit is None or hit[0] is not value.free:  # keyed by the array, kept alive with its sum
         hit = sums[id(value.free)] = (value.free, (value.free[0, 0] * weights.T).sum(axis=0))
@@ -582,7 +579,7 @@ def _modified_argument(o) -> tuple[uc.Argument | None, int]:
     return _modified_terminal(o, uc.Argument)
 
 
-def _modified_terminal(o, kind: type) -> tuple:
+def _modified_terminal(o, kind: type | tuple[type, ...]) -> tuple:
     """The terminal of ``o`` = grad(...(grad(terminal))) when it is a ``kind``, and the number of grads;
     (None, 0) otherwise."""
     derivatives = 0
@@ -612,7 +609,6 @@ class _Part:
 #: The part of an absent argument (a linear form has no trial function): one DOF, value 1.
 _ABSENT = _Part(ArgumentBlock(0, np.zeros(1, dtype=np.int64), lambda derivatives: (np.ones((1, 1, 1, 1)), None)), 0)
 _MISSING = object()
-_ZERO_PART = object()  # an argument's component in another derivative order than its current part's: it vanishes
 
 _ARGS, _POINTS = "AB", "YZ"
 _INDEX_LETTERS = string.ascii_lowercase + "CDEFGHIJKLMNOPQRSTUVWX"
@@ -783,8 +779,6 @@ class _Evaluator:
         """The integrand's value as :meth:`_terms`, its terms that are not :class:`_Factored` added into one."""
         terms = self._terms(o)
         arrays = [term for term in terms if not isinstance(term, _Factored)]
-        if len(arrays) == len(terms):
-            return [functools.reduce(operator.add, arrays)] if arrays else []
         factored = [term for term in terms if isinstance(term, _Factored)]
         return factored + ([functools.reduce(operator.add, arrays)] if arrays else [])
 
@@ -836,42 +830,48 @@ class _Evaluator:
             return np.zeros((1, 1) + o.ufl_shape + tuple(o.ufl_index_dimensions) + (1, 1))
         return result
 
-    def _coefficient_component(self, expression, multiindex) -> np.ndarray | None:
-        """``expression`` = grad^k(f) of a field f with ``multiindex`` fixing f's value component:
-        that component alone from the context, (1, 1, *(gdim,) * k, Q, E); ``None`` otherwise."""
-        ask = getattr(self.context, "coefficient_components", None)
-        function, derivatives = _modified_terminal(expression, uc.Coefficient)
-        component = None if ask is None or function is None else _fixed_component(function, multiindex)
+    def _fixed_component_value(self, expression, multiindex) -> tuple[int, np.ndarray | None] | None:
+        """``expression`` = grad^k(t) of an argument or a field t with ``multiindex`` fixing t's value
+        component: (the number of value axes thereby applied, that component's value alone); ``None`` when
+        it is not such an expression, or the context gives no part of the field.
+
+        An argument's component is its block's map alone, not placed among zeros for the other components
+        (:meth:`argument`; the caller has ruled out the other blocks), and vanishes (value ``None``) in
+        another derivative order than the block's part; a field's comes from the context's
+        ``coefficient_components`` (the context need not interpolate the other components).
+        """
+        terminal, derivatives = _modified_terminal(expression, (uc.Argument, uc.Coefficient))
+        component = None if terminal is None else _fixed_component(terminal, multiindex)
         if component is None:
             return None
-        values = ask(function, derivatives, slice(component, component + 1))  # a flat component
-        return None if values is None else _swap_points(values[0])[None, None]
+        applied = len(terminal.ufl_shape)
+        if isinstance(terminal, uc.Argument):
+            number = terminal.number()
+            part = self.parts[number][self._pair[number]]
+            if part.block.component != component:  # a dense block of all components
+                return None
+            if derivatives != part.derivatives:
+                return applied, None
+            mapping = _swap_points(self.factors(number, self._pair[number])[1])
+            return applied, mapping[:, None] if number == 0 else mapping[None, :]
+        values = self._field_components(terminal, derivatives, slice(component, component + 1))
+        return None if values is None else (applied, _swap_points(values[0])[None, None])
 
-    def _argument_component(self, expression, multiindex) -> np.ndarray | None:
-        """``expression`` = grad^k(v) with ``multiindex`` fixing v's value component to its current block's:
-        the block's map alone, (A, B, *(gdim,) * k, Q, E), not placed among zeros for the other components
-        (:meth:`argument`); ``None`` otherwise (the caller has ruled out the other components' blocks)."""
-        argument, derivatives = _modified_argument(expression)
-        number = argument.number()
-        part = self.parts[number][self._pair[number]]
-        if part.block.component is None or _fixed_component(argument, multiindex) != part.block.component:
-            return None
-        if derivatives != part.derivatives:
-            return _ZERO_PART
-        mapping = _swap_points(self.factors(number, self._pair[number])[1])
-        return mapping[:, None] if number == 0 else mapping[None, :]
+    def _field_components(self, function, derivatives: int, components: slice) -> np.ndarray | None:
+        """The context's ``coefficient_components`` of a field, (n, *(gdim,) * k, E, Q); ``None`` when it has none."""
+        ask = getattr(self.context, "coefficient_components", None)
+        return None if ask is None else ask(function, derivatives, components)
 
     def _coefficient_rows(self, expression, rows: slice) -> np.ndarray | None:
         """``expression`` = grad^k(f) of a field f: its ``rows`` along f's first value axis from the context,
         (1, 1, n_rows, *f's other value axes, *(gdim,) * k, Q, E) (what ``value(expression)[:, :, rows]``
         is); ``None`` when it is not such an expression or the context does not give parts of fields."""
-        ask = getattr(self.context, "coefficient_components", None)
         function, derivatives = _modified_terminal(expression, uc.Coefficient)
-        if ask is None or function is None:
+        if function is None:
             return None
         rest = function.ufl_shape[1:]
         size = math.prod(rest)
-        values = ask(function, derivatives, slice(rows.start * size, rows.stop * size))
+        values = self._field_components(function, derivatives, slice(rows.start * size, rows.stop * size))
         if values is None:
             return None
         values = values.reshape((rows.stop - rows.start,) + rest + values.shape[1:])
@@ -973,16 +973,8 @@ class _Evaluator:
         expression, multiindex = o.ufl_operands
         if self._mask(expression) and self._other_component(expression, multiindex):
             return None
-        array, picked = self._coefficient_component(expression, multiindex), 0
-        if array is not None:  # the value-shape indices are already applied
-            picked = len(_modified_terminal(expression, uc.Coefficient)[0].ufl_shape)
-        elif (self._mask(expression) and _modified_argument(expression)[0] is not None
-              and (array := self._argument_component(expression, multiindex)) is not None):
-            if array is _ZERO_PART:
-                return None
-            picked = len(_modified_argument(expression)[0].ufl_shape)
-        else:
-            array = self._value(expression)
+        component = self._fixed_component_value(expression, multiindex)
+        picked, array = (0, self._value(expression)) if component is None else component  # value axes applied
         if array is None:
             return None
         slicer = [slice(None)] * array.ndim
