@@ -613,16 +613,8 @@ class _Chunk:
     def coefficient(self, function, derivatives: int) -> np.ndarray:
         if not isinstance(function, SkfemFunction):
             raise unsupported(f"{type(function).__name__} (a coefficient not made by the skfem backend)")
-        space = function.function_space
-        self._check_space(space)
-        key = (id(function), derivatives)
-        if key not in self._field_cache:
-            compute = functools.partial(self._field_values, function, derivatives)
-            if isinstance(self.cells, slice):  # a run of cells, as every form over the whole mesh has
-                self._field_cache[key] = self.mesh.field_values.get(function, derivatives, self.rule, self.cells, compute)
-            else:
-                self._field_cache[key] = compute()
-        return self._field_cache[key]
+        self._check_space(function.function_space)
+        return self._kept_values(function, derivatives, None)
 
     def coefficient_components(self, function, derivatives: int, components: slice) -> np.ndarray | None:
         """A run of a field's flat value components, (n, *(gdim,) * k, E, Q): only their blocks are
@@ -632,15 +624,22 @@ class _Chunk:
             return None
         space = function.function_space
         self._check_space(space)
-        whole = self._field_cache.get((id(function), derivatives))
+        whole = self._field_cache.get((id(function), derivatives, None))
         if whole is not None:
             return whole.reshape((-1,) + whole.shape[len(space.value_shape):])[components]
-        key = (id(function), derivatives, components.start, components.stop)
+        return self._kept_values(function, derivatives, (components.start, components.stop))
+
+    def _kept_values(self, function, derivatives: int, components: tuple[int, int] | None) -> np.ndarray:
+        """:meth:`_field_values` of the field (or of its flat ``components``, first and stop), kept for the
+        chunk's other nodes and, over a run of cells (as every form over the whole mesh has), on the mesh
+        for the other forms while the field's DOF values stay."""
+        key = (id(function), derivatives, components)
         if key not in self._field_cache:
-            compute = functools.partial(self._field_values, function, derivatives, components)
+            compute = functools.partial(self._field_values, function, derivatives,
+                                        None if components is None else slice(*components))
             if isinstance(self.cells, slice):
                 self._field_cache[key] = self.mesh.field_values.get(function, derivatives, self.rule, self.cells,
-                                                                    compute, (components.start, components.stop))
+                                                                    compute, components)
             else:
                 self._field_cache[key] = compute()
         return self._field_cache[key]
