@@ -334,12 +334,11 @@ class Summary(Output):
         due = None
         if run.is_root:
             now = time.monotonic()
-            series = [output.series.written_at for output in getattr(run, "outputs", ())
+            series = [output.series.written_at for output in run.outputs
                       if isinstance(output, ScalarSeriesNetcdf) and output.series is not None]
             due = (self._written_at is None or now - self._written_at >= SUMMARY_INTERVAL
                    or any(at is not None and at > self._written_at for at in series))
-        comm = getattr(run, "comm", None)
-        return comm.bcast(due, root=0) if comm is not None and comm.size > 1 else due
+        return run.comm.bcast(due, root=0) if run.comm.size > 1 else due
 
     def snapshot(self, run):
         self._write(run, "running")

@@ -132,9 +132,13 @@ def test_the_resolved_output_table_holds_every_declared_default():
 class StandInRun:
     """What outputs read of a run, without a finite element solve: m = t everywhere."""
 
+    class OneRank:
+        size, rank = 1, 0
+
     def __init__(self, out_dir: Path):
-        self.out_dir, self.mesh_data, self.is_root = out_dir, MESH, True
+        self.out_dir, self.mesh_data, self.is_root, self.comm = out_dir, MESH, True, self.OneRank()
         self.time, self.step_index = 0.0, 0
+        self.outputs: list = []  # the outputs the run calls, in order (the summary looks for the series)
 
     def advance(self, dt: float = 0.2) -> None:
         self.time, self.step_index = round(self.time + dt, 12), self.step_index + 1
