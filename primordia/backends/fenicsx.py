@@ -63,6 +63,26 @@ def _silence_jit_logging():
             handler.addFilter(_QuietBuild())
 
 
+def jit_parameters() -> dict:
+    """FFCx's C compiler at ``-O3``, unless the user's dolfinx JIT configuration sets the compiler flags.
+
+    dolfinx 0.5 compiles its kernels at ``-O2``; at ``-O3`` GCC vectorises the loops over the
+    quadrature points.  Measured alone at 171 x 171 squares (example 1b) and 86 x 86 (2a):
+    1b's active-stress load (six points a cell, a division at each) 4.3-4.6 -> 3.0-3.4 ms, to
+    the same bits; 2a's Jacobian unchanged (85 ms), its residual slower, 9.4 -> 10.3 ms (0.1% of
+    a step).  Compiling takes about 30% longer, once.  Portable code (no ``-march``): a cache
+    shared by a cluster's nodes stays valid on each.  The flags are part of the cache key.
+    A flag set in ``~/.config/dolfinx/dolfinx_jit_parameters.json`` or the working directory's
+    ``dolfinx_jit_parameters.json`` wins.
+    """
+    from dolfinx import jit
+
+    default = jit.DOLFINX_DEFAULT_JIT_PARAMETERS["cffi_extra_compile_args"][0]
+    if jit.get_parameters()["cffi_extra_compile_args"] != default:
+        return {}
+    return {"cffi_extra_compile_args": ["-O3", "-g0"]}
+
+
 class FenicsxBackend(Backend):
     """dolfinx 0.5.2: MPI-parallel assembly of UFL forms into PETSc objects."""
 
@@ -77,6 +97,7 @@ class FenicsxBackend(Backend):
         self._p1_spaces: dict[tuple, object] = {}
         self._components: dict[tuple, tuple] = {}
         self._petsc_comms: dict[int, object] = {}  # communicator -> an empty vector keeping it alive
+        self._jit = jit_parameters()
         _silence_jit_logging()
 
     # -- mesh, spaces, fields -----------------------------------------------------------
@@ -141,7 +162,7 @@ class FenicsxBackend(Backend):
 
     # -- assembly -----------------------------------------------------------------------
     def _form(self, form: ufl.Form):
-        return self._compiled.get(form, lambda: fem.form(form))
+        return self._compiled.get(form, lambda: fem.form(form, jit_params=self._jit))
 
     def assemble_matrix(self, form, bcs: Sequence[BoundaryCondition] = (), A=None, diagonal: float = 1.0):
         compiled = self._form(form)
@@ -172,7 +193,8 @@ class FenicsxBackend(Backend):
         from mpi4py import MPI
 
         compiled = self._compiled.get(
-            expression, lambda: fem.Expression(expression, basix_reference_vertices(mesh.topology.cell_name())))
+            expression, lambda: fem.Expression(expression, basix_reference_vertices(mesh.topology.cell_name()),
+                                                jit_params=self._jit))
         cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
         values = compiled.eval(cells)
         low = float(values.min()) if values.size else np.inf

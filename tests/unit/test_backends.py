@@ -505,3 +505,22 @@ def test_the_skfem_backend_runs_numpy_blas_on_one_thread_unless_the_user_set_a_c
         monkeypatch.delenv("OPENBLAS_NUM_THREADS")
         SkfemBackend(MPI.COMM_SELF)
         assert blas_threads() == {1}
+
+
+def test_fenicsx_compiles_kernels_at_O3_unless_the_users_dolfinx_configuration_sets_the_flags(tmp_path, monkeypatch):
+    """dolfinx 0.5 compiles at -O2; primordia asks for -O3 (the loops over quadrature points are
+    vectorised), and a user's dolfinx JIT parameter file, read once per process, wins."""
+    import primordia.backends.fenicsx as fenicsx
+
+    made = []
+    monkeypatch.setattr(fenicsx.fem, "form", lambda form, **kwargs: made.append(kwargs) or object())
+    backend = FenicsxBackend(MPI.COMM_SELF)
+    backend._form(object())
+    assert made == [{"jit_params": {"cffi_extra_compile_args": ["-O3", "-g0"]}}]
+    (tmp_path / "dolfinx").mkdir()
+    (tmp_path / "dolfinx" / "dolfinx_jit_parameters.json").write_text('{"cffi_extra_compile_args": ["-O1"]}')
+    script = "from primordia.backends.fenicsx import jit_parameters; print(jit_parameters())"
+    env = {**os.environ, "XDG_CONFIG_HOME": str(tmp_path)}
+    printed = subprocess.run([sys.executable, "-c", script], env=env, cwd=tmp_path, capture_output=True,
+                             text=True, check=True).stdout
+    assert printed.strip() == "{}"
