@@ -270,14 +270,16 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         return self._A
 
     def shifted(self, diagonal):
-        """A + diag(d) in place (one process, where PETSc reads this object's values): the lumped
-        mass of the cell density's step added without copying the matrix.
+        """A + diag(d) in the operator's PETSc matrix: the lumped mass of the cell density's step added
+        without copying the matrix.
 
         PETSc adds the diagonal (MatDiagonalSet finds each row's diagonal entry itself): 58 us at
-        171^2, against 145 for numpy's ``values[diagonal positions] += d``, the same numbers.
+        171^2, against 145 for numpy's ``values[diagonal positions] += d``, the same numbers.  On any
+        number of processes: every :meth:`update` rewrites all the values (PETSc's own arrays on one
+        process, a copy by rows or ``setValuesCSR`` on several), so the shift lasts until the next
+        update or :meth:`matrix`.  On 2 ranks this spares the solver a copy of the matrix and a
+        second diagonal sum at every step.
         """
-        if not self._in_place:
-            return None
         if self._shifted:
             self.matrix()
         if self._shift is None:

@@ -200,7 +200,7 @@ def test_the_shifted_operator_adds_the_diagonal_and_leaves_a_itself_intact(backe
     diagonal = operator.matrix().createVecLeft()
     diagonal.setArray(np.linspace(1.0, 2.0, diagonal.getLocalSize()))
     shifted = operator.shifted(diagonal)
-    assert shifted is not None  # one process: the values are the operator's own
+    assert shifted is not None  # in the operator's own matrix (on any number of processes)
     np.testing.assert_allclose(dense(shifted), A + np.diag(diagonal.getArray()), rtol=1e-15, atol=1e-15)
     x, y = diagonal.duplicate(), diagonal.duplicate()
     x.setArray(np.cos(np.arange(x.getLocalSize())))
