@@ -25,6 +25,8 @@ import sys
 import time
 from pathlib import Path
 
+from machine import describe  # benchmarks/machine.py
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
@@ -75,6 +77,7 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="also run the whole example 1a")
     parser.add_argument("--ex01b", action="store_true", help="also time example 1b per backend and scheme")
     args = parser.parse_args()
+    print(describe(), flush=True)
 
     from primordia.core.plugins import BackendEntry
 

@@ -31,6 +31,8 @@ from pathlib import Path
 
 from primordia.core.clocks import CLOCKS  # the clocks the solvers time themselves on (no PETSc import)
 
+from machine import describe  # benchmarks/machine.py
+
 ROOT = Path(__file__).resolve().parent.parent
 
 clock = time.perf_counter
@@ -99,6 +101,7 @@ def main() -> None:
                         help="cpu: this process's CPU time, fair on a machine others are using (run with "
                              "OPENBLAS_NUM_THREADS=1)")
     args = parser.parse_args()
+    print(describe(), flush=True)
     global clock
     clock = CLOCKS[args.clock]
     if not args.no_ex02a:

@@ -27,6 +27,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from machine import describe  # benchmarks/machine.py
+
 ROOT = Path(__file__).resolve().parent.parent
 
 #: example -> coarse mesh cells (every example's own physics, at a size that runs in seconds)
@@ -79,6 +81,7 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=4)
     parser.add_argument("--rebuilds", type=int, default=3)
     args = parser.parse_args()
+    print(describe(), flush=True)
     if not sys.platform.startswith("linux"):
         sys.exit("bench_memory: needs glibc's mallinfo2 (Linux)")
     print(f"{'example':>11} {'backend':>8} {'mesh':>9} {'kB per step':>12} {'kB per rebuild':>15} {'MB freed at once':>17}")

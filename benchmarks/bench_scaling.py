@@ -39,6 +39,8 @@ import sys
 import time
 from pathlib import Path
 
+from machine import describe  # benchmarks/machine.py
+
 ROOT = Path(__file__).resolve().parent.parent
 
 #: example -> (mesh cells, dt, steps): the seed's mesh for 1a, a quarter of it for 2a, 4 at laptop size.
@@ -117,6 +119,7 @@ def main() -> None:
     parser.add_argument("--as-shipped", action="store_true",
                         help="run each example as its TOML states it and time the whole command")
     args = parser.parse_args()
+    print(describe(), flush=True)
     extra = [a for s in args.set for a in ("--set", s)]
     n = args.ranks
     if args.as_shipped:

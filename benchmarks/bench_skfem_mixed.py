@@ -32,6 +32,8 @@ from mpi4py import MPI
 from primordia.core.meshes import box, rectangle
 from primordia.core.clocks import CLOCKS
 
+from machine import describe  # benchmarks/machine.py
+
 
 def growth_system(backend, data):
     """Residual and Jacobian forms of the finite-strain growth system on ``data``, state set."""
@@ -87,6 +89,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--clock", choices=CLOCKS, default="wall")
     args = parser.parse_args()
+    print(describe(), flush=True)
     clock = CLOCKS[args.clock]
 
     from primordia.backends.fenicsx import FenicsxBackend

@@ -44,6 +44,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from machine import describe  # benchmarks/machine.py
+
 ROOT = Path(__file__).resolve().parent.parent
 
 #: What each system runs: the example, how a size maps to mesh cells, the subproblem studied, preconditioners.
@@ -240,15 +242,16 @@ def main() -> None:
         if MPI.COMM_WORLD.rank == 0:
             print(json.dumps(row), flush=True)
         return
-    if args.share:
-        share_table(args)
-        return
     if args.one:
         row = one(args.one[0], args.one[1], int(args.one[2]), args.steps, args.warmup, args.set, args.clock)
         from mpi4py import MPI
 
         if MPI.COMM_WORLD.rank == 0:
             print(json.dumps(row), flush=True)
+        return
+    print(describe(), flush=True)
+    if args.share:
+        share_table(args)
         return
     header = (f"{'system':>10} {'preconditioner':>14} {'size':>5} {'ranks':>5} {'unknowns':>9} {'Krylov/Newton':>13} "
               f"{'Newton/step':>11} {'ms/step':>9} {'peak MB':>8} {'B/unknown':>9} {'/direct':>7}")
