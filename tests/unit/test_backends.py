@@ -517,10 +517,14 @@ def test_fenicsx_compiles_kernels_at_O3_unless_the_users_dolfinx_configuration_s
     backend = FenicsxBackend(MPI.COMM_SELF)
     backend._form(object())
     assert made == [{"jit_params": {"cffi_extra_compile_args": ["-O3", "-g0"]}}]
-    (tmp_path / "dolfinx").mkdir()
-    (tmp_path / "dolfinx" / "dolfinx_jit_parameters.json").write_text('{"cffi_extra_compile_args": ["-O1"]}')
     script = "from primordia.backends.fenicsx import jit_parameters; print(jit_parameters())"
-    env = {**os.environ, "XDG_CONFIG_HOME": str(tmp_path)}
-    printed = subprocess.run([sys.executable, "-c", script], env=env, cwd=tmp_path, capture_output=True,
-                             text=True, check=True).stdout
-    assert printed.strip() == "{}"
+    for where in ("config", "cwd"):  # ~/.config/dolfinx/ or the working directory; dolfinx's own -O2 counts too
+        config, cwd = tmp_path / where / "config", tmp_path / where / "cwd"
+        folder = config / "dolfinx" if where == "config" else cwd
+        folder.mkdir(parents=True)
+        cwd.mkdir(exist_ok=True)
+        (folder / "dolfinx_jit_parameters.json").write_text('{"cffi_extra_compile_args": ["-O2", "-g0"]}')
+        env = {**os.environ, "XDG_CONFIG_HOME": str(config)}
+        printed = subprocess.run([sys.executable, "-c", script], env=env, cwd=cwd, capture_output=True,
+                                 text=True, check=True).stdout
+        assert printed.strip() == "{}", where
