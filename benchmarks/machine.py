@@ -53,7 +53,7 @@ def describe() -> str:
         name += f" (family {info['cpu family']} model {info.get('model', '?')})"
     flags = set(info.get("flags", info.get("Features", "")).split())
     vector = next((flag for flag in VECTOR_FLAGS if flag in flags), None)
-    parts = [name, f"{os.cpu_count()} CPUs", *([vector] if vector else []), *([_caches()] if _caches() else [])]
+    parts = [part for part in (name, f"{os.cpu_count()} CPUs", vector, _caches()) if part]
     try:
         from petsc4py import PETSc
 

@@ -277,8 +277,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         171^2, against 145 for numpy's ``values[diagonal positions] += d``, the same numbers.  On any
         number of processes: every :meth:`update` rewrites all the values (PETSc's own arrays on one
         process, a copy by rows or ``setValuesCSR`` on several), so the shift lasts until the next
-        update or :meth:`matrix`.  On 2 ranks this spares the solver a copy of the matrix and a
-        second diagonal sum at every step.
+        update or :meth:`matrix`.  On 2 ranks this spares the solver a copy of the matrix at every step.
         """
         if self._shifted:
             self.matrix()
