@@ -900,3 +900,35 @@ def assert_as_written(s, form, rewrite: str) -> None:
     finally:
         setattr(ufl_numpy, rewrite, kept)
     assert np.abs(rewritten - as_written).max() <= 1e-13 * np.abs(as_written).max()
+
+
+def test_numpys_tanh_is_exactly_one_where_the_evaluator_stops_calling_it():
+    """The assumption of ``saturating_tanh``, on this machine's numpy: tanh(x) is +-1.0 for every |x| >= 22."""
+    beyond = np.concatenate([np.linspace(ufl_numpy.TANH_SATURATED, 40.0, 200_001), np.geomspace(40.0, 1e308, 20_001),
+                             [np.inf]])
+    assert np.all(np.tanh(beyond) == 1.0) and np.all(np.tanh(-beyond) == -1.0)
+
+
+@pytest.mark.parametrize("layout", ["front", "all inside", "transposed", "in place"])
+def test_saturating_tanh_gives_numpys_bits(layout):
+    """Against np.tanh bit for bit (signed zeros, NaN, infinities included), on a travelling front
+    (mostly saturated: the sparing path), on values mostly inside (numpy's own path), on a non-contiguous
+    array and into an ``out`` that is its input."""
+    rng = np.random.default_rng(3)
+    x = 5.0 * (2.0 - rng.uniform(0.0, 20.0, (40, 37)) / 0.04)  # seed eq. (2.4)'s argument, 1% unsaturated
+    x.flat[:8] = [0.0, -0.0, np.nan, np.inf, -np.inf, 21.999999999999996, 18.5, -18.5]  # tanh(18.5) < 1
+    if layout == "all inside":
+        x = rng.uniform(-25.0, 25.0, x.shape)
+    expected = np.tanh(x)
+    if layout == "transposed":
+        x, expected = x.T, expected.T
+    if layout == "in place":
+        got = ufl_numpy.saturating_tanh(x, out=x)
+        assert got is x
+    else:
+        out = np.full_like(x, 7.0)
+        got = ufl_numpy.saturating_tanh(x, out=out)
+        assert got is out
+        assert ufl_numpy.saturating_tanh(x).tobytes() == expected.tobytes()
+    assert got.tobytes() == expected.tobytes()
+    assert ufl_numpy.saturating_tanh(0.5) == np.tanh(0.5)
