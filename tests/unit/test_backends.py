@@ -528,3 +528,63 @@ def test_fenicsx_compiles_kernels_at_O3_unless_the_users_dolfinx_configuration_s
         printed = subprocess.run([sys.executable, "-c", script], env=env, cwd=cwd, capture_output=True,
                                  text=True, check=True).stdout
         assert printed.strip() == "{}", where
+
+
+# -- the fenicsx backend packs a form's coefficients itself ---------------------------------------
+
+
+def test_the_coefficient_packer_gives_dolfinxs_table_and_assembly(data):
+    """A form over P1, P2 vector, a Taylor-Hood field and its components: the packer's table is dolfinx's
+    to the bit, also after the fields change, and so are the vector and matrix assembled with it."""
+    from dolfinx import cpp
+
+    from primordia.backends.fenicsx import CoefficientPacker
+
+    backend = FenicsxBackend(MPI.COMM_WORLD)
+    mesh = backend.create_mesh(data)
+    m = backend.function(lagrange(backend, mesh), "m")
+    u = backend.function(lagrange(backend, mesh, 2, vector=True), "u")
+    w = backend.function(taylor_hood(backend, mesh), "w")
+    velocity, pressure = ufl.split(w)
+    test = ufl.TestFunction(m.ufl_function_space())
+    trial = ufl.TrialFunction(m.ufl_function_space())
+    integrand = (m * ufl.div(u) + ufl.dot(velocity, ufl.grad(m)) + pressure * m ** 2) * ufl.exp(-m)
+    forms = [backend._form(integrand * test * ufl.dx + m * u[0] * test * ufl.ds),
+             backend._form(integrand * trial * test * ufl.dx)]
+    for step in range(2):
+        backend.interpolate(m, lambda x, s=step: 1.0 + x[0] * x[1] + s)
+        backend.interpolate(u, lambda x, s=step: np.stack([np.sin(x[i] + s) for i in range(data.gdim)]))
+        backend.interpolate_component(w, 0, lambda x, s=step: np.stack([x[i] * (i + 2 + s) for i in range(data.gdim)]))
+        backend.interpolate_component(w, 1, lambda x, s=step: x[0] - x[1] + s)
+        for compiled in forms:
+            packer = backend._packers.get(compiled, lambda compiled=compiled: CoefficientPacker.for_form(compiled))
+            assert packer is not None
+            reference = cpp.fem.pack_coefficients(compiled)
+            packed = packer.pack()
+            assert sorted(packed, key=str) == sorted(reference, key=str)
+            for key in reference:
+                assert packed[key].tobytes() == reference[key].tobytes()
+    vector = backend.assemble_vector(integrand * test * ufl.dx + m * u[0] * test * ufl.ds)  # through the packer
+    import dolfinx.fem.petsc as fem_petsc
+
+    plain = fem_petsc.assemble_vector(forms[0])  # dolfinx packs
+    plain.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    assert vector.getArray().tobytes() == plain.getArray().tobytes()
+    matrix = backend.assemble_matrix(integrand * trial * test * ufl.dx)
+    reference_matrix = fem_petsc.assemble_matrix(forms[1])
+    reference_matrix.assemble()
+    assert np.array_equal(to_numpy(matrix), to_numpy(reference_matrix))
+
+
+def test_the_coefficient_packer_leaves_other_forms_to_dolfinx(data):
+    """No packer for a form with an interior-facet integral, or without coefficients: dolfinx packs those."""
+    from primordia.backends.fenicsx import CoefficientPacker
+
+    backend = FenicsxBackend(MPI.COMM_WORLD)
+    mesh = backend.create_mesh(data)
+    m = backend.function(lagrange(backend, mesh), "m")
+    test = ufl.TestFunction(m.ufl_function_space())
+    assert CoefficientPacker.for_form(backend._form(m * test * ufl.dx)) is not None
+    assert CoefficientPacker.for_form(backend._form(m * test * ufl.dx + m * test * ufl.ds)) is not None
+    assert CoefficientPacker.for_form(backend._form(m * test * ufl.dx + ufl.avg(m) * ufl.avg(test) * ufl.dS)) is None
+    assert CoefficientPacker.for_form(backend._form(test * ufl.dx)) is None
