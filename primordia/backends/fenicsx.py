@@ -24,6 +24,8 @@ from dolfinx import cpp as _cpp
 from dolfinx import fem
 from petsc4py import PETSc
 
+logger = logging.getLogger(__name__)
+
 
 #: The environment variable that sets PT-SCOTCH's threads (SCOTCH 7); see FenicsxBackend.create_mesh.
 SCOTCH_THREADS = "SCOTCH_PTHREAD_NUMBER"
@@ -88,7 +90,8 @@ class CoefficientPacker:
             for function, start in zip(compiled.coefficients, base):
                 dofmap = function.function_space.dofmap
                 dofs = dofmap.list().array.reshape(-1, dofmap.dof_layout.num_dofs)[cells]
-                columns.append((start + dofs[:, :, None] * dofmap.bs + np.arange(dofmap.bs)).reshape(len(cells), -1))
+                columns.append((start + dofs[:, :, None] * dofmap.bs + np.arange(dofmap.bs)).reshape(
+                    len(cells), dofs.shape[1] * dofmap.bs))  # no rows: (0, stride), as dolfinx's
             indices = np.concatenate(columns, axis=1).astype(np.intp)
             self._tables.append((key, indices.reshape(-1), np.empty(indices.shape)))
 
@@ -113,8 +116,13 @@ class CoefficientPacker:
         rows = sum(len(cls.rows(compiled, key)) for key in cls.keys(compiled))
         if rows * sum(e.space_dimension for e in elements) > cls.MAX_ENTRIES:
             return None
-        packer = cls(compiled)
-        reference, packed = _cpp.fem.pack_coefficients(compiled), packer.pack()
+        try:
+            packer = cls(compiled)
+            packed = packer.pack()
+        except (ValueError, IndexError) as error:  # on one rank only, an error would leave the others waiting
+            logger.debug("coefficients of a form left to dolfinx: %s", error)
+            return None
+        reference = _cpp.fem.pack_coefficients(compiled)
         if sorted(reference, key=str) != sorted(packed, key=str) or not all(
                 np.array_equal(packed[key], reference[key], equal_nan=True) for key in reference):
             return None

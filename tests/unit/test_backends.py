@@ -549,7 +549,7 @@ def test_the_coefficient_packer_gives_dolfinxs_table_and_assembly(data):
     test = ufl.TestFunction(m.ufl_function_space())
     trial = ufl.TrialFunction(m.ufl_function_space())
     integrand = (m * ufl.div(u) + ufl.dot(velocity, ufl.grad(m)) + pressure * m ** 2) * ufl.exp(-m)
-    forms = [backend._form(integrand * test * ufl.dx + m * u[0] * test * ufl.ds),
+    forms = [backend._form(integrand * test * ufl.dx + m * u[0] * test * ufl.ds + m * test * ufl.ds(7)),  # 7: none
              backend._form(integrand * trial * test * ufl.dx)]
     for step in range(2):
         backend.interpolate(m, lambda x, s=step: 1.0 + x[0] * x[1] + s)
@@ -564,7 +564,8 @@ def test_the_coefficient_packer_gives_dolfinxs_table_and_assembly(data):
             assert sorted(packed, key=str) == sorted(reference, key=str)
             for key in reference:
                 assert packed[key].tobytes() == reference[key].tobytes()
-    vector = backend.assemble_vector(integrand * test * ufl.dx + m * u[0] * test * ufl.ds)  # through the packer
+    vector = backend.assemble_vector(integrand * test * ufl.dx + m * u[0] * test * ufl.ds
+                                     + m * test * ufl.ds(7))  # through the packer
     import dolfinx.fem.petsc as fem_petsc
 
     plain = fem_petsc.assemble_vector(forms[0])  # dolfinx packs
