@@ -95,8 +95,9 @@ class CoefficientPacker:
             indices = np.concatenate(columns, axis=1).astype(np.intp)
             self._tables.append((key, indices.reshape(-1), np.empty(indices.shape)))
 
-    @classmethod
-    def keys(cls, compiled) -> list[tuple]:
+    @staticmethod
+    def keys(compiled) -> list[tuple]:
+        """The form's integrals, as dolfinx keys its tables: (integral type, subdomain id)."""
         return [(kind, i) for kind in compiled.integral_types for i in compiled.integral_ids(kind)]
 
     @staticmethod
@@ -123,7 +124,7 @@ class CoefficientPacker:
             logger.debug("coefficients of a form left to dolfinx: %s", error)
             return None
         reference = _cpp.fem.pack_coefficients(compiled)
-        if sorted(reference, key=str) != sorted(packed, key=str) or not all(
+        if set(reference) != set(packed) or not all(
                 np.array_equal(packed[key], reference[key], equal_nan=True) for key in reference):
             return None
         return packer
