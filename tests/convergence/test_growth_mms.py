@@ -69,7 +69,7 @@ def test_taylor_hood_growth_converges_at_the_optimal_rates(backend, tmp_path):
 def test_chemotaxis_in_the_reference_configuration_converges_at_second_order(backend, flux_scheme, tmp_path):
     problem = ReferenceChemotaxisProblem()
     cells_per_side = (8, 16, 32)
-    final_time = 0.125
+    final_time = 0.0625
     errors = []
     with registered(problem):
         for n in cells_per_side:

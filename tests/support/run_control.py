@@ -145,6 +145,13 @@ def finish(process: subprocess.Popen, timeout: float = 120) -> tuple[int, str]:
     return process.returncode, stderr
 
 
+def stop(process: subprocess.Popen) -> None:
+    """Kill a started run's process group if it is still running (nothing once it ended)."""
+    if process.poll() is None:
+        kill_group(process)
+        process.communicate()
+
+
 def summary(out: Path) -> dict:
     return json.loads((out / "summary.json").read_text())
 
