@@ -135,6 +135,7 @@ class CoefficientPacker:
             values = function.x.array
             self._gathered[start:start + values.size] = values
         for _, indices, table in self._tables:
+            # "clip" writes into ``out`` directly ("raise" buffers a copy); the indices were checked at the first pack
             np.take(self._gathered, indices, out=table.reshape(-1), mode="clip")
         return {key: table for key, _, table in self._tables}
 
@@ -264,12 +265,12 @@ class FenicsxBackend(Backend):
     def assemble_matrix(self, form, bcs: Sequence[BoundaryCondition] = (), A=None, diagonal: float = 1.0):
         compiled = self._form(form)
         handles = [bc.handle for bc in bcs]
+        coefficients = self._coefficients(compiled)
         if A is None:
-            A = self._track(fem_petsc.assemble_matrix(compiled, bcs=handles, diagonal=diagonal,
-                                                      coeffs=self._coefficients(compiled)))
+            A = self._track(fem_petsc.assemble_matrix(compiled, bcs=handles, diagonal=diagonal, coeffs=coefficients))
         else:
             A.zeroEntries()
-            fem_petsc.assemble_matrix(A, compiled, bcs=handles, diagonal=diagonal, coeffs=self._coefficients(compiled))
+            fem_petsc.assemble_matrix(A, compiled, bcs=handles, diagonal=diagonal, coeffs=coefficients)
         A.assemble()
         return A
 

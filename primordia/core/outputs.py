@@ -183,7 +183,8 @@ class ScalarSeriesNetcdf(Output):
 
 
 #: series.nc is rewritten at most this often (seconds) while a run goes on, and at its end: every row
-#: of a fast run would otherwise rewrite the file (example 1a: 12 ms a row, a row every 10 steps of 20 ms).
+#: of a fast run would otherwise rewrite the file (example 1a: 4.8 ms a rewrite
+#: of its 261 rows of 21 columns, 7.8 ms when xarray wrote them; a row every 10 steps of 20 ms).
 SERIES_INTERVAL = 2.0
 
 #: summary.json is rewritten at a series time at most this often (seconds), unless series.nc was just rewritten.

@@ -41,7 +41,8 @@ class ScalarSeries:
     With ``min_interval`` > 0 a row appended less than that many seconds after the last
     rewrite waits in memory for the next row or event, or for :meth:`flush`: a run that
     records a row every few milliseconds does not spend its time rewriting the file
-    (12 ms a rewrite for example 1a's series; one row every 10 steps of 20 ms).  The file
+    (example 1a's 261 rows of 21 columns: 4.8 ms a rewrite, 7.8 ms when xarray wrote them; it records a
+    row every 10 steps of 20 ms).  The file
     is still whole at every moment; it lacks at most the rows of the last ``min_interval``
     seconds and of the time to the next row (a slow run, whose rows come further apart,
     writes each at once).
@@ -176,18 +177,19 @@ def _write_netcdf(path: Path, variables: Mapping[str, tuple[str, np.ndarray, dic
             if dimension not in target.dimensions:
                 target.createDimension(dimension, len(values))
             if values.dtype.kind == "U":
-                encoded = np.char.encode(values, "utf-8")
-                width = max(1, encoded.dtype.itemsize)
+                encoded = np.char.encode(values, "utf-8")  # bytes, at least one per entry ("" is b"")
+                width = encoded.dtype.itemsize
                 characters = f"string{width}"
                 if characters not in target.dimensions:
                     target.createDimension(characters, width)
                 variable = target.createVariable(name, "c", (dimension, characters))
-                variable[:] = encoded.astype(f"S{width}").view("S1").reshape(len(values), width)
+                variable[:] = encoded.view("S1").reshape(len(values), width)
                 variable._attributes["_Encoding"] = "utf-8"
             else:
                 variable = target.createVariable(name, "d", (dimension,))
                 variable[:] = values
                 variable._attributes["_FillValue"] = np.float64(np.nan)
+            # into the attribute table itself: setattr would also let an attribute named "shape" hide the variable's
             for key, value in attrs.items():
                 variable._attributes[key] = value
 

@@ -41,7 +41,7 @@ def test_a_run_killed_at_a_random_step_and_restarted_ends_bit_for_bit_as_the_uni
 
     # a serial reference runs on the second core beside the run to be killed; two ranks take both cores
     reference = rc.start("run", *arguments, "--out", tmp_path / "reference", ranks=ranks)
-    killed = tmp_path / "killed"
+    killed, process = tmp_path / "killed", None
     try:
         if ranks > 1:
             status, stderr = rc.finish(reference, timeout=300)
@@ -54,8 +54,10 @@ def test_a_run_killed_at_a_random_step_and_restarted_ends_bit_for_bit_as_the_uni
         rc.wait_until_gone(killed)
         status, stderr = rc.finish(reference, timeout=300)
         assert status == 0, stderr[-3000:]
-    finally:
-        rc.stop(reference)  # a failure above leaves no reference run behind
+    finally:  # a failure above leaves no run behind (the held one would sleep for 10 minutes)
+        for started in (reference, process):
+            if started is not None:
+                rc.stop(started)
     assert rc.summary(killed)["status"] == "running"  # what a killed process leaves
     assert rc.checkpointed_step(killed) < steps
 
