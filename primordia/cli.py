@@ -22,6 +22,7 @@ import sys
 import traceback
 from pathlib import Path
 
+from primordia.core import compiled
 from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, is_root_process
 from primordia.core.signals import INTERRUPTS, signal_name
 
@@ -87,6 +88,7 @@ def command_run(args) -> int:
                           f"directory")
     if args.config is None and args.restart is None:
         raise ConfigError("run needs a config file, CONFIG.toml (or --restart OUT_DIR)")
+    compiled.mode()  # a wrong PRIMORDIA_COMPILED stops the run before it starts
     if args.restart is not None and not args.restart.strip():
         raise ConfigError("--restart needs the output directory of the run to continue")
     overrides = list(args.overrides)
@@ -204,6 +206,7 @@ def _print_linear_algebra() -> None:
     warning = reference_blas_warning(libraries)
     if warning is not None:
         print(f"  warning: {warning}")
+    print(f"  {'compiled loops':<22} {compiled.status().removeprefix('compiled loops: ')}")
 
 
 def main(argv: list[str] | None = None) -> int:

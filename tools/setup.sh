@@ -5,7 +5,8 @@
 #      on Debian's reference BLAS, and MUMPS factorises example 2a's tangent at 171 x 171 in 14.8 s
 #      instead of 5.0 (README, "Backends"). Debian's reference BLAS (libblas3, which dolfinx's PETSc
 #      depends on) stays installed beside it, unselected: tests/unit/test_blas.py runs on it once to
-#      check the warning `primordia run` prints there;
+#      check the warning `primordia run` prints there; gcc and libc6-dev (FFCx compiles with them, and so
+#      do primordia's few C loops, primordia/core/compiled.py, with glibc's vector math library);
 #   2. .venv made from /usr/bin/python3 with --system-site-packages (sees Debian's dolfinx/petsc4py);
 #   3. primordia (editable) and the example plugins, with numpy pinned below 2
 #      (Debian's petsc4py/dolfinx are built against numpy 1.x).
@@ -17,7 +18,7 @@ SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 
 missing=()
-for pkg in python3-dolfinx python3-venv python3-h5py-mpi libopenblas0-serial libblas3; do
+for pkg in python3-dolfinx python3-venv python3-h5py-mpi libopenblas0-serial libblas3 gcc libc6-dev; do
   if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
     missing+=("$pkg")
   fi

@@ -61,6 +61,7 @@ from __future__ import annotations
 import numpy as np
 import ufl
 
+from primordia.core import compiled
 from primordia.core.errors import ConfigError
 from primordia.core.ops import NUMPY, UFL
 from primordia.core.validation import number, numbers
@@ -69,6 +70,7 @@ from primordia.physics.edge_flux import ExponentiallyFittedFlux
 from primordia.physics.kinetics.base import Species
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
+EDGE_OPS = compiled.numpy_ops()  # the sensitivity at every edge at every step: exp by the compiled loop
 ACCUMULATIONS = ("material", "conservative")
 PERTURBATION_SHAPES = ("random", "cosine")
 #: ``solve``: one linear solve per species (IMEX, Gauss-Seidel), or all species in one Newton system.
@@ -258,7 +260,7 @@ class Chemotaxis(Physics):
                 operator = ExponentiallyFittedFlux(  # (2.3a): D_m grad m - chi m grad f, fitted
                     self.disc, species.name, species.attractant,
                     diffusivity=self.params[species.diffusivity],
-                    sensitivity=lambda c, species=species: self.sensitivity(species, c, NUMPY),
+                    sensitivity=lambda c, species=species: self.sensitivity(species, c, EDGE_OPS),
                     metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
                 self._fitted_operators = {**getattr(self, "_fitted_operators", {}), species.name: operator}

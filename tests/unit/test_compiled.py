@@ -1,0 +1,127 @@
+"""The compiled loops (primordia.core.compiled): built on this machine, right, and optional.
+
+On Debian x86-64 (CI and the README's machine) the vector variant must build: a numpy
+fall-back there would be a silent slow-down, so it is a failure, not a skip.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from primordia.core import compiled
+from primordia.core.errors import PrimordiaError
+
+
+@pytest.fixture
+def fresh(monkeypatch, tmp_path):
+    """The module as if no library had been loaded in this process, with a cache of its own."""
+    monkeypatch.setattr(compiled, "_loaded", {})
+    monkeypatch.setenv("PRIMORDIA_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("PRIMORDIA_COMPILED", raising=False)
+    return tmp_path
+
+
+def test_the_loops_build_here_with_vector_math():
+    library = compiled.kernels()
+    assert library is not None, compiled.status()
+    assert compiled.status().startswith("compiled loops: /")
+    if platform.machine() == "x86_64" and os.path.exists("/usr/include/x86_64-linux-gnu/bits/math-vector.h"):
+        assert compiled._loaded["variant"] == 0, "glibc x86-64 without libmvec's exp: the slow variant was built"
+
+
+def test_vector_exp_is_numpys_to_four_ulps_everywhere():
+    rng = np.random.default_rng(1)
+    x = np.concatenate([rng.uniform(-745, 709, 20000), rng.uniform(-1e-3, 1e-3, 2000), [0.0, -0.0, 1e-310]])
+    expected = np.exp(x)
+    got = compiled.vector_exp(x)
+    ulps = np.abs(got - expected) / np.spacing(expected)
+    assert ulps.max() <= 4, ulps.max()
+    with np.errstate(over="ignore"):
+        special = compiled.vector_exp(np.array([800.0, -800.0, np.inf, -np.inf, np.nan]))
+    assert special[0] == np.inf and special[1] == 0.0 and special[2] == np.inf and special[3] == 0.0
+    assert np.isnan(special[4])
+    assert compiled.vector_exp(2.0) == np.exp(2.0)  # a scalar goes to numpy
+    strided = x[::3]
+    np.testing.assert_array_equal(compiled.vector_exp(strided), compiled.vector_exp(strided.copy()))
+
+
+def test_a_new_cache_is_built_once_and_then_loaded(fresh):
+    assert compiled.kernels() is not None
+    built = list((fresh / "cache" / "compiled").glob("kernels-*.so"))
+    assert len(built) == 1
+    stamp = built[0].stat().st_mtime_ns
+    compiled._loaded.clear()
+    assert compiled.kernels() is not None
+    assert built[0].stat().st_mtime_ns == stamp  # loaded, not built again
+    assert not [p for p in built[0].parent.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
+def test_an_unwritable_cache_builds_for_this_process(fresh, monkeypatch):
+    blocker = fresh / "not-a-directory"
+    blocker.write_text("")
+    monkeypatch.setenv("PRIMORDIA_CACHE_DIR", str(blocker))
+    assert compiled.kernels() is not None
+    assert not str(compiled._loaded["path"]).startswith(str(blocker))
+
+
+def test_off_keeps_numpy(fresh, monkeypatch):
+    monkeypatch.setenv("PRIMORDIA_COMPILED", "off")
+    assert compiled.kernels() is None
+    assert "off" in compiled.status()
+    x = np.linspace(-3, 3, 11)
+    np.testing.assert_array_equal(compiled.vector_exp(x), np.exp(x))
+
+
+def test_without_a_compiler_auto_falls_back_and_on_is_one_clear_error(fresh, monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    assert compiled.kernels() is None
+    assert "no C compiler" in compiled.status() and "/nonexistent/cc" in compiled.status()
+    compiled._loaded.clear()
+    monkeypatch.setenv("PRIMORDIA_COMPILED", "on")
+    with pytest.raises(PrimordiaError, match="PRIMORDIA_COMPILED=on but the compiled loops could not be built"):
+        compiled.kernels()
+
+
+def test_a_compiler_that_fails_falls_back_to_numpy(fresh, monkeypatch, tmp_path):
+    failing = tmp_path / "failing-cc"
+    failing.write_text("#!/bin/sh\necho 'cc: error: this compiler builds nothing' >&2\nexit 1\n")
+    failing.chmod(0o755)
+    monkeypatch.setenv("CC", str(failing))
+    assert compiled.kernels() is None
+    assert "this compiler builds nothing" in compiled.status()
+    assert not list((fresh / "cache" / "compiled").glob("*"))  # nothing half-written left
+
+
+def test_a_wrong_mode_is_one_line_naming_it(fresh, monkeypatch):
+    monkeypatch.setenv("PRIMORDIA_COMPILED", "fast")
+    with pytest.raises(PrimordiaError, match="PRIMORDIA_COMPILED must be auto, on or off, got 'fast'"):
+        compiled.kernels()
+
+
+def test_a_wrong_mode_stops_a_run_with_one_line(tmp_path):
+    primordia = shutil.which("primordia", path=os.path.dirname(sys.executable))
+    config = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "ex01a.toml")
+    result = subprocess.run([primordia, "run", config, "--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.05",
+                             "--out", str(tmp_path / "out"), "--no-progress"],
+                            capture_output=True, text=True, env={**os.environ, "PRIMORDIA_COMPILED": "fast"},
+                            timeout=300)
+    assert result.returncode != 0
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert lines and "PRIMORDIA_COMPILED must be auto, on or off" in lines[-1]
+    assert "Traceback" not in result.stderr
+
+
+def test_addresses_are_checked():
+    with pytest.raises(ValueError, match="contiguous float64"):
+        compiled.address(np.zeros(4, dtype=np.float32))
+    with pytest.raises(ValueError, match="contiguous int64"):
+        compiled.address(np.zeros(4, dtype=np.int32), np.int64)
+    with pytest.raises(ValueError, match="contiguous float64"):
+        compiled.address(np.zeros(8)[::2])
