@@ -180,7 +180,7 @@ def _build_or_load():
             library = _load(target if target.is_file() else _compile(command, libraries, target))
             _loaded["variant"] = variant
             return library
-        except (OSError, subprocess.SubprocessError) as error:
+        except (OSError, AttributeError, subprocess.SubprocessError) as error:  # AttributeError: a function missing
             last_error = str(error).strip().splitlines()[-1] if str(error).strip() else type(error).__name__
     return _failed(last_error)
 
@@ -190,15 +190,14 @@ def _compile(command: list[str], libraries: list[str], target: Path) -> Path:
     written (in a temporary directory if the cache cannot be written)."""
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        directory = target.parent
-    except OSError:  # a read-only home: build for this process only
-        directory = Path(tempfile.mkdtemp(prefix="primordia-compiled-"))
-        target = directory / target.name
+        output = tempfile.NamedTemporaryFile(dir=target.parent, prefix=f".{target.stem}.", suffix=".so", delete=False)
+    except OSError:  # a cache that cannot be written (a read-only home): build for this process only
+        target = Path(tempfile.mkdtemp(prefix="primordia-compiled-")) / target.name
+        output = tempfile.NamedTemporaryFile(dir=target.parent, prefix=f".{target.stem}.", suffix=".so", delete=False)
+    output.close()
     with tempfile.TemporaryDirectory(prefix="primordia-build-") as build:
         source = Path(build) / "kernels.c"
         source.write_text(SOURCE)
-        output = tempfile.NamedTemporaryFile(dir=directory, prefix=f".{target.stem}.", suffix=".so", delete=False)
-        output.close()
         try:
             result = subprocess.run([*command, str(source), "-o", output.name, *libraries],
                                     capture_output=True, text=True, timeout=120)

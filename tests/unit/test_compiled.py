@@ -11,6 +11,7 @@ import platform
 import shutil
 import subprocess
 import sys
+import tempfile
 
 import numpy as np
 import pytest
@@ -69,6 +70,28 @@ def test_an_unwritable_cache_builds_for_this_process(fresh, monkeypatch):
     monkeypatch.setenv("PRIMORDIA_CACHE_DIR", str(blocker))
     assert compiled.kernels() is not None
     assert not str(compiled._loaded["path"]).startswith(str(blocker))
+
+
+def test_a_read_only_cache_builds_for_this_process(fresh, monkeypatch):
+    if os.geteuid() == 0:  # root writes into a read-only directory: make it a file's child instead
+        monkeypatch.setattr(compiled.tempfile, "NamedTemporaryFile", _refusing_in(fresh / "cache"))
+    else:
+        (fresh / "cache" / "compiled").mkdir(parents=True)
+        (fresh / "cache" / "compiled").chmod(0o500)
+    assert compiled.kernels() is not None
+    assert not str(compiled._loaded["path"]).startswith(str(fresh / "cache"))
+
+
+def _refusing_in(directory):
+    """tempfile.NamedTemporaryFile, refusing (as a read-only directory would) to create files under ``directory``."""
+    original = tempfile.NamedTemporaryFile
+
+    def named_temporary_file(*args, dir=None, **kwargs):
+        if dir is not None and str(dir).startswith(str(directory)):
+            raise PermissionError(13, "Permission denied", str(dir))
+        return original(*args, dir=dir, **kwargs)
+
+    return named_temporary_file
 
 
 def test_off_keeps_numpy(fresh, monkeypatch):
