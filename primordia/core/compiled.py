@@ -169,9 +169,9 @@ def kernels(comm=None):
 
 def _build_or_load():
     compiler = os.environ.get("CC") or "cc"
-    last_error = "no C compiler"
     if shutil.which(compiler.split()[0]) is None:
         return _failed(f"no C compiler ({compiler!r} is not on PATH)")
+    last_error = "no variant built"
     for variant, (defines, libraries) in enumerate(_VARIANTS):
         command = [*compiler.split(), *_FLAGS, *defines]
         key = hashlib.sha256("\0".join([SOURCE, *command, *libraries, platform.machine()]).encode()).hexdigest()[:16]
@@ -188,12 +188,15 @@ def _build_or_load():
 def _compile(command: list[str], libraries: list[str], target: Path) -> Path:
     """Compile :data:`SOURCE` into ``target``, atomically (a temporary file renamed over it); the path
     written (in a temporary directory if the cache cannot be written)."""
+    def temporary_next_to(path: Path):
+        return tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.", suffix=".so", delete=False)
+
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        output = tempfile.NamedTemporaryFile(dir=target.parent, prefix=f".{target.stem}.", suffix=".so", delete=False)
+        output = temporary_next_to(target)
     except OSError:  # a cache that cannot be written (a read-only home): build for this process only
         target = Path(tempfile.mkdtemp(prefix="primordia-compiled-")) / target.name
-        output = tempfile.NamedTemporaryFile(dir=target.parent, prefix=f".{target.stem}.", suffix=".so", delete=False)
+        output = temporary_next_to(target)
     output.close()
     with tempfile.TemporaryDirectory(prefix="primordia-build-") as build:
         source = Path(build) / "kernels.c"
@@ -227,7 +230,7 @@ def _failed(reason: str):
 
 
 def status() -> str:
-    """One line saying what the compiled loops are and where they come from (for ``primordia info``)."""
+    """One line saying what the compiled loops are and where they come from (for ``primordia plugins``)."""
     library = kernels()
     if library is not None:
         return f"compiled loops: {_loaded['path']}"
