@@ -177,7 +177,11 @@ def _build_or_load():
         key = hashlib.sha256("\0".join([SOURCE, *command, *libraries, platform.machine()]).encode()).hexdigest()[:16]
         target = cache_directory() / f"kernels-{key}.so"
         try:
-            library = _load(target if target.is_file() else _compile(command, libraries, target))
+            built = target if target.is_file() else _compile(command, libraries, target)
+            library = _load(built)
+            if built != target:  # built for this process alone: mapped now, so nothing needs to stay on disk
+                _loaded["path"] = f"{built.name}, built for this process (the cache {target.parent} cannot be written)"
+                shutil.rmtree(built.parent, ignore_errors=True)
             _loaded["variant"] = variant
             return library
         except (OSError, AttributeError, subprocess.SubprocessError) as error:  # AttributeError: a function missing
@@ -187,7 +191,8 @@ def _build_or_load():
 
 def _compile(command: list[str], libraries: list[str], target: Path) -> Path:
     """Compile :data:`SOURCE` into ``target``, atomically (a temporary file renamed over it); the path
-    written (in a temporary directory if the cache cannot be written)."""
+    written (in a temporary directory of its own if the cache cannot be written: the caller removes it
+    once the library is loaded)."""
     def temporary_next_to(path: Path):
         return tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.", suffix=".so", delete=False)
 

@@ -64,22 +64,34 @@ def test_a_new_cache_is_built_once_and_then_loaded(fresh):
     assert not [p for p in built[0].parent.iterdir() if p.name.startswith(".")]  # no temporary file left
 
 
-def test_an_unwritable_cache_builds_for_this_process(fresh, monkeypatch):
+def test_an_unwritable_cache_builds_for_this_process(fresh, monkeypatch, private_tmp):
     blocker = fresh / "not-a-directory"
     blocker.write_text("")
     monkeypatch.setenv("PRIMORDIA_CACHE_DIR", str(blocker))
     assert compiled.kernels() is not None
-    assert not str(compiled._loaded["path"]).startswith(str(blocker))
+    assert "built for this process" in compiled.status()
+    np.testing.assert_array_equal(compiled.vector_exp(np.zeros(4)), np.ones(4))  # still mapped, though unlinked
+    assert not list(private_tmp.iterdir())  # its temporary directory is gone
 
 
-def test_a_read_only_cache_builds_for_this_process(fresh, monkeypatch):
+@pytest.fixture
+def private_tmp(monkeypatch, tmp_path):
+    """tempfile's directory for this test alone, to see what a process-only build leaves there."""
+    directory = tmp_path / "tmp"
+    directory.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(directory))
+    return directory
+
+
+def test_a_read_only_cache_builds_for_this_process(fresh, monkeypatch, private_tmp):
     if os.geteuid() == 0:  # root writes into a read-only directory: make it a file's child instead
         monkeypatch.setattr(compiled.tempfile, "NamedTemporaryFile", _refusing_in(fresh / "cache"))
     else:
         (fresh / "cache" / "compiled").mkdir(parents=True)
         (fresh / "cache" / "compiled").chmod(0o500)
     assert compiled.kernels() is not None
-    assert not str(compiled._loaded["path"]).startswith(str(fresh / "cache"))
+    assert "built for this process" in compiled.status()
+    assert not list(private_tmp.iterdir())
 
 
 def _refusing_in(directory):
