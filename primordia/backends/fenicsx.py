@@ -17,6 +17,7 @@ import ufl
 
 from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, sub_elements
 from primordia.core.mesh_data import MeshData
+from primordia.core import reductions
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
 import dolfinx.fem.petsc as fem_petsc
@@ -289,8 +290,6 @@ class FenicsxBackend(Backend):
         return self.comm.allreduce(fem.assemble_scalar(self._form(form)))
 
     def extrema(self, expression, mesh) -> tuple[float, float]:
-        from mpi4py import MPI
-
         compiled = self._compiled.get(
             expression, lambda: fem.Expression(expression, basix_reference_vertices(mesh.topology.cell_name()),
                                                 jit_params=self._jit))
@@ -298,7 +297,7 @@ class FenicsxBackend(Backend):
         values = compiled.eval(cells)
         low = float(values.min()) if values.size else np.inf
         high = float(values.max()) if values.size else -np.inf
-        return self.comm.allreduce(low, op=MPI.MIN), self.comm.allreduce(high, op=MPI.MAX)
+        return reductions.extrema(self.comm, low, high)
 
     def assemble_residual(self, residual, jacobian, bcs, state, b=None):
         compiled = self._form(residual)
@@ -448,12 +447,10 @@ class FenicsxBackend(Backend):
         return result[:, 0] if bs == 1 else result
 
     def vertex_extrema(self, function, component=None) -> tuple[float, float]:
-        from mpi4py import MPI
-
         values = self._owned_vertex_values(function, component)[1]
         low = float(values.min()) if values.size else np.inf
         high = float(values.max()) if values.size else -np.inf
-        return self.comm.allreduce(low, op=MPI.MIN), self.comm.allreduce(high, op=MPI.MAX)
+        return reductions.extrema(self.comm, low, high)
 
     def collect_garbage(self) -> None:
         super().collect_garbage()

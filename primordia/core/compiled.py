@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core.errors import PrimordiaError
+from primordia.core.reductions import on_every_rank
 
 SOURCE = r"""
 #include <stddef.h>
@@ -160,7 +161,7 @@ def kernels(comm=None):
     if "library" not in _loaded:
         _loaded["library"] = None if mode() == "off" else _build_or_load()
     library = _loaded["library"]
-    if comm is not None and comm.size > 1 and not comm.allreduce(library is not None, op=_land()):
+    if comm is not None and comm.size > 1 and not on_every_rank(comm, library is not None):
         if library is not None:  # this process keeps numpy's too, in every caller
             _loaded["library"], _loaded["reason"] = None, "another process could not build them"
         return None
@@ -263,12 +264,6 @@ def vector_exp(x):
     result = np.empty_like(array)
     library.primordia_exp(array.size, address(array), address(result))
     return result
-
-
-def _land():
-    from mpi4py import MPI
-
-    return MPI.LAND
 
 
 def numpy_ops():

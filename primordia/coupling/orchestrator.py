@@ -37,6 +37,7 @@ from primordia.core import checkpoint as checkpoint_file
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.plugins import choose, get_plugin_manager, registry
+from primordia.core.reductions import largest, largest_in_place, smallest
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
@@ -372,7 +373,7 @@ class Simulation:
                 continue
             owned.array[:] = values
             self.backend.update_ghosts(function)
-        if self.comm.allreduce(wrong, op=_mpi_max()):
+        if largest(self.comm, wrong):
             raise ConfigError(f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}: its fields are "
                               f"laid out differently (another mesh partition or another discretisation)")
         for physics in self.model.physics_objects:
@@ -426,7 +427,7 @@ class Simulation:
                      and self.disc.field(fields[0]).ufl_shape == self.disc.field(others[0]).ufl_shape
                      and self.backend.shares_dofs(space, self.disc.group_function(other).ufl_function_space()))
             if self.comm.size > 1:
-                alike = self.comm.allreduce(alike, op=_mpi_min())
+                alike = smallest(self.comm, alike)
             if alike:
                 cache[group] = layout
                 return layout
@@ -496,7 +497,7 @@ class Simulation:
         due_by_time = every_minutes > 0 and clock.perf_counter() - self._last_checkpoint_wall >= 60 * every_minutes
         asked = INTERRUPTS.received or 0
         if self.comm.size > 1:
-            due_by_time, asked = self.comm.bcast(due_by_time, root=0), self.comm.allreduce(asked, op=_mpi_max())
+            due_by_time, asked = self.comm.bcast(due_by_time, root=0), largest(self.comm, asked)
         if asked or due_by_time or (every_steps and self.step_index % every_steps == 0):
             self.write_checkpoint()
             if not asked:
@@ -634,10 +635,7 @@ class Simulation:
         for j, (name, _) in enumerate(self._nonnegative):
             values = self.backend.local_array(self.disc.function_of(name)[0])
             flags[len(groups) + j] = -float(np.min(values)) if len(values) else -np.inf
-        if self.comm.size > 1:
-            from mpi4py import MPI
-
-            self.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        largest_in_place(self.comm, flags)
         for i, group in enumerate(groups):
             if flags[i]:
                 return f"field {', '.join(self.disc.group_fields(group))} is not finite at t = {t:g}"
@@ -904,18 +902,6 @@ def _rows(keys: np.ndarray) -> np.ndarray:
     """Integer key rows as single comparable items (sortable, searchable)."""
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     return keys.view(np.dtype((np.void, keys.dtype.itemsize * keys.shape[1]))).ravel()
-
-
-def _mpi_max():
-    from mpi4py import MPI
-
-    return MPI.MAX
-
-
-def _mpi_min():
-    from mpi4py import MPI
-
-    return MPI.MIN
 
 
 class _NoBar:

@@ -32,6 +32,7 @@ from scipy.sparse import csr_matrix as _csr
 
 from primordia.core import compiled
 from primordia.core.petsc_library import update_mpiaij_values
+from primordia.core.reductions import largest, smallest
 from primordia.physics.base import AlgebraicOperator
 from primordia.physics.discretisation import Discretisation
 
@@ -110,10 +111,10 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         """Edge weights w_ij = -S_ij (scaled by D), and how many are negative (not an M-matrix)."""
         weights = np.where(self._diagonal, 0.0, -values)
         comm = self.disc.comm
-        scale = comm.allreduce(float(np.abs(values).max(initial=0.0)), op=_max_op())
+        scale = largest(comm, float(np.abs(values).max(initial=0.0)))
         self.negative_weights = comm.allreduce(int((weights < -1e-12 * scale).sum())) // 2  # each edge twice
-        largest = comm.allreduce(float(weights.max(initial=0.0)), op=_max_op())
-        self.most_negative_weight = -comm.allreduce(float(-weights.min(initial=0.0)), op=_max_op()) / largest
+        heaviest = largest(comm, float(weights.max(initial=0.0)))
+        self.most_negative_weight = smallest(comm, float(weights.min(initial=0.0))) / heaviest
         self._scaled_weights = weights * self.diffusivity  # w_ij D (0 on the diagonal)
 
     def _prepare_gather(self, template):
@@ -355,9 +356,4 @@ def _aij_over(shape, csr: tuple, comm) -> tuple:
         matrix.assemble()
     return matrix, shared
 
-
-def _max_op():
-    from mpi4py import MPI
-
-    return MPI.MAX
 
