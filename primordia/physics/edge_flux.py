@@ -144,20 +144,18 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         ``_difference``), and the entries of A from the per-edge table [B(Pe), B(Pe) + Pe]
         (``_entries``: -w_ij D at B(Pe_ij) for an off-diagonal entry, w_ij D at each B(-Pe_ij)
         of its row for a diagonal one).  Gathered positions are ordered like global indices.
+        Those matrices are made from the edges' ends (``_edge_ends``) at the numpy branch's first
+        update (:meth:`_numpy_products`); the compiled loops read the ends and ``_edge_positions``.
         """
         off = ~self._diagonal
         i, j = self._entry_row[off], self._entry_column[off]
-        size = max(len(self._gathered_values[self.species]), 1)
+        size = self._gathered_size()
         low, high = np.minimum(i, j), np.maximum(i, j)
         edges, edge_of = np.unique(low.astype(np.int64) * size + high, return_inverse=True)
         edge_low, edge_high = edges // size, edges % size
         n_edges, n_entries = len(edges), len(self._columns)
-        rows, ones = np.arange(n_edges), np.ones(n_edges)
         self._edge_ends = tuple(np.ascontiguousarray(end, dtype=np.int64) for end in (edge_low, edge_high))
-        self._midpoint = _csr((np.r_[ones, ones] / 2, (np.r_[rows, rows], np.r_[edge_low, edge_high])), (n_edges, size))
-        # the difference over D: the Peclet number without another pass over the edges
-        self._difference = _csr((np.r_[ones, -ones] / self.diffusivity, (np.r_[rows, rows], np.r_[edge_high, edge_low])),
-                                (n_edges, size))
+        self._midpoint = self._difference = None  # the numpy branch's (_numpy_products)
         forward = i < j  # entry (i, j) runs from the edge's low end to its high end
         toward = edge_of + n_edges * ~forward  # B(Pe_ij) in the table
         away = edge_of + n_edges * forward  # B(-Pe_ij) in the table
@@ -177,6 +175,20 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         # PETSc views of the two: the entry product writes the operator's values in place
         self._values_vector = PETSc.Vec().createWithArray(self._values, comm=PETSc.COMM_SELF)
         self._table_vector = PETSc.Vec().createWithArray(self._table, comm=PETSc.COMM_SELF)
+
+    def _gathered_size(self) -> int:
+        return max(len(self._gathered_values[self.species]), 1)
+
+    def _numpy_products(self) -> None:
+        """The numpy branch's sparse matrices of the edges' midpoints and differences over D (the Peclet
+        number without another pass over the edges), from ``_edge_ends``, and its entry matrix."""
+        low, high = self._edge_ends
+        n_edges, size = len(low), self._gathered_size()
+        rows, ones = np.arange(n_edges), np.ones(n_edges)
+        self._midpoint = _csr((np.r_[ones, ones] / 2, (np.r_[rows, rows], np.r_[low, high])), (n_edges, size))
+        self._difference = _csr((np.r_[ones, -ones] / self.diffusivity, (np.r_[rows, rows], np.r_[high, low])),
+                                (n_edges, size))
+        self._entries = self._entry_matrix()
 
     def _entry_matrix(self):
         """``_entries`` for the current weights (see :meth:`_prepare_pairs`), a serial PETSc matrix whose
@@ -266,7 +278,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self._compiled_values(c, a)
         else:
             if self._entries is None:
-                self._entries = self._entry_matrix()
+                self._numpy_products()
             elif self._moving:
                 self._refresh_entries()
             chi = self.sensitivity(self._midpoint @ c)  # at the edge midpoint, as quadrature would
