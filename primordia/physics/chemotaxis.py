@@ -321,13 +321,16 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
     is 4.4 to 5.4 times the redundant solve on 2 ranks; if it scaled perfectly it would catch
     up near 9 to 11 ranks, so from 9 ranks on the symmetric positive definite matrices of the diffusing
     species get CG with BoomerAMG (set up once, the matrix is constant).  A matrix that
-    changes (a growing tissue's metric, example 2a) gets CG with BoomerAMG on any number of
-    ranks, one included: a factorisation at every solve costs more than AMG's set-up and
-    iterations.  Example 2a, f and b per step (``bench_solvers.py --share ex02a --clock wall``,
-    the solves' split): in serial at 171 x 171 squares 316 and 304 ms with LU, 113 and 135
-    with BoomerAMG (86 x 86: 38 and 38 against 24 and 31); on 2 ranks at 86 x 86 41.7 and
-    41.9 ms redundant, 22.7 and 34.4 with BoomerAMG (``bench_scaling.py --examples ex02a
-    --solves``).
+    changes (a growing tissue's metric, example 2a) is mass-dominated at the seed's time
+    steps, so on up to ``GATHERED_RANKS`` ranks it gets CG with an incomplete Cholesky
+    factorisation of each rank's block, kept over solves while it works: a factorisation at
+    every solve costs more, and so does AMG's set-up.  Example 2a, f and b linear-solve ms
+    per step (``primordia run examples/ex02a.toml`` for 5 steps, ``summary.json``; session
+    of 2026-12-03): at 171 x 171 squares 95 and 117 with BoomerAMG against 12 and 19 (on 2
+    ranks 61 and 73 against 12 and 18); at 86 x 86 21 and 32 against 2.1 and 3.0; before,
+    LU cost 316 and 304 at 171.  CG needs 6-9 iterations a solve in serial, twice that on 2
+    ranks (additive Schwarz with overlap, symmetric, saves a fifth of them and no time).
+    Example 4 (small, 20 x 20 x 2): 10.6 and 13.1 against 0.9 and 1.2.
     """
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}
@@ -353,7 +356,10 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
             preconditioner = {"pc_type": "bjacobi"}
         return {"ksp_type": "gmres", **preconditioner, "ksp_rtol": 1e-12, "ksp_atol": 1e-14,
                 "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm"}
-    if ranks > GATHERED_RANKS or not constant:
+    if ranks > GATHERED_RANKS:
         return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
+    if not constant:
+        return {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "icc", "ksp_rtol": 1e-12, "ksp_atol": 1e-14,
+                "rebuild_preconditioner_after": "fresh+1"}
     direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
     return {**direct, "solve_on_one_rank": True} if ranks > 1 else direct

@@ -137,6 +137,28 @@ def test_cell_density_boomeramg_hmis_reaches_the_direct_solution(backend, tmp_pa
     assert all(iterations >= 2 for iterations in krylov_iterations(amg, "chemotaxis.m"))  # it iterates
 
 
+# -- f and b on a growing tissue: CG on an incomplete Cholesky factor, kept while it works -----------------------
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_morphogens_on_a_growing_tissue_keep_an_incomplete_cholesky_and_reach_the_direct_solution(backend, tmp_path):
+    """Their matrices follow the tissue's metric, so they change at every solve: the default keeps each
+    rank's incomplete Cholesky factor over those solves while CG needs no more iterations than after its
+    build, and the fields are the direct solve's."""
+    steps, fixed_point = 3, [o for o in GROWTH if not o.startswith("coupling.")]  # ex02a's own: several solves a step
+    lu = [f'solver.chemotaxis_{name}.{key}="{value}"' for name in "fb"
+          for key, value in (("ksp_type", "preonly"), ("pc_type", "lu"))]
+    direct = run("ex02a", backend, tmp_path, steps, *fixed_point, *lu)
+    kept = run("ex02a", backend, tmp_path, steps, *fixed_point)
+    assert_same_fields(direct, kept, 1e-9)
+    for name in "fb":
+        (solver,) = [s for s in kept.solvers if s.sub.name == f"chemotaxis.{name}"]
+        assert (solver.options["ksp_type"], solver.options["pc_type"], solver.options["sub_pc_type"]) == (
+            "cg", "bjacobi", "icc")
+        assert not unused(f"chemotaxis_{name}_", ["sub_pc_type"])  # PETSc read it
+        solves = sum(kept.coupling_iterations["fixed_point"])  # one solve of each species per outer iteration
+        assert min(krylov_iterations(kept, f"chemotaxis.{name}")) >= solves / steps  # it iterates
+        assert 1 <= solver.preconditioner_builds < solves / 2, (solver.preconditioner_builds, solves)
+
+
 # -- the cell density keeps its preconditioner over time steps (rebuild_preconditioner_after = "fresh+1") --------
 def _cell_density_run(backend: str, tmp_path, steps: int, *overrides) -> tuple[Simulation, int]:
     """Example 1a on a coarse mesh, and how many ILU factorisations its cell-density solves made (the

@@ -183,8 +183,12 @@ def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks
         assert (whole["ksp_type"], whole["pc_type"], whole[GATHER]) == ("preonly", "lu", True)
         assert whole["pc_factor_mat_solver_type"] == "petsc"  # the owner's whole system is serial
     assert _solver_defaults(morphogen, GATHERED_RANKS + 1, constant=True)["pc_type"] == "hypre"
-    # a matrix that changes every solve (a growing tissue's metric): AMG, not a factorisation at every solve
-    assert [_solver_defaults(morphogen, ranks, constant=False)["pc_type"] for ranks in (1, 2)] == ["hypre", "hypre"]
+    # a matrix that changes every solve (a growing tissue's metric): CG on each rank's incomplete Cholesky
+    # factor, kept while it works, not a factorisation at every solve; AMG from 9 ranks on
+    changing = [_solver_defaults(morphogen, ranks, constant=False) for ranks in (1, 2, GATHERED_RANKS + 1)]
+    assert [(d["ksp_type"], d["pc_type"], d.get("sub_pc_type")) for d in changing] == [
+        ("cg", "bjacobi", "icc"), ("cg", "bjacobi", "icc"), ("cg", "hypre", None)]
+    assert [d.get("rebuild_preconditioner_after") for d in changing] == ["fresh+1", "fresh+1", None]
     cells = Species("m", "cells", diffusivity="D_m", attractant="f")
     # rebuilt every step: no factorisation to keep; ILU, with two layers of overlap between ranks
     assert [_solver_defaults(cells, ranks, constant=False)["pc_type"] for ranks in (1, 2, 16)] == ["bjacobi", "asm", "asm"]
