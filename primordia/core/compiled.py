@@ -30,6 +30,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -180,6 +181,8 @@ def _build_or_load():
         try:
             built = target if target.is_file() else _compile(command, libraries, target)
             library = _load(built)
+            if built == target:
+                _keep_recent(target)
             if built != target:  # built for this process alone: mapped now, so nothing needs to stay on disk
                 _loaded["path"] = f"{built.name}, built for this process (the cache {target.parent} cannot be written)"
                 shutil.rmtree(built.parent, ignore_errors=True)
@@ -188,6 +191,33 @@ def _build_or_load():
         except (OSError, AttributeError, subprocess.SubprocessError) as error:  # AttributeError: a function missing
             last_error = str(error).strip().splitlines()[-1] if str(error).strip() else type(error).__name__
     return _failed(last_error)
+
+
+#: Builds kept in the cache: the one in use and the most recently used others (another checkout or
+#: version sharing the cache, a cluster's older runs); older ones, and temporary files that a build
+#: killed halfway left behind for an hour, are removed whenever a library is loaded from the cache.
+KEPT_BUILDS = 4
+_STALE_SECONDS = 3600
+
+
+def _keep_recent(target: Path) -> None:
+    """Mark ``target`` as just used and remove all but the :data:`KEPT_BUILDS` most recently used builds.
+
+    Best effort: a file another process removes or still writes is left alone.  A process that has
+    already loaded a removed library keeps it mapped; one about to load it builds it again.
+    """
+    now = time.time()
+    try:
+        os.utime(target)
+        builds = sorted(target.parent.glob("kernels-*.so"), key=lambda path: path.stat().st_mtime, reverse=True)
+        stale = [path for path in target.parent.glob(".kernels-*.so") if now - path.stat().st_mtime > _STALE_SECONDS]
+    except OSError:
+        return
+    for path in [path for path in builds if path != target][KEPT_BUILDS - 1:] + stale:
+        try:
+            path.unlink()
+        except OSError:
+            pass
 
 
 def _compile(command: list[str], libraries: list[str], target: Path) -> Path:

@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 import pytest
@@ -57,11 +58,38 @@ def test_a_new_cache_is_built_once_and_then_loaded(fresh):
     assert compiled.kernels() is not None
     built = list((fresh / "cache" / "compiled").glob("kernels-*.so"))
     assert len(built) == 1
-    stamp = built[0].stat().st_mtime_ns
+    inode = built[0].stat().st_ino
     compiled._loaded.clear()
     assert compiled.kernels() is not None
-    assert built[0].stat().st_mtime_ns == stamp  # loaded, not built again
+    assert built[0].stat().st_ino == inode  # loaded, not built again (a build renames a new file over it)
     assert not [p for p in built[0].parent.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
+def test_the_cache_keeps_the_builds_used_last_and_drops_older_ones_and_stale_temporaries(fresh):
+    """Builds of other versions (other sources or flags) pile up in a shared cache: all but the
+    KEPT_BUILDS most recently used go when a library is loaded, and so do temporary files that a
+    killed build left behind for more than an hour; a fresh temporary file (a build under way) stays."""
+    cache = fresh / "cache" / "compiled"
+    cache.mkdir(parents=True)
+    now = time.time()
+    others = [cache / f"kernels-{index:016x}.so" for index in range(6)]
+    for age, path in enumerate(others, start=1):  # 1 to 6 days unused
+        path.write_bytes(b"an older build")
+        os.utime(path, (now - age * 86400, now - age * 86400))
+    stale, under_way = cache / ".kernels-0000000000000001.abc.so", cache / ".kernels-0000000000000002.def.so"
+    for path, age in ((stale, 2 * 3600), (under_way, 60)):
+        path.write_bytes(b"")
+        os.utime(path, (now - age, now - age))
+    assert compiled.kernels() is not None
+    current = compiled._loaded["path"]
+    left = sorted(path.name for path in cache.iterdir())
+    assert left == sorted([current.name, under_way.name, *(path.name for path in others[: compiled.KEPT_BUILDS - 1])])
+    os.utime(others[2], (now - 3600, now - 3600))  # another checkout used this build an hour ago
+    os.utime(current, (now - 7 * 86400, now - 7 * 86400))
+    compiled._loaded.clear()
+    assert compiled.kernels() is not None  # loading marks the build in use as the most recent
+    assert current.stat().st_mtime > now - 60  # so that another process's pruning keeps it
+    assert current.exists() and others[2].exists() and others[0].exists() and others[1].exists()
 
 
 def test_an_unwritable_cache_builds_for_this_process(fresh, monkeypatch, private_tmp):
