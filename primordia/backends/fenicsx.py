@@ -15,9 +15,9 @@ from collections.abc import Sequence
 import numpy as np
 import ufl
 
+from primordia.core import reductions
 from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, sub_elements
 from primordia.core.mesh_data import MeshData
-from primordia.core import reductions
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
 import dolfinx.fem.petsc as fem_petsc

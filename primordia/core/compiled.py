@@ -183,7 +183,7 @@ def _build_or_load():
             library = _load(built)
             if built == target:
                 _keep_recent(target)
-            if built != target:  # built for this process alone: mapped now, so nothing needs to stay on disk
+            else:  # built for this process alone: mapped now, so nothing needs to stay on disk
                 _loaded["path"] = f"{built.name}, built for this process (the cache {target.parent} cannot be written)"
                 shutil.rmtree(built.parent, ignore_errors=True)
             _loaded["variant"] = variant

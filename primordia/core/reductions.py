@@ -10,25 +10,25 @@ from __future__ import annotations
 import numpy as np
 
 
-def _operation(name: str):
+def _mpi():
     from mpi4py import MPI
 
-    return getattr(MPI, name)
+    return MPI
 
 
 def largest(comm, value):
     """The largest ``value`` over the ranks of ``comm``."""
-    return value if comm.size == 1 else comm.allreduce(value, op=_operation("MAX"))
+    return value if comm.size == 1 else comm.allreduce(value, op=_mpi().MAX)
 
 
 def smallest(comm, value):
     """The smallest ``value`` over the ranks of ``comm``."""
-    return value if comm.size == 1 else comm.allreduce(value, op=_operation("MIN"))
+    return value if comm.size == 1 else comm.allreduce(value, op=_mpi().MIN)
 
 
 def on_every_rank(comm, flag: bool) -> bool:
     """Whether ``flag`` holds on every rank of ``comm``."""
-    return bool(flag) if comm.size == 1 else bool(comm.allreduce(bool(flag), op=_operation("LAND")))
+    return bool(flag) if comm.size == 1 else bool(comm.allreduce(bool(flag), op=_mpi().LAND))
 
 
 def extrema(comm, low: float, high: float) -> tuple[float, float]:
@@ -39,4 +39,5 @@ def extrema(comm, low: float, high: float) -> tuple[float, float]:
 def largest_in_place(comm, values: np.ndarray) -> None:
     """Each entry of ``values`` replaced by its largest over the ranks (one message for the whole array)."""
     if comm.size > 1:
-        comm.Allreduce(_operation("IN_PLACE"), values, op=_operation("MAX"))
+        MPI = _mpi()
+        comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)

@@ -37,7 +37,7 @@ from primordia.core import checkpoint as checkpoint_file
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.plugins import choose, get_plugin_manager, registry
-from primordia.core.reductions import largest, largest_in_place, smallest
+from primordia.core.reductions import largest, largest_in_place, on_every_rank
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
@@ -426,8 +426,7 @@ class Simulation:
             alike = (len(fields) == len(others) == 1
                      and self.disc.field(fields[0]).ufl_shape == self.disc.field(others[0]).ufl_shape
                      and self.backend.shares_dofs(space, self.disc.group_function(other).ufl_function_space()))
-            if self.comm.size > 1:
-                alike = smallest(self.comm, alike)
+            alike = on_every_rank(self.comm, alike)
             if alike:
                 cache[group] = layout
                 return layout

@@ -325,7 +325,7 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
     steps, so on up to ``GATHERED_RANKS`` ranks it gets CG with an incomplete Cholesky
     factorisation of each rank's block, kept over solves while it works: a factorisation at
     every solve costs more, and so does AMG's set-up.  Example 2a, f and b linear-solve ms
-    per step (``primordia run examples/ex02a.toml`` for 5 steps, ``summary.json``; session
+    per step (``primordia run examples/ex02a.toml`` for 5-10 steps, ``summary.json``; session
     of 2026-12-03): at 171 x 171 squares 95 and 117 with BoomerAMG against 12 and 19 (on 2
     ranks 61 and 73 against 12 and 18); at 86 x 86 21 and 32 against 2.1 and 3.0; before,
     LU cost 316 and 304 at 171.  CG needs 6-9 iterations a solve in serial, twice that on 2
@@ -356,10 +356,10 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
             preconditioner = {"pc_type": "bjacobi"}
         return {"ksp_type": "gmres", **preconditioner, "ksp_rtol": 1e-12, "ksp_atol": 1e-14,
                 "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm"}
+    cg = {"ksp_type": "cg", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     if ranks > GATHERED_RANKS:
-        return {"ksp_type": "cg", "pc_type": "hypre", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
+        return {**cg, "pc_type": "hypre"}
     if not constant:
-        return {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "icc", "ksp_rtol": 1e-12, "ksp_atol": 1e-14,
-                "rebuild_preconditioner_after": "fresh+1"}
+        return {**cg, "pc_type": "bjacobi", "sub_pc_type": "icc", "rebuild_preconditioner_after": "fresh+1"}
     direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
     return {**direct, "solve_on_one_rank": True} if ranks > 1 else direct

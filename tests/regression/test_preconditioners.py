@@ -149,14 +149,16 @@ def test_morphogens_on_a_growing_tissue_keep_an_incomplete_cholesky_and_reach_th
     direct = run("ex02a", backend, tmp_path, steps, *fixed_point, *lu)
     kept = run("ex02a", backend, tmp_path, steps, *fixed_point)
     assert_same_fields(direct, kept, 1e-9)
+    solves_per_step = kept.coupling_iterations["fixed_point"]  # one solve of each species per outer iteration
     for name in "fb":
         (solver,) = [s for s in kept.solvers if s.sub.name == f"chemotaxis.{name}"]
         assert (solver.options["ksp_type"], solver.options["pc_type"], solver.options["sub_pc_type"]) == (
             "cg", "bjacobi", "icc")
         assert not unused(f"chemotaxis_{name}_", ["sub_pc_type"])  # PETSc read it
-        solves = sum(kept.coupling_iterations["fixed_point"])  # one solve of each species per outer iteration
-        assert min(krylov_iterations(kept, f"chemotaxis.{name}")) >= solves / steps  # it iterates
-        assert 1 <= solver.preconditioner_builds < solves / 2, (solver.preconditioner_builds, solves)
+        # it iterates: at least two CG iterations a solve (a direct solve counts one)
+        assert all(its >= 2 * solves for its, solves in zip(krylov_iterations(kept, f"chemotaxis.{name}"),
+                                                             solves_per_step))
+        assert 1 <= solver.preconditioner_builds < sum(solves_per_step) / 2, solver.preconditioner_builds
 
 
 # -- the cell density keeps its preconditioner over time steps (rebuild_preconditioner_after = "fresh+1") --------
