@@ -217,8 +217,8 @@ class Simulation:
         :meth:`linear_solve_seconds`."""
         for solver in solvers:
             carried = self._solve_seconds.setdefault(solver.sub.name, no_time())
-            for clock, seconds in solver.linear_solve_seconds.items():
-                carried[clock] += seconds
+            for name, seconds in solver.linear_solve_seconds.items():
+                carried[name] += seconds
 
     def _create_solvers(self):
         """The scheme's solvers, and what is read from the forms they were built with (diagnostics, promises)."""

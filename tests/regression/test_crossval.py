@@ -31,9 +31,7 @@ import meshio
 import numpy as np
 import pytest
 import scipy.sparse
-import ufl
 
-from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import rectangle
 from primordia.core.plugins import registry
 from primordia.coupling.orchestrator import Simulation

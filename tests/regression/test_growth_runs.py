@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import ufl
 import xarray as xr
 from petsc4py import PETSc
 

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import meshio
 import numpy as np
-import pytest
 import xarray as xr
 
 from primordia.core.timestepping import StepController
