@@ -480,6 +480,32 @@ class FenicsxBackend(Backend):
         return (space.dofmap.index_map.size_local == other.dofmap.index_map.size_local
                 and np.array_equal(space.dofmap.list.array, other.dofmap.list.array))
 
+    def p1_cell_dofs(self, space, component=None):
+        part, element = space, space.ufl_element()
+        if component is not None:  # the sub-space path of a flat component: dolfinx's V.sub(i).sub(j)
+            rest = component
+            while isinstance(element, ufl.MixedElement):
+                for index, sub in enumerate(element.sub_elements()):
+                    size = int(np.prod(sub.value_shape()))
+                    if rest < size:
+                        part, element = part.sub(index), sub
+                        break
+                    rest -= size
+                else:
+                    return None
+        if (element.family() not in ("Lagrange", "P", "Q") or element.degree() != 1 or element.value_shape()
+                or part.dofmap.bs != 1 or space.mesh.geometry.cmap.degree != 1):
+            return None
+        cells = space.mesh.topology.index_map(space.mesh.topology.dim).size_local
+        dofs = part.dofmap.list.array.reshape(-1, part.dofmap.cell_dofs(0).size)[:cells]
+        return np.ascontiguousarray(dofs, dtype=np.int64)
+
+    def p1_cell_coordinates(self, mesh):
+        geometry = mesh.geometry
+        cells = mesh.topology.index_map(mesh.topology.dim).size_local
+        nodes = geometry.dofmap.array.reshape(-1, geometry.dofmap.links(0).size)[:cells]
+        return np.ascontiguousarray(geometry.x[nodes][:, :, : geometry.dim])
+
     # -- field splits ---------------------------------------------------------------------
     def field_index_sets(self, space):
         index_map, bs = space.dofmap.index_map, space.dofmap.index_map_bs

@@ -1145,6 +1145,17 @@ class SkfemBackend(Backend):
     def num_cells(self, mesh) -> int:
         return mesh.mesh_data.num_cells
 
+    def p1_cell_dofs(self, space, component=None):
+        block = space.blocks[0 if component is None else component] if (
+            component is None and space.value_size == 1 or component is not None and component < space.value_size) else None
+        if block is None or block.element.maxdeg != 1 or len(block.element.doflocs) != space.mesh.mesh_data.gdim + 1:
+            return None
+        return np.ascontiguousarray(block.cell_dofs[:, space.vertex_local_dofs(block)], dtype=np.int64)
+
+    def p1_cell_coordinates(self, mesh):
+        data = mesh.mesh_data
+        return np.ascontiguousarray(data.points[data.cells], dtype=float)
+
     def num_dofs(self, space) -> int:
         return space.num_dofs
 

@@ -207,6 +207,20 @@ class Backend(ABC):
         """
         return False
 
+    def p1_cell_dofs(self, space, component: int | None = None) -> np.ndarray | None:
+        """Per cell this rank assembles over, the ``local_array`` positions of a P1 scalar part's DOFs at its
+        vertices, (n_cells, tdim + 1), vertex by vertex in the order of :meth:`p1_cell_coordinates`.
+
+        ``component`` is a flat value component of a vector or mixed space (``u[1]`` of a mixed
+        (u, p) space is 1, p is 2). None when that part is not P1 Lagrange, or the backend cannot
+        tell: the closed-form assembly of :mod:`primordia.coupling.p1_advection` is then not used.
+        """
+        return None
+
+    def p1_cell_coordinates(self, mesh) -> np.ndarray | None:
+        """The vertex coordinates (n_cells, tdim + 1, gdim) of the cells of :meth:`p1_cell_dofs`, or None."""
+        return None
+
     # -- field splits ---------------------------------------------------------------------
     @abstractmethod
     def field_index_sets(self, space) -> list:

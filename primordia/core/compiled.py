@@ -114,6 +114,36 @@ void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restric
     }
   }
 }
+
+/* The P1 advection load of one term, b_i += s |K| / ((d + 1)(d + 2)) grad c_K . (sum_j r_j + r_i) over the
+   cells K at vertex i: the exact integral of s (r . grad c) w_i for P1 r, c and w on affine simplices
+   (primordia/coupling/p1_advection.py).  Per cell: nv vertices, gdim coordinates; gradients (cells, nv, gdim)
+   of the hat functions; out, c: the cells' positions in b and in c; r_dofs (gdim, cells, nv) in r[d]. */
+void primordia_p1_advection(ptrdiff_t n, ptrdiff_t nv, ptrdiff_t gdim, double scale,
+                            const double *restrict gradients, const double *restrict weights,
+                            const long long *restrict out, const long long *restrict c_dofs,
+                            const long long *restrict r_dofs, const double *restrict c,
+                            const double *const *restrict r, double *restrict b)
+{
+  for (ptrdiff_t e = 0; e < n; ++e) {
+    double g[3] = {0.0, 0.0, 0.0}, sum[3] = {0.0, 0.0, 0.0}, at[4][3];
+    for (ptrdiff_t j = 0; j < nv; ++j) {
+      const double cj = c[c_dofs[e * nv + j]];
+      for (ptrdiff_t d = 0; d < gdim; ++d) {
+        g[d] += cj * gradients[(e * nv + j) * gdim + d];
+        at[j][d] = r[d][r_dofs[(d * n + e) * nv + j]];
+        sum[d] += at[j][d];
+      }
+    }
+    const double w = scale * weights[e];
+    for (ptrdiff_t i = 0; i < nv; ++i) {
+      double dot = 0.0;
+      for (ptrdiff_t d = 0; d < gdim; ++d)
+        dot += g[d] * (sum[d] + at[i][d]);
+      b[out[e * nv + i]] += w * dot;
+    }
+  }
+}
 """
 
 #: Both variants compile the same loops; the first vectorises exp and expm1 (glibc, x86-64).
@@ -132,6 +162,8 @@ _SIGNATURES = {
     "primordia_edge_midpoints": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4],
     "primordia_edge_bernoulli": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4, ctypes.c_double, ctypes.c_void_p],
     "primordia_edge_entries": [ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 8],
+    "primordia_p1_advection": [ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_double,
+                               *[ctypes.c_void_p] * 8],
 }
 
 _loaded: dict = {}  # "library" -> the CDLL or None, once decided in this process

@@ -1,0 +1,224 @@
+r"""The advection of P1 fields by a P1 velocity, assembled from its closed form.
+
+Example 1b's species are advected by the solid velocity, u_t . grad c^n (seed (2.3a),
+(2.3c), (2.3d)), an explicit term assembled at every step.  With r, c and the test
+function w_i all P1 on an affine simplex K of dimension d, grad c is constant on K and
+
+    int_K (r . grad c) w_i = grad c_K . sum_j r_j int_K w_j w_i
+                           = |K| / ((d + 1)(d + 2)) grad c_K . (sum_j r_j + r_i),
+
+which quadrature of degree 2 (what the form's degree estimate gives) integrates
+exactly.  A loop over the cells (:mod:`primordia.core.compiled`) evaluates it from the
+cells' hat-function gradients, kept for the run.  The physics stays the members' UFL:
+:meth:`P1Advection.recognise` reads it from the form, a sum of terms
+
+    s * w[k] * dot(r, grad(c)) * dx        (s a number, r a P1 vector or P1 components)
+
+and anything else (another factor, a subdomain, a quadrature degree below 2, another
+element, a backend without :meth:`~primordia.core.backend.Backend.p1_cell_dofs`, no C
+compiler) is assembled as before.  Before its first use the closed form is checked
+against the backend's assembly of the same form on smooth fields set for the check.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+
+import numpy as np
+from ufl.classes import Coefficient, Dot, FixedIndex, Grad, Indexed, Inner, ListTensor, Product, ScalarValue
+
+from primordia.core import compiled
+
+logger = logging.getLogger(__name__)
+
+#: Largest difference, relative to the largest entry, the check allows between the closed form and assembly.
+CHECK_TOLERANCE = 1e-12
+
+
+class P1Advection:
+    """Assembles a sum of P1 advection terms (see the module docstring) into the test space's vector."""
+
+    def __init__(self, backend, form, terms, gradients, weights):
+        self.backend, self.form = backend, form
+        self._terms = terms            # (scale, out dofs, c, c dofs, [(r coefficient, component)], r dofs)
+        self._gradients = gradients    # (cells, nv, gdim)
+        self._weights = weights        # |K| / ((d + 1)(d + 2))
+        self._library = compiled.kernels(backend.comm)
+
+    @classmethod
+    def recognise(cls, backend, form) -> "P1Advection | None":
+        """The closed form of ``form`` (a linear form), or None where it does not apply."""
+        library = compiled.kernels(backend.comm)
+        parsed = _terms(form) if library is not None else None
+        if parsed is None:
+            return None
+        mesh = form.arguments()[0].ufl_function_space().mesh
+        coordinates = backend.p1_cell_coordinates(mesh)
+        test_space = form.arguments()[0].ufl_function_space()
+        terms = []
+        for scale, component, c, velocity in parsed:
+            out = backend.p1_cell_dofs(test_space, component)
+            c_dofs = backend.p1_cell_dofs(c.ufl_function_space())
+            r_dofs = [backend.p1_cell_dofs(r.ufl_function_space(), part) for r, part in velocity]
+            if (coordinates is None or out is None or c_dofs is None or any(d is None for d in r_dofs)
+                    or len(velocity) != coordinates.shape[2]):
+                return None
+            terms.append((scale, out, c, c_dofs, velocity, np.ascontiguousarray(np.stack(r_dofs))))
+        if not terms or coordinates.shape[1] != coordinates.shape[2] + 1:
+            return None
+        gradients, volumes = _hat_gradients(coordinates)
+        d = coordinates.shape[2]
+        evaluator = cls(backend, form, terms, gradients, volumes / ((d + 1) * (d + 2)))
+        return evaluator if evaluator._agrees_with_assembly() else None
+
+    def assemble(self, b=None):
+        """The form's vector (a backend vector of the test space; ``b`` is reused): owned and ghost rows summed."""
+        if b is None:
+            b = self.backend.assemble_vector(self.form)  # the layout only: its values are overwritten
+        if self.backend.comm.size == 1:
+            values = b.getArray()
+            values[:] = 0.0
+            self._add(values)
+            return b
+        from petsc4py import PETSc
+
+        with b.localForm() as local:  # owned and ghost rows, as an assembly adds them
+            values = local.getArray()
+            values[:] = 0.0
+            self._add(values)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return b
+
+    def _add(self, values: np.ndarray) -> None:
+        address = compiled.address
+        n, nv, gdim = self._gradients.shape
+        for scale, out, c, c_dofs, velocity, r_dofs in self._terms:
+            arrays = [self.backend.local_array(r) for r, _ in velocity]
+            pointers = (ctypes.c_void_p * gdim)(*[address(a) for a in arrays])
+            c_values = self.backend.local_array(c)
+            self._library.primordia_p1_advection(
+                n, nv, gdim, scale, address(self._gradients), address(self._weights), address(out, np.int64),
+                address(c_dofs, np.int64), address(r_dofs, np.int64), address(c_values),
+                ctypes.cast(pointers, ctypes.c_void_p), address(values))
+
+    def _agrees_with_assembly(self) -> bool:
+        """Both ways on smooth fields (set for the check, then restored): the same vector to CHECK_TOLERANCE."""
+        backend = self.backend
+        fields = {id(f): f for _, _, c, _, velocity, _ in self._terms for f in (c, *(r for r, _ in velocity))}
+        kept = {key: backend.local_array(f).copy() for key, f in fields.items()}
+        coordinates = backend.p1_cell_coordinates(self.form.arguments()[0].ufl_function_space().mesh)
+        x, y = coordinates[..., 0], coordinates[..., -1]
+        try:
+            # every part read gets a smooth function of its nodes (the same on every rank), each its own
+            for number, (_, _, c, c_dofs, velocity, r_dofs) in enumerate(self._terms):
+                backend.local_array(c)[c_dofs] = np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)
+                for d, (r, part) in enumerate(velocity):
+                    backend.local_array(r)[r_dofs[d]] = np.cos((0.5 + 0.4 * part) * x - 0.2 * y) + 0.1 * part
+            assembled = backend.assemble_vector(self.form).getArray(readonly=True).copy()
+            mine = self.assemble().getArray(readonly=True)
+            size = max(float(backend.comm.allreduce(np.abs(assembled).max(initial=0.0), op=_max())), 1e-300)
+            difference = float(backend.comm.allreduce(np.abs(mine - assembled).max(initial=0.0), op=_max()))
+        finally:
+            for key, f in fields.items():
+                backend.local_array(f)[:] = kept[key]
+        agrees = difference <= CHECK_TOLERANCE * size
+        if not agrees:
+            logger.debug("the closed-form advection differs from assembly by %.3g of %.3g: assembled", difference, size)
+        return agrees
+
+
+def _max():
+    from mpi4py import MPI
+
+    return MPI.MAX
+
+
+def _hat_gradients(coordinates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients (cells, nv, gdim) of the hat functions of affine simplices, and the cells' volumes."""
+    edges = coordinates[:, 1:, :] - coordinates[:, :1, :]          # (cells, d, d): rows x_j - x_0
+    inverse = np.linalg.inv(edges)                                  # columns: gradients of lambda_1 .. lambda_d
+    gradients = np.empty_like(coordinates)
+    gradients[:, 1:, :] = np.swapaxes(inverse, 1, 2)
+    gradients[:, 0, :] = -gradients[:, 1:, :].sum(axis=1)
+    d = coordinates.shape[2]
+    volumes = np.abs(np.linalg.det(edges)) / float(np.prod(np.arange(1, d + 1)))
+    return np.ascontiguousarray(gradients), np.ascontiguousarray(volumes)
+
+
+def _terms(form) -> list | None:
+    """[(scale, test component, c, [(r, flat component) per dimension])] of each integral, or None."""
+    if len(form.arguments()) != 1:
+        return None
+    test = form.arguments()[0]
+    terms = []
+    for integral in form.integrals():
+        degree = integral.metadata().get("quadrature_degree")
+        if (integral.integral_type() != "cell" or integral.subdomain_id() not in ("everywhere", "otherwise")
+                or (degree is not None and degree < 2)
+                or integral.ufl_domain().ufl_cell().cellname() not in ("triangle", "tetrahedron")):
+            return None
+        term = _term(integral.integrand(), test)
+        if term is None:
+            return None
+        terms.append(term)
+    return terms
+
+
+def _term(expression, test):
+    factors = _factors(expression)
+    scale, component, advection = 1.0, None, None
+    for factor in factors:
+        if isinstance(factor, ScalarValue):
+            scale *= float(factor)
+        elif factor == test and not test.ufl_shape:
+            component = component if component is not None else "scalar"
+        elif (isinstance(factor, Indexed) and factor.ufl_operands[0] == test
+              and all(isinstance(i, FixedIndex) for i in factor.ufl_operands[1]) and len(factor.ufl_operands[1]) == 1
+              and len(test.ufl_shape) == 1 and component is None):
+            component = int(factor.ufl_operands[1][0])
+        elif isinstance(factor, (Dot, Inner)) and advection is None:
+            advection = _advection(*factor.ufl_operands)
+            if advection is None:
+                return None
+        else:
+            return None
+    if component is None or advection is None:
+        return None
+    return scale, (None if component == "scalar" else component), *advection
+
+
+def _factors(expression) -> list:
+    if isinstance(expression, Product):
+        return [f for operand in expression.ufl_operands for f in _factors(operand)]
+    return [expression]
+
+
+def _advection(left, right):
+    """(c, [(r, component)]) of dot(r, grad(c)) in either order, or None."""
+    for velocity, gradient in ((left, right), (right, left)):
+        if (isinstance(gradient, Grad) and isinstance(gradient.ufl_operands[0], Coefficient)
+                and not gradient.ufl_operands[0].ufl_shape):
+            parts = _components(velocity)
+            if parts is not None:
+                return gradient.ufl_operands[0], parts
+    return None
+
+
+def _components(velocity):
+    """[(coefficient, flat component)] of a vector: a vector coefficient or a list of its scalar components."""
+    if isinstance(velocity, Coefficient) and len(velocity.ufl_shape) == 1:
+        if velocity.ufl_function_space().ufl_element().value_shape() != velocity.ufl_shape:
+            return None
+        return [(velocity, i) for i in range(velocity.ufl_shape[0])]
+    if isinstance(velocity, ListTensor):
+        parts = []
+        for item in velocity.ufl_operands:
+            if not (isinstance(item, Indexed) and isinstance(item.ufl_operands[0], Coefficient)
+                    and len(item.ufl_operands[1]) == 1 and isinstance(item.ufl_operands[1][0], FixedIndex)
+                    and len(item.ufl_operands[0].ufl_shape) == 1):
+                return None
+            parts.append((item.ufl_operands[0], int(item.ufl_operands[1][0])))
+        return parts
+    return None
+
