@@ -40,7 +40,8 @@ hookspec = pluggy.HookspecMarker("primordia")
 #: in primordia.physics.discretisation.  1.3: the optional Backend.shares_dofs / owned_dof_coordinates,
 #: OutputOption.names_fields.
 #: 1.4: the optional AlgebraicOperator.shifted (the lumped mass added to an operator in place).
-CONTRACT_VERSION = (1, 4)
+#: 1.5: the optional Backend.p1_cell_dofs / p1_cell_coordinates (the closed-form P1 advection).
+CONTRACT_VERSION = (1, 5)
 
 
 @hookspec
