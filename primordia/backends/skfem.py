@@ -1146,9 +1146,11 @@ class SkfemBackend(Backend):
         return mesh.mesh_data.num_cells
 
     def p1_cell_dofs(self, space, component=None):
-        block = space.blocks[0 if component is None else component] if (
-            component is None and space.value_size == 1 or component is not None and component < space.value_size) else None
-        if block is None or block.element.maxdeg != 1 or len(block.element.doflocs) != space.mesh.mesh_data.gdim + 1:
+        index = 0 if component is None else component
+        if (component is None and space.value_size != 1) or not 0 <= index < space.value_size:
+            return None
+        block = space.blocks[index]
+        if block.element.maxdeg != 1 or len(block.element.doflocs) != space.mesh.mesh_data.gdim + 1:
             return None
         return np.ascontiguousarray(block.cell_dofs[:, space.vertex_local_dofs(block)], dtype=np.int64)
 

@@ -28,6 +28,7 @@ import logging
 import numpy as np
 from ufl.classes import Coefficient, Dot, FixedIndex, Grad, Indexed, Inner, ListTensor, Product, ScalarValue
 
+from primordia.backends.ufl_numpy import cell_quantities
 from primordia.core import compiled
 from primordia.core.reductions import largest
 
@@ -40,12 +41,12 @@ CHECK_TOLERANCE = 1e-12
 class P1Advection:
     """Assembles a sum of P1 advection terms (see the module docstring) into the test space's vector."""
 
-    def __init__(self, backend, form, terms, gradients, weights):
-        self.backend, self.form = backend, form
+    def __init__(self, backend, form, library, terms, coordinates):
+        self.backend, self.form, self._library = backend, form, library
         self._terms = terms            # (scale, out dofs, c, c dofs, [(r coefficient, component)], r dofs)
-        self._gradients = gradients    # (cells, nv, gdim)
-        self._weights = weights        # |K| / ((d + 1)(d + 2))
-        self._library = compiled.kernels(backend.comm)
+        self._gradients = _hat_gradients(coordinates)  # (cells, nv, gdim)
+        d = coordinates.shape[2]
+        self._weights = np.ascontiguousarray(cell_quantities(coordinates)["CellVolume"] / ((d + 1) * (d + 2)))
 
     @classmethod
     def recognise(cls, backend, form) -> "P1Advection | None":
@@ -68,23 +69,16 @@ class P1Advection:
             terms.append((scale, out, c, c_dofs, velocity, np.ascontiguousarray(np.stack(r_dofs))))
         if not terms or coordinates.shape[1] != coordinates.shape[2] + 1:
             return None
-        gradients, volumes = _hat_gradients(coordinates)
-        d = coordinates.shape[2]
-        evaluator = cls(backend, form, terms, gradients, volumes / ((d + 1) * (d + 2)))
-        return evaluator if evaluator._agrees_with_assembly() else None
+        evaluator = cls(backend, form, library, terms, coordinates)
+        return evaluator if evaluator._agrees_with_assembly(coordinates) else None
 
     def assemble(self, b=None):
         """The form's vector (a backend vector of the test space; ``b`` is reused): owned and ghost rows summed."""
-        if b is None:
-            b = self.backend.assemble_vector(self.form)  # the layout only: its values are overwritten
-        if self.backend.comm.size == 1:
-            values = b.getArray()
-            values[:] = 0.0
-            self._add(values)
-            return b
         from petsc4py import PETSc
 
-        with b.localForm() as local:  # owned and ghost rows, as an assembly adds them
+        if b is None:
+            b = self.backend.assemble_vector(self.form)  # the layout only: its values are overwritten
+        with b.localForm() as local:  # owned and ghost rows, as an assembly adds them (a serial Vec: itself)
             values = local.getArray()
             values[:] = 0.0
             self._add(values)
@@ -103,12 +97,11 @@ class P1Advection:
                 address(c_dofs, np.int64), address(r_dofs, np.int64), address(c_values),
                 ctypes.cast(pointers, ctypes.c_void_p), address(values))
 
-    def _agrees_with_assembly(self) -> bool:
+    def _agrees_with_assembly(self, coordinates: np.ndarray) -> bool:
         """Both ways on smooth fields (set for the check, then restored): the same vector to CHECK_TOLERANCE."""
         backend = self.backend
         fields = {id(f): f for _, _, c, _, velocity, _ in self._terms for f in (c, *(r for r, _ in velocity))}
         kept = {key: backend.local_array(f).copy() for key, f in fields.items()}
-        coordinates = backend.p1_cell_coordinates(self.form.arguments()[0].ufl_function_space().mesh)
         x, y = coordinates[..., 0], coordinates[..., -1]
         try:
             # every part read gets a smooth function of its nodes (the same on every rank), each its own
@@ -116,8 +109,9 @@ class P1Advection:
                 backend.local_array(c)[c_dofs] = np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)
                 for d, (r, part) in enumerate(velocity):
                     backend.local_array(r)[r_dofs[d]] = np.cos((0.5 + 0.4 * part) * x - 0.2 * y) + 0.1 * part
-            assembled = backend.assemble_vector(self.form).getArray(readonly=True).copy()
-            mine = self.assemble().getArray(readonly=True)
+            vector = backend.assemble_vector(self.form)
+            assembled = vector.getArray(readonly=True).copy()
+            mine = self.assemble(vector).getArray(readonly=True)  # into the same layout: no second assembly
             size = max(float(largest(backend.comm, np.abs(assembled).max(initial=0.0))), 1e-300)
             difference = float(largest(backend.comm, np.abs(mine - assembled).max(initial=0.0)))
         finally:
@@ -129,16 +123,14 @@ class P1Advection:
         return agrees
 
 
-def _hat_gradients(coordinates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients (cells, nv, gdim) of the hat functions of affine simplices, and the cells' volumes."""
+def _hat_gradients(coordinates: np.ndarray) -> np.ndarray:
+    """Gradients (cells, nv, gdim) of the hat functions of affine simplices."""
     edges = coordinates[:, 1:, :] - coordinates[:, :1, :]          # (cells, d, d): rows x_j - x_0
     inverse = np.linalg.inv(edges)                                  # columns: gradients of lambda_1 .. lambda_d
     gradients = np.empty_like(coordinates)
     gradients[:, 1:, :] = np.swapaxes(inverse, 1, 2)
     gradients[:, 0, :] = -gradients[:, 1:, :].sum(axis=1)
-    d = coordinates.shape[2]
-    volumes = np.abs(np.linalg.det(edges)) / float(np.prod(np.arange(1, d + 1)))
-    return np.ascontiguousarray(gradients), np.ascontiguousarray(volumes)
+    return np.ascontiguousarray(gradients)
 
 
 def _terms(form) -> list | None:
@@ -161,26 +153,29 @@ def _terms(form) -> list | None:
 
 
 def _term(expression, test):
-    factors = _factors(expression)
-    scale, component, advection = 1.0, None, None
-    for factor in factors:
+    """(scale, test component or None, c, velocity parts) of s * w[k] * dot(r, grad(c)), or None."""
+    scale, tested, component, advection = 1.0, False, None, None
+    for factor in _factors(expression):
         if isinstance(factor, ScalarValue):
             scale *= float(factor)
-        elif factor == test and not test.ufl_shape:
-            component = component if component is not None else "scalar"
-        elif (isinstance(factor, Indexed) and factor.ufl_operands[0] == test
-              and all(isinstance(i, FixedIndex) for i in factor.ufl_operands[1]) and len(factor.ufl_operands[1]) == 1
-              and len(test.ufl_shape) == 1 and component is None):
-            component = int(factor.ufl_operands[1][0])
+        elif factor == test and not test.ufl_shape and not tested:
+            tested = True
+        elif (isinstance(factor, Indexed) and factor.ufl_operands[0] == test and len(test.ufl_shape) == 1
+              and _fixed_index(factor) is not None and not tested):
+            tested, component = True, _fixed_index(factor)
         elif isinstance(factor, (Dot, Inner)) and advection is None:
             advection = _advection(*factor.ufl_operands)
             if advection is None:
                 return None
         else:
             return None
-    if component is None or advection is None:
-        return None
-    return scale, (None if component == "scalar" else component), *advection
+    return (scale, component, *advection) if tested and advection is not None else None
+
+
+def _fixed_index(indexed) -> int | None:
+    """k of ``v[k]`` (one fixed index), else None."""
+    indices = indexed.ufl_operands[1]
+    return int(indices[0]) if len(indices) == 1 and isinstance(indices[0], FixedIndex) else None
 
 
 def _factors(expression) -> list:
@@ -210,10 +205,8 @@ def _components(velocity):
         parts = []
         for item in velocity.ufl_operands:
             if not (isinstance(item, Indexed) and isinstance(item.ufl_operands[0], Coefficient)
-                    and len(item.ufl_operands[1]) == 1 and isinstance(item.ufl_operands[1][0], FixedIndex)
-                    and len(item.ufl_operands[0].ufl_shape) == 1):
+                    and len(item.ufl_operands[0].ufl_shape) == 1 and _fixed_index(item) is not None):
                 return None
-            parts.append((item.ufl_operands[0], int(item.ufl_operands[1][0])))
+            parts.append((item.ufl_operands[0], _fixed_index(item)))
         return parts
     return None
-
