@@ -115,34 +115,63 @@ void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restric
   }
 }
 
-/* The P1 advection load of one term, b_i += s |K| / ((d + 1)(d + 2)) grad c_K . (sum_j r_j + r_i) over the
-   cells K at vertex i: the exact integral of s (r . grad c) w_i for P1 r, c and w on affine simplices
-   (primordia/coupling/p1_advection.py).  Per cell: nv vertices, gdim coordinates; gradients (cells, nv, gdim)
-   of the hat functions; out, c: the cells' positions in b and in c; r_dofs (gdim, cells, nv) in r[d]. */
-void primordia_p1_advection(ptrdiff_t n, ptrdiff_t nv, ptrdiff_t gdim, double scale,
+/* The P1 advection load of terms sharing one velocity r: for each term t,
+   b_i += s_t |K| / ((d + 1)(d + 2)) grad c_K . (sum_j r_j + r_i) over the cells K at vertex i, the exact
+   integral of s (r . grad c) w_i for P1 r, c and w on affine simplices (primordia/coupling/p1_advection.py).
+   Triangles (gdim 2) or tetrahedra (gdim 3), nv = gdim + 1 vertices; gradients (cells, nv, gdim) of the
+   hat functions; r_dofs (cells, nv, gdim): the vertices' positions in r[d]; out[t], c_dofs[t] (cells, nv):
+   the positions in b and in c[t].  The velocity is read once a cell for every term; per term the operations
+   are those of one term alone. */
+/* The loop for simplices of dimension D (nv = D + 1): with constant bounds the compiler unrolls the vertex
+   and coordinate loops and keeps the cell's values in registers: 1.2 against 4.7 ms for example 1b's three
+   species at 171^2 with the bounds as arguments. */
+#define P1_ADVECTION(D)                                                                                    \
+static void p1_advection_##D(ptrdiff_t n, ptrdiff_t terms, const double *restrict scales,                 \
+                             const double *restrict gradients, const double *restrict weights,              \
+                             const int *const *restrict out, const int *const *restrict c_dofs,             \
+                             const int *restrict r_dofs, const double *const *restrict c,                   \
+                             const double *const *restrict r, double *restrict b)                           \
+{                                                                                                           \
+  enum { NV = D + 1 };                                                                                      \
+  for (ptrdiff_t e = 0; e < n; ++e) {                                                                       \
+    double sum[D] = {0.0}, at[NV][D];                                                                       \
+    const double *restrict grad = gradients + e * NV * D;                                                   \
+    const int *restrict rd = r_dofs + e * NV * D;                                                           \
+    for (int j = 0; j < NV; ++j)                                                                            \
+      for (int d = 0; d < D; ++d) {                                                                         \
+        at[j][d] = r[d][rd[j * D + d]];                                                                     \
+        sum[d] += at[j][d];                                                                                 \
+      }                                                                                                     \
+    for (ptrdiff_t t = 0; t < terms; ++t) {                                                                 \
+      const int *restrict cd = c_dofs[t] + e * NV, *restrict o = out[t] + e * NV;                           \
+      const double *restrict ct = c[t];                                                                     \
+      double g[D] = {0.0};                                                                                  \
+      for (int j = 0; j < NV; ++j) {                                                                        \
+        const double cj = ct[cd[j]];                                                                        \
+        for (int d = 0; d < D; ++d)                                                                         \
+          g[d] += cj * grad[j * D + d];                                                                     \
+      }                                                                                                     \
+      const double w = scales[t] * weights[e];                                                              \
+      for (int i = 0; i < NV; ++i) {                                                                        \
+        double dot = 0.0;                                                                                   \
+        for (int d = 0; d < D; ++d)                                                                         \
+          dot += g[d] * (sum[d] + at[i][d]);                                                                \
+        b[o[i]] += w * dot;                                                                                 \
+      }                                                                                                     \
+    }                                                                                                       \
+  }                                                                                                         \
+}
+P1_ADVECTION(2)
+P1_ADVECTION(3)
+
+void primordia_p1_advection(ptrdiff_t n, ptrdiff_t gdim, ptrdiff_t terms, const double *restrict scales,
                             const double *restrict gradients, const double *restrict weights,
-                            const long long *restrict out, const long long *restrict c_dofs,
-                            const long long *restrict r_dofs, const double *restrict c,
+                            const int *const *restrict out, const int *const *restrict c_dofs,
+                            const int *restrict r_dofs, const double *const *restrict c,
                             const double *const *restrict r, double *restrict b)
 {
-  for (ptrdiff_t e = 0; e < n; ++e) {
-    double g[3] = {0.0, 0.0, 0.0}, sum[3] = {0.0, 0.0, 0.0}, at[4][3];
-    for (ptrdiff_t j = 0; j < nv; ++j) {
-      const double cj = c[c_dofs[e * nv + j]];
-      for (ptrdiff_t d = 0; d < gdim; ++d) {
-        g[d] += cj * gradients[(e * nv + j) * gdim + d];
-        at[j][d] = r[d][r_dofs[(d * n + e) * nv + j]];
-        sum[d] += at[j][d];
-      }
-    }
-    const double w = scale * weights[e];
-    for (ptrdiff_t i = 0; i < nv; ++i) {
-      double dot = 0.0;
-      for (ptrdiff_t d = 0; d < gdim; ++d)
-        dot += g[d] * (sum[d] + at[i][d]);
-      b[out[e * nv + i]] += w * dot;
-    }
-  }
+  if (gdim == 2) p1_advection_2(n, terms, scales, gradients, weights, out, c_dofs, r_dofs, c, r, b);
+  else p1_advection_3(n, terms, scales, gradients, weights, out, c_dofs, r_dofs, c, r, b);
 }
 """
 
@@ -162,8 +191,7 @@ _SIGNATURES = {
     "primordia_edge_midpoints": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4],
     "primordia_edge_bernoulli": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4, ctypes.c_double, ctypes.c_void_p],
     "primordia_edge_entries": [ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 8],
-    "primordia_p1_advection": [ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_double,
-                               *[ctypes.c_void_p] * 8],
+    "primordia_p1_advection": [ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 9],
 }
 
 _loaded: dict = {}  # "library" -> the CDLL or None, once decided in this process
@@ -308,7 +336,7 @@ def status() -> str:
 
 
 def address(array: np.ndarray, dtype=np.float64) -> int:
-    """The address of a contiguous array of ``dtype`` (float64, or int64 for indices), checked; the
+    """The address of a contiguous array of ``dtype`` (float64, or int64 / int32 for indices), checked; the
     caller keeps the array alive while the address is used."""
     if array.dtype != dtype or not array.flags.c_contiguous:
         raise ValueError(f"compiled loops need contiguous {np.dtype(dtype).name} arrays, got {array.dtype}")

@@ -47,6 +47,7 @@ class P1Advection:
         self._gradients = _hat_gradients(coordinates)  # (cells, nv, gdim)
         d = coordinates.shape[2]
         self._weights = np.ascontiguousarray(cell_quantities(coordinates)["CellVolume"] / ((d + 1) * (d + 2)))
+        self._groups, self._positions = _by_velocity(terms)  # the loop's arguments; the arrays they address
 
     @classmethod
     def recognise(cls, backend, form) -> "P1Advection | None":
@@ -86,16 +87,15 @@ class P1Advection:
         return b
 
     def _add(self, values: np.ndarray) -> None:
-        address = compiled.address
-        n, nv, gdim = self._gradients.shape
-        for scale, out, c, c_dofs, velocity, r_dofs in self._terms:
-            arrays = [self.backend.local_array(r) for r, _ in velocity]
-            pointers = (ctypes.c_void_p * gdim)(*[address(a) for a in arrays])
-            c_values = self.backend.local_array(c)
+        address, local_array = compiled.address, self.backend.local_array
+        n, _, gdim = self._gradients.shape
+        for velocity, r_dofs, scales, outs, c_dofs, species in self._groups:
+            r = (ctypes.c_void_p * gdim)(*[address(local_array(f)) for f, _ in velocity])
+            c = (ctypes.c_void_p * len(species))(*[address(local_array(f)) for f in species])
             self._library.primordia_p1_advection(
-                n, nv, gdim, scale, address(self._gradients), address(self._weights), address(out, np.int64),
-                address(c_dofs, np.int64), address(r_dofs, np.int64), address(c_values),
-                ctypes.cast(pointers, ctypes.c_void_p), address(values))
+                n, gdim, len(species), address(scales), address(self._gradients), address(self._weights),
+                ctypes.addressof(outs), ctypes.addressof(c_dofs), address(r_dofs, np.int32),
+                ctypes.addressof(c), ctypes.addressof(r), address(values))
 
     def _agrees_with_assembly(self, coordinates: np.ndarray) -> bool:
         """Both ways on smooth fields (set for the check, then restored): the same vector to CHECK_TOLERANCE."""
@@ -121,6 +121,35 @@ class P1Advection:
         if not agrees:
             logger.debug("the closed-form advection differs from assembly by %.3g of %.3g: assembled", difference, size)
         return agrees
+
+
+def _by_velocity(terms) -> tuple[list, list]:
+    """The terms grouped by their velocity, for the loop that reads it once a cell for every term of a group:
+    [(velocity, r dofs (cells, nv, gdim), scales, out pointers, c-dof pointers, c fields)] and the index
+    arrays the pointers address (to keep alive).  Positions are int32 (dolfinx's own index type) and equal
+    arrays are one array, read once a cell too."""
+    groups, arrays = {}, []
+
+    def one(positions):
+        positions = np.ascontiguousarray(positions, dtype=np.int32)
+        for known in arrays:
+            if known.shape == positions.shape and np.array_equal(known, positions):
+                return known
+        arrays.append(positions)
+        return positions
+
+    for scale, out, c, c_dofs, velocity, r_dofs in terms:
+        key = tuple((id(f), part) for f, part in velocity)
+        group = groups.setdefault(key, (velocity, one(np.moveaxis(r_dofs, 0, -1)), [], [], [], []))
+        for items, item in zip(group[2:], (scale, one(out), one(c_dofs), c)):
+            items.append(item)
+
+    def pointers(items):
+        return (ctypes.c_void_p * len(items))(*[compiled.address(a, np.int32) for a in items])
+
+    made = [(velocity, r_dofs, np.array(scales, dtype=np.float64), pointers(outs), pointers(c_dofs), species)
+            for velocity, r_dofs, scales, outs, c_dofs, species in groups.values()]
+    return made, arrays
 
 
 def _hat_gradients(coordinates: np.ndarray) -> np.ndarray:
