@@ -28,6 +28,9 @@ from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
 from primordia.coupling.nodal import NodalGroup, nodal_form, nodal_part
+from primordia.coupling.p1_gradient_load import P1GradientLoad
+
+_UNDECIDED = object()  # a closed form not yet looked for
 
 
 def _constants_state(constants) -> tuple:
@@ -194,6 +197,7 @@ class AffineResidual:
         self._scratch = self._shifted = self._lift = None
         #: (batch, index) when the assembled remainder is assembled with other subproblems' (batched.py)
         self.batch = None
+        self._gradient_load = _UNDECIDED  # the remainder's P1GradientLoad, None: assembled as it is
 
     @property
     def assembled_remainder(self):
@@ -258,7 +262,12 @@ class AffineResidual:
             part.refresh()
         if self._assembled_remainder is not None:
             if self.batch is None:
-                b = backend.assemble_vector(self._assembled_remainder, b=b)
+                if self._gradient_load is _UNDECIDED:  # decided at the first solve, on every rank alike
+                    self._gradient_load = P1GradientLoad.recognise(backend, self._assembled_remainder)
+                if self._gradient_load is not None:
+                    b = self._gradient_load.assemble(b)
+                else:
+                    b = backend.assemble_vector(self._assembled_remainder, b=b)
             else:
                 batch, index = self.batch
                 b = batch.vector(index, b if b is not None else x.duplicate())

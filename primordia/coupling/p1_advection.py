@@ -44,7 +44,7 @@ class P1Advection:
     def __init__(self, backend, form, library, terms, coordinates):
         self.backend, self.form, self._library = backend, form, library
         self._terms = terms            # (scale, out dofs, c, c dofs, [(r coefficient, component)], r dofs)
-        self._gradients = _hat_gradients(coordinates)  # (cells, nv, gdim)
+        self._gradients = hat_gradients(coordinates)  # (cells, nv, gdim)
         d = coordinates.shape[2]
         self._weights = np.ascontiguousarray(cell_quantities(coordinates)["CellVolume"] / ((d + 1) * (d + 2)))
         self._groups, self._positions = _by_velocity(terms)  # the loop's arguments; the arrays they address
@@ -152,7 +152,7 @@ def _by_velocity(terms) -> tuple[list, list]:
     return made, arrays
 
 
-def _hat_gradients(coordinates: np.ndarray) -> np.ndarray:
+def hat_gradients(coordinates: np.ndarray) -> np.ndarray:
     """Gradients (cells, nv, gdim) of the hat functions of affine simplices."""
     edges = coordinates[:, 1:, :] - coordinates[:, :1, :]          # (cells, d, d): rows x_j - x_0
     inverse = np.linalg.inv(edges)                                  # columns: gradients of lambda_1 .. lambda_d

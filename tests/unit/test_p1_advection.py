@@ -2,24 +2,18 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import ufl
-from mpi4py import MPI
 
-from primordia.backends.fenicsx import FenicsxBackend
-from primordia.backends.skfem import SkfemBackend
-from primordia.core.meshes import box, rectangle
 from primordia.coupling.p1_advection import P1Advection
 
-BACKENDS = {"fenicsx": lambda: FenicsxBackend(MPI.COMM_WORLD), "skfem": lambda: SkfemBackend()}
-MESHES = {2: lambda: rectangle([0.0, 0.0], [2.0, 1.5], [7, 5], diagonal="crossed"),
-          3: lambda: box([0.0, 0.0, 0.0], [1.0, 1.2, 0.8], [3, 4, 2])}
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "support"))  # also under mpirun
+from closed_forms import (BACKENDS, MESHES, assert_equal_to_assembly, check_on_ranks,  # noqa: E402
+                          rotate_scalar_cell_dofs, run_on_two_ranks)
 
 
 def _problem(backend, dimension: int, **options):
@@ -51,10 +45,7 @@ def test_the_closed_form_equals_the_assembled_vector(name, dimension):
     form = _problem(backend, dimension)
     closed = P1Advection.recognise(backend, form)
     assert closed is not None, "the three advection terms are recognised"
-    assembled = backend.assemble_vector(form).getArray().copy()
-    mine = closed.assemble().getArray()
-    assert np.abs(assembled).max() > 1e-3
-    np.testing.assert_allclose(mine, assembled, rtol=0, atol=1e-13 * np.abs(assembled).max())
+    assert_equal_to_assembly(backend, form, closed)
 
 
 @pytest.mark.parametrize("name", list(BACKENDS))
@@ -72,30 +63,14 @@ def test_positions_that_do_not_match_the_assembly_are_caught_before_use(name, mo
     """The check against assembly guards the closed form: DOF positions out of vertex order fail it."""
     backend = BACKENDS[name]()
     form = _problem(backend, 2)
-    right = backend.p1_cell_dofs
-    monkeypatch.setattr(backend, "p1_cell_dofs", lambda space, component=None: np.roll(right(space, component), 1, axis=1)
-                        if component is None else right(space, component))  # the species' vertices rotated
+    rotate_scalar_cell_dofs(backend, monkeypatch)  # the species' vertices rotated
     assert P1Advection.recognise(backend, form) is None
 
 
 @pytest.mark.mpi
 def test_the_closed_form_equals_assembly_on_two_ranks():
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-    done = subprocess.run(["mpirun", "-n", "2", sys.executable, str(Path(__file__).resolve())], env=env,
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-3000:]
-    assert done.stdout.strip() == "agree on 2 ranks", done.stdout
+    run_on_two_ranks(Path(__file__).resolve())
 
 
 if __name__ == "__main__":  # under mpirun: each rank's owned rows, ghost contributions summed to their owners
-    for dimension in (2, 3):
-        backend = FenicsxBackend(MPI.COMM_WORLD)
-        form = _problem(backend, dimension)
-        closed = P1Advection.recognise(backend, form)
-        assert closed is not None
-        assembled = backend.assemble_vector(form).getArray().copy()
-        mine = closed.assemble().getArray()
-        scale = MPI.COMM_WORLD.allreduce(np.abs(assembled).max(), op=MPI.MAX)
-        assert MPI.COMM_WORLD.allreduce(np.abs(mine - assembled).max(), op=MPI.MAX) <= 1e-13 * scale
-    if MPI.COMM_WORLD.rank == 0:
-        print(f"agree on {MPI.COMM_WORLD.size} ranks")
+    check_on_ranks(_problem, P1Advection.recognise)
