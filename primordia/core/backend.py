@@ -213,7 +213,8 @@ class Backend(ABC):
 
         ``component`` is a flat value component of a vector or mixed space (``u[1]`` of a mixed
         (u, p) space is 1, p is 2). None when that part is not P1 Lagrange, or the backend cannot
-        tell: the closed-form assembly of :mod:`primordia.coupling.p1_advection` is then not used.
+        tell: the closed forms of :mod:`primordia.coupling.p1_advection` and
+        :mod:`primordia.coupling.p1_gradient_load` are then not used.
         """
         return None
 
