@@ -123,7 +123,8 @@ class P1GradientLoad:
         return (self.backend.local_array(function)[dofs] @ self._barycentric_t).ravel()
 
     def integrals(self) -> np.ndarray:
-        """int_K G of every root G and cell K (roots * cells,), with the reference weights (|det J| spread)."""
+        """Each root G summed over each cell's quadrature points with the reference weights, (roots * cells,):
+        int_K G without the factor |det J_K|, which the spreading matrix holds."""
         return (self._program.run().reshape(self._shape) @ self._weights).ravel()
 
     def assemble(self, b=None):
@@ -139,9 +140,11 @@ class P1GradientLoad:
             target = self._extra
         with target.localForm() as local:  # owned and ghost rows, as an assembly adds them (a serial Vec: itself)
             values = local.getArray()
-            if self._spread is None:
+            if self._spread is None:  # made at the first use, when the vector's local size is known
                 rows, columns, entries = self._entries
-                self._spread = csr_matrix((entries, (rows, columns)), shape=(values.size, int(np.prod(self._shape[:2]))))
+                shape = (values.size, self._shape[0] * self._shape[1])
+                self._spread = csr_matrix((entries, (rows, columns)), shape=shape)
+                self._entries = None
             values[:] = self._spread @ self.integrals()
         target.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         if target is not b:
@@ -156,7 +159,8 @@ class P1GradientLoad:
         x, y = coordinates[..., 0], coordinates[..., -1]
         try:
             for number, (function, dofs) in enumerate(self._fields.values()):
-                backend.local_array(function)[dofs] = 1.0 + 0.25 * np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)
+                smooth = np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)
+                backend.local_array(function)[dofs] = 1.0 + 0.25 * smooth
             vector = backend.assemble_vector(self.form)
             assembled = vector.getArray(readonly=True).copy()
             mine = self.assemble(vector).getArray(readonly=True)
@@ -167,7 +171,8 @@ class P1GradientLoad:
                 backend.local_array(function)[:] = kept[key]
         agrees = difference <= CHECK_TOLERANCE * size
         if not agrees:
-            logger.debug("the per-cell gradient load differs from assembly by %.3g of %.3g: assembled", difference, size)
+            logger.debug("the per-cell gradient load differs from assembly by %.3g of %.3g: assembled",
+                         difference, size)
         return agrees
 
 

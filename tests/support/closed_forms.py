@@ -33,8 +33,8 @@ def rotate_scalar_cell_dofs(backend, monkeypatch) -> None:
     """The backend's ``p1_cell_dofs`` of scalar spaces with every cell's vertices rotated (out of vertex order);
     those of a component of a vector or mixed space as they are."""
     right = backend.p1_cell_dofs
-    monkeypatch.setattr(backend, "p1_cell_dofs", lambda space, component=None: np.roll(right(space, component), 1, axis=1)
-                        if component is None else right(space, component))
+    monkeypatch.setattr(backend, "p1_cell_dofs", lambda space, component=None: right(space, component)
+                        if component is not None else np.roll(right(space, component), 1, axis=1))
 
 
 def run_on_two_ranks(script) -> None:
