@@ -28,6 +28,7 @@ from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
 from primordia.coupling.nodal import NodalGroup, nodal_form, nodal_part
+from primordia.coupling.constant_load import ConstantLoad
 from primordia.coupling.p1_gradient_load import P1GradientLoad
 
 _UNDECIDED = object()  # a closed form not yet looked for
@@ -197,7 +198,8 @@ class AffineResidual:
         self._scratch = self._shifted = self._lift = None
         #: (batch, index) when the assembled remainder is assembled with other subproblems' (batched.py)
         self.batch = None
-        self._gradient_load = _UNDECIDED  # the remainder's P1GradientLoad, None: assembled as it is
+        # the remainder evaluated without cell-by-cell assembly (P1GradientLoad, ConstantLoad); None: assembled
+        self._closed_remainder = _UNDECIDED
 
     @property
     def assembled_remainder(self):
@@ -262,10 +264,11 @@ class AffineResidual:
             part.refresh()
         if self._assembled_remainder is not None:
             if self.batch is None:
-                if self._gradient_load is _UNDECIDED:  # decided at the first solve, on every rank alike
-                    self._gradient_load = P1GradientLoad.recognise(backend, self._assembled_remainder)
-                if self._gradient_load is not None:
-                    b = self._gradient_load.assemble(b)
+                if self._closed_remainder is _UNDECIDED:  # decided at the first solve, on every rank alike
+                    self._closed_remainder = (P1GradientLoad.recognise(backend, self._assembled_remainder)
+                                              or ConstantLoad.recognise(backend, self._assembled_remainder))
+                if self._closed_remainder is not None:
+                    b = self._closed_remainder.assemble(b)
                 else:
                     b = backend.assemble_vector(self._assembled_remainder, b=b)
             else:

@@ -21,8 +21,9 @@ test axis (each cell's element vector and its scatter) is left out: example 1b's
 
 The physics stays the modules' UFL.  :meth:`P1GradientLoad.recognise` takes a linear form's
 cell integrals when every term has that shape and every field the G_t read is P1 scalar; the
-form's other integrals (a traction on ds) are assembled by the backend as before, and a form
-that does not match is assembled whole.  Before its first use the result is checked against
+form's other integrals (a traction on ds) are assembled by the backend as before (or, reading
+only constants, combined from vectors assembled once: :mod:`primordia.coupling.constant_load`),
+and a form that does not match is assembled whole.  Before its first use the result is checked against
 the backend's assembly of the same form on smooth fields set for the check.
 """
 
@@ -39,6 +40,7 @@ from ufl.algorithms.analysis import extract_arguments, extract_coefficients
 from ufl.classes import Division, FixedIndex, Grad, Indexed, IntValue, Product, Sum
 
 from primordia.backends.ufl_numpy import UnsupportedUFL, cell_quantities, preprocess_form, reference_quadrature
+from primordia.coupling.constant_load import ConstantLoad, constant_value
 from primordia.coupling.nodal_program import NodalProgram
 from primordia.coupling.p1_advection import hat_gradients
 from primordia.core.reductions import largest
@@ -55,12 +57,13 @@ class P1GradientLoad:
     def __init__(self, backend, form, rest, roots, fields, terms, rule, coordinates):
         self.backend, self.form = backend, form
         self._rest = rest                  # the form's other integrals (a ufl.Form), or None
+        self._rest_load = ConstantLoad.recognise(backend, rest) if rest is not None else None
         self._fields = fields              # id(function) -> (function, its cell dofs (cells, nv))
         barycentric, self._weights = rule  # (nq, nv) at the reference points, (nq,)
         self._barycentric_t = np.ascontiguousarray(barycentric.T)
         cells, nv, gdim = coordinates.shape
         points = np.einsum("qj,cjd->dcq", barycentric, coordinates).reshape(gdim, -1)
-        self._program = NodalProgram.compile(roots, points, self._at_points, _constant)
+        self._program = NodalProgram.compile(roots, points, self._at_points, constant_value)
         self._shape = (len(roots), cells, len(self._weights))
         # the spreading matrix's entries: row = the test DOF, column = (root, cell), value = d_b phi_i |det J_K|
         scale = cell_quantities(coordinates)["CellVolume"] * math.factorial(nv - 1)
@@ -134,7 +137,7 @@ class P1GradientLoad:
             b = backend.assemble_vector(self.form)  # the layout only: its values are overwritten
         target = b
         if self._rest is not None:
-            b = backend.assemble_vector(self._rest, b=b)
+            b = self._rest_load.assemble(b) if self._rest_load is not None else backend.assemble_vector(self._rest, b=b)
             if self._extra is None:
                 self._extra = b.duplicate()
             target = self._extra
@@ -174,10 +177,6 @@ class P1GradientLoad:
             logger.debug("the per-cell gradient load differs from assembly by %.3g of %.3g: assembled",
                          difference, size)
         return agrees
-
-
-def _constant(constant) -> np.ndarray:
-    return np.asarray(constant.value, dtype=float)
 
 
 def _summands(expression) -> list:
