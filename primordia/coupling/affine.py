@@ -27,8 +27,8 @@ import ufl
 from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
-from primordia.coupling.nodal import NodalGroup, nodal_form, nodal_part
 from primordia.coupling.constant_load import ConstantLoad
+from primordia.coupling.nodal import NodalGroup, nodal_form, nodal_part
 from primordia.coupling.p1_gradient_load import P1GradientLoad
 
 _UNDECIDED = object()  # a closed form not yet looked for
