@@ -16,7 +16,7 @@ import numpy as np
 import ufl
 
 from primordia.core import reductions
-from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, sub_elements
+from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, is_p1_scalar, sub_elements
 from primordia.core.mesh_data import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
@@ -493,8 +493,7 @@ class FenicsxBackend(Backend):
                     rest -= size
                 else:
                     return None
-        if (element.family() not in ("Lagrange", "P", "Q") or element.degree() != 1 or element.value_shape()
-                or part.dofmap.bs != 1 or space.mesh.geometry.cmap.degree != 1):
+        if not is_p1_scalar(element) or part.dofmap.bs != 1 or space.mesh.geometry.cmap.degree != 1:
             return None
         cells = space.mesh.topology.index_map(space.mesh.topology.dim).size_local
         dofs = part.dofmap.list.array.reshape(-1, part.dofmap.cell_dofs(0).size)[:cells]

@@ -300,6 +300,12 @@ def sub_elements(element) -> list:
     return [element]
 
 
+def is_p1_scalar(element) -> bool:
+    """Whether a UFL element is scalar P1 Lagrange (what nodal evaluation and the closed-form loads read)."""
+    return (element.family() in ("Lagrange", "P", "Q", "CG") and element.degree() == 1
+            and element.value_shape() == () and not element.sub_elements())
+
+
 def index_set(comm, dofs: np.ndarray, components: np.ndarray | None = None, value_size: int = 1):
     """A sorted PETSc ``IS`` of the global indices ``dofs`` on the backend's ``comm``.
 

@@ -37,6 +37,7 @@ from ufl.algorithms.apply_derivatives import apply_derivatives
 from ufl.corealg.traversal import unique_pre_traversal
 
 from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, post_order
+from primordia.core.backend import is_p1_scalar
 from primordia.coupling.nodal_program import NodalProgram
 
 #: Node types an integrand single-valued at the vertices may not contain (after lowering).
@@ -44,9 +45,7 @@ _NOT_NODAL = (uc.Derivative, uc.GeometricQuantity, uc.Argument, uc.Restricted, u
 
 
 def _is_p1_scalar(space) -> bool:
-    element = space.ufl_element()
-    return (element.family() in ("Lagrange", "P", "Q", "CG") and element.degree() == 1
-            and element.value_shape() == () and not element.sub_elements())
+    return is_p1_scalar(space.ufl_element())
 
 
 def _vertex_integrals(form) -> bool:
