@@ -37,6 +37,10 @@ from primordia.core.parameters import Parameter
 if TYPE_CHECKING:
     from primordia.physics.discretisation import Discretisation
 
+#: Up to this many ranks a constant matrix solved directly is factorised whole by one rank
+#: (``solve_on_one_rank``): the chemotaxis species' and linear Biot's defaults.
+GATHERED_RANKS = 8
+
 
 @dataclass(frozen=True)
 class FieldSpec:

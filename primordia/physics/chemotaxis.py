@@ -65,7 +65,7 @@ from primordia.core import compiled
 from primordia.core.errors import ConfigError
 from primordia.core.ops import NUMPY, UFL
 from primordia.core.validation import number, numbers
-from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
+from primordia.physics.base import GATHERED_RANKS, Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.edge_flux import ExponentiallyFittedFlux
 from primordia.physics.kinetics.base import Species
 
@@ -283,10 +283,6 @@ class Chemotaxis(Physics):
                           jacobian=ufl.derivative(residual, unknown), linear=False,
                           fields=self.disc.unknown_fields(first),
                           petsc_options=_coupled_defaults(self.settings["preconditioner"], self.species))
-
-
-#: Up to this many ranks, a constant species matrix is factorised whole by one rank (see _solver_defaults).
-GATHERED_RANKS = 8
 
 
 def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict:

@@ -32,7 +32,7 @@ import ufl
 from primordia.core.errors import ConfigError
 from primordia.core.expressions import Formula
 from primordia.core.validation import number
-from primordia.physics.base import FieldSpec, Physics, Subproblem, jacobian_is_constant
+from primordia.physics.base import GATHERED_RANKS, FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.boundary_conditions import conditions_from_config
 from primordia.physics.kinematics import Kinematics
 from primordia.physics.seed_parameters import POROELASTICITY, lame
@@ -147,9 +147,11 @@ class LinearPoroelasticity(Physics):
         bcs = self.conditions.dirichlet(disc)
         unknown = disc.unknown("u")
         jacobian = ufl.derivative(residual, unknown)
+        constant = jacobian_is_constant(jacobian, disc)
         return [Subproblem(name=self.name, unknown=unknown, residual=residual, jacobian=jacobian, bcs=bcs,
-                           linear=True, constant_jacobian=jacobian_is_constant(jacobian, disc),
-                           petsc_options=_solver_defaults(self.settings["preconditioner"]),
+                           linear=True, constant_jacobian=constant,
+                           petsc_options=_solver_defaults(self.settings["preconditioner"], disc.ranks, disc.gdim,
+                                                          constant=constant),
                            fields=disc.unknown_fields("u"), rigid_body="u",
                            preconditioner=fixed_stress(prm["alpha_BW"] / (self.drained_bulk_modulus() * disc.dt),
                                                        disc.trial("p"), q, disc.dx))]
@@ -167,12 +169,22 @@ class LinearPoroelasticity(Physics):
 PRECONDITIONERS = ("lu", "fixed_stress")
 
 
-def _solver_defaults(preconditioner: str) -> dict:
+def _solver_defaults(preconditioner: str, ranks: int, gdim: int, *, constant: bool) -> dict:
     """A direct solve (the matrix is constant: factorised once), or GMRES with the fixed-stress Schur
     fieldsplit: AMG (GAMG with the rigid-body near-nullspace) on u, AMG on the pressure block plus the
-    fixed-stress term.  In 2D the reused factorisation is cheaper; the fieldsplit's cost grows linearly."""
+    fixed-stress term.  In 2D the reused factorisation is cheaper; the fieldsplit's cost grows linearly.
+
+    In 2D on up to ``GATHERED_RANKS`` ranks a constant matrix is gathered to one rank, which factorises it
+    once and solves the whole system (``solve_on_one_rank``, as the species' constant matrices): MUMPS's
+    distributed triangular solves cost more than the serial ones.  Example 1b at 171^2 on 2 ranks
+    (``benchmarks/bench_solvers.py --share ex01b --sizes 171 --backends fenicsx --steps 100 --warmup 1
+    --clock wall --ranks 2``): the (u, p) solves 36.2 ms a step with MUMPS, 20.2 on one rank; the step 53.8
+    against 37.1 ms (40 in serial).  In 3D the whole factor on one rank would hold the memory of a serial run.
+    """
     if preconditioner == "lu":
-        return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+        direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+        return {**direct, "solve_on_one_rank": True} if constant and gdim == 2 and 1 < ranks <= GATHERED_RANKS \
+            else direct
     return {"ksp_type": "gmres", "ksp_rtol": 1e-10, "ksp_atol": 1e-14, "ksp_max_it": 500, "ksp_pc_side": "right",
             "pc_type": "fieldsplit", "pc_fieldsplit_type": "schur", "pc_fieldsplit_schur_fact_type": "lower",
             "pc_fieldsplit_schur_precondition": "a11",

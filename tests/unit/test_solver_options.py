@@ -169,6 +169,22 @@ mg_levels = { ksp_type = "chebyshev", ksp_max_it = 2 }
     assert summary["mean_linear_iterations"]["chemotaxis.f"] > 1  # GMRES + AMG, not the default direct solve
 
 
+def test_linear_biot_in_2d_is_solved_whole_by_one_rank_up_to_eight_ranks():
+    # example 1b's constant (u, p) matrix: MUMPS's distributed triangular solves cost more than one rank's
+    # serial ones (36 against 19-20 ms a step at 171^2 on 2 ranks); in 3D, or a matrix that changes, MUMPS
+    from primordia.physics.base import GATHERED_RANKS
+    from primordia.physics.poroelastic_linear import _solver_defaults
+
+    direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+    assert _solver_defaults("lu", 1, 2, constant=True) == direct
+    for ranks in (2, GATHERED_RANKS):
+        assert _solver_defaults("lu", ranks, 2, constant=True) == {**direct, GATHER: True}
+    assert _solver_defaults("lu", GATHERED_RANKS + 1, 2, constant=True) == direct
+    assert _solver_defaults("lu", 2, 3, constant=True) == direct
+    assert _solver_defaults("lu", 2, 2, constant=False) == direct
+    assert GATHER not in _solver_defaults("fixed_stress", 2, 2, constant=True)
+
+
 def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks():
     # in parallel a diffusing species' constant matrix is gathered to one rank and factorised there once;
     # independent species are solved at once on different ranks (solve_in_turn); from 9 ranks on, AMG
