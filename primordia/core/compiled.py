@@ -121,10 +121,9 @@ void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restric
    Triangles (gdim 2) or tetrahedra (gdim 3), nv = gdim + 1 vertices; gradients (cells, nv, gdim) of the
    hat functions; r_dofs (cells, nv, gdim): the vertices' positions in r[d]; out[t], c_dofs[t] (cells, nv):
    the positions in b and in c[t].  The velocity is read once a cell for every term; per term the operations
-   are those of one term alone. */
-/* The loop for simplices of dimension D (nv = D + 1): with constant bounds the compiler unrolls the vertex
-   and coordinate loops and keeps the cell's values in registers: 1.2 against 4.7 ms for example 1b's three
-   species at 171^2 with the bounds as arguments. */
+   are those of one term alone.  One loop per dimension D (nv = D + 1): with constant bounds the compiler
+   unrolls the vertex and coordinate loops and keeps the cell's values in registers: 1.2 against 4.7 ms for
+   example 1b's three species at 171^2 with the bounds as arguments. */
 #define P1_ADVECTION(D)                                                                                    \
 static void p1_advection_##D(ptrdiff_t n, ptrdiff_t terms, const double *restrict scales,                 \
                              const double *restrict gradients, const double *restrict weights,              \

@@ -38,7 +38,7 @@ from ufl.corealg.traversal import unique_pre_traversal
 
 from primordia.backends.ufl_numpy import UnsupportedUFL, evaluate_integrand, post_order
 from primordia.core.backend import is_p1_scalar
-from primordia.coupling.nodal_program import NodalProgram
+from primordia.coupling.nodal_program import NodalProgram, constant_value
 
 #: Node types an integrand single-valued at the vertices may not contain (after lowering).
 _NOT_NODAL = (uc.Derivative, uc.GeometricQuantity, uc.Argument, uc.Restricted, uc.ExprList, uc.ExprMapping)
@@ -163,7 +163,7 @@ class _NodeContext:
         return self.backend.petsc_vector(function).getArray(readonly=True)[:, None]
 
     def constant(self, constant) -> np.ndarray:
-        return np.asarray(constant.value, dtype=float)
+        return constant_value(constant)
 
     def field(self, function) -> np.ndarray:
         """A P1 field's values at the owned DOFs (a view, read-only)."""

@@ -130,6 +130,11 @@ def _negated_once(node):
     return inner if inner is not None and _negated(inner) is None else None
 
 
+def constant_value(constant) -> np.ndarray:
+    """A UFL constant's value, as a program reads it (both backends' constants carry ``value``)."""
+    return np.asarray(constant.value, dtype=float)
+
+
 class NodalProgram:
     """Scalar integrands evaluated at ``size`` nodes as one straight-line numpy program.
 

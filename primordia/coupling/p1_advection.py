@@ -23,19 +23,13 @@ against the backend's assembly of the same form on smooth fields set for the che
 from __future__ import annotations
 
 import ctypes
-import logging
 
 import numpy as np
 from ufl.classes import Coefficient, Dot, FixedIndex, Grad, Indexed, Inner, ListTensor, Product, ScalarValue
 
 from primordia.backends.ufl_numpy import cell_quantities
 from primordia.core import compiled
-from primordia.core.reductions import largest
-
-logger = logging.getLogger(__name__)
-
-#: Largest difference, relative to the largest entry, the check allows between the closed form and assembly.
-CHECK_TOLERANCE = 1e-12
+from primordia.coupling.closed_forms import agrees_with_assembly, flattened, hat_gradients, write_local
 
 
 class P1Advection:
@@ -75,16 +69,9 @@ class P1Advection:
 
     def assemble(self, b=None):
         """The form's vector (a backend vector of the test space; ``b`` is reused): owned and ghost rows summed."""
-        from petsc4py import PETSc
-
         if b is None:
             b = self.backend.assemble_vector(self.form)  # the layout only: its values are overwritten
-        with b.localForm() as local:  # owned and ghost rows, as an assembly adds them (a serial Vec: itself)
-            values = local.getArray()
-            values[:] = 0.0
-            self._add(values)
-        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        return b
+        return write_local(b, self._add)
 
     def _add(self, values: np.ndarray) -> None:
         address, local_array = compiled.address, self.backend.local_array
@@ -98,29 +85,15 @@ class P1Advection:
                 ctypes.addressof(c), ctypes.addressof(r), address(values))
 
     def _agrees_with_assembly(self, coordinates: np.ndarray) -> bool:
-        """Both ways on smooth fields (set for the check, then restored): the same vector to CHECK_TOLERANCE."""
-        backend = self.backend
-        fields = {id(f): f for _, _, c, _, velocity, _ in self._terms for f in (c, *(r for r, _ in velocity))}
-        kept = {key: backend.local_array(f).copy() for key, f in fields.items()}
+        """The check against assembly, every part read a smooth function of its nodes (the same on every
+        rank), each its own."""
         x, y = coordinates[..., 0], coordinates[..., -1]
-        try:
-            # every part read gets a smooth function of its nodes (the same on every rank), each its own
-            for number, (_, _, c, c_dofs, velocity, r_dofs) in enumerate(self._terms):
-                backend.local_array(c)[c_dofs] = np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)
-                for d, (r, part) in enumerate(velocity):
-                    backend.local_array(r)[r_dofs[d]] = np.cos((0.5 + 0.4 * part) * x - 0.2 * y) + 0.1 * part
-            vector = backend.assemble_vector(self.form)
-            assembled = vector.getArray(readonly=True).copy()
-            mine = self.assemble(vector).getArray(readonly=True)  # into the same layout: no second assembly
-            size = max(float(largest(backend.comm, np.abs(assembled).max(initial=0.0))), 1e-300)
-            difference = float(largest(backend.comm, np.abs(mine - assembled).max(initial=0.0)))
-        finally:
-            for key, f in fields.items():
-                backend.local_array(f)[:] = kept[key]
-        agrees = difference <= CHECK_TOLERANCE * size
-        if not agrees:
-            logger.debug("the closed-form advection differs from assembly by %.3g of %.3g: assembled", difference, size)
-        return agrees
+        settings = []
+        for number, (_, _, c, c_dofs, velocity, r_dofs) in enumerate(self._terms):
+            settings.append((c, c_dofs, np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)))
+            settings += [(r, r_dofs[d], np.cos((0.5 + 0.4 * part) * x - 0.2 * y) + 0.1 * part)
+                         for d, (r, part) in enumerate(velocity)]
+        return agrees_with_assembly(self, settings, "the closed-form advection")
 
 
 def _by_velocity(terms) -> tuple[list, list]:
@@ -152,16 +125,6 @@ def _by_velocity(terms) -> tuple[list, list]:
     return made, arrays
 
 
-def hat_gradients(coordinates: np.ndarray) -> np.ndarray:
-    """Gradients (cells, nv, gdim) of the hat functions of affine simplices."""
-    edges = coordinates[:, 1:, :] - coordinates[:, :1, :]          # (cells, d, d): rows x_j - x_0
-    inverse = np.linalg.inv(edges)                                  # columns: gradients of lambda_1 .. lambda_d
-    gradients = np.empty_like(coordinates)
-    gradients[:, 1:, :] = np.swapaxes(inverse, 1, 2)
-    gradients[:, 0, :] = -gradients[:, 1:, :].sum(axis=1)
-    return np.ascontiguousarray(gradients)
-
-
 def _terms(form) -> list | None:
     """[(scale, test component, c, [(r, flat component) per dimension])] of each integral, or None."""
     if len(form.arguments()) != 1:
@@ -184,7 +147,7 @@ def _terms(form) -> list | None:
 def _term(expression, test):
     """(scale, test component or None, c, velocity parts) of s * w[k] * dot(r, grad(c)), or None."""
     scale, tested, component, advection = 1.0, False, None, None
-    for factor in _factors(expression):
+    for factor in flattened(expression, Product):
         if isinstance(factor, ScalarValue):
             scale *= float(factor)
         elif factor == test and not test.ufl_shape and not tested:
@@ -205,12 +168,6 @@ def _fixed_index(indexed) -> int | None:
     """k of ``v[k]`` (one fixed index), else None."""
     indices = indexed.ufl_operands[1]
     return int(indices[0]) if len(indices) == 1 and isinstance(indices[0], FixedIndex) else None
-
-
-def _factors(expression) -> list:
-    if isinstance(expression, Product):
-        return [f for operand in expression.ufl_operands for f in _factors(operand)]
-    return [expression]
 
 
 def _advection(left, right):

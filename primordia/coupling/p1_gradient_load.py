@@ -29,26 +29,18 @@ the backend's assembly of the same form on smooth fields set for the check.
 
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
 import ufl
-from petsc4py import PETSc
 from scipy.sparse import csr_matrix
 from ufl.algorithms.analysis import extract_arguments, extract_coefficients
 from ufl.classes import Division, FixedIndex, Grad, Indexed, IntValue, Product, Sum
 
 from primordia.backends.ufl_numpy import UnsupportedUFL, cell_quantities, preprocess_form, reference_quadrature
-from primordia.coupling.constant_load import ConstantLoad, constant_value
-from primordia.coupling.nodal_program import NodalProgram
-from primordia.coupling.p1_advection import hat_gradients
-from primordia.core.reductions import largest
-
-logger = logging.getLogger(__name__)
-
-#: Largest difference, relative to the largest entry, the check allows between this and assembly.
-CHECK_TOLERANCE = 1e-12
+from primordia.coupling.closed_forms import agrees_with_assembly, flattened, hat_gradients, write_local
+from primordia.coupling.constant_load import ConstantLoad
+from primordia.coupling.nodal_program import NodalProgram, constant_value
 
 
 class P1GradientLoad:
@@ -56,8 +48,7 @@ class P1GradientLoad:
 
     def __init__(self, backend, form, rest, roots, fields, terms, rule, coordinates):
         self.backend, self.form = backend, form
-        self._rest = rest                  # the form's other integrals (a ufl.Form), or None
-        self._rest_load = ConstantLoad.recognise(backend, rest) if rest is not None else None
+        self._rest = rest                  # the form's other integrals into a vector (b -> b), or None
         self._fields = fields              # id(function) -> (function, its cell dofs (cells, nv))
         barycentric, self._weights = rule  # (nq, nv) at the reference points, (nq,)
         self._barycentric_t = np.ascontiguousarray(barycentric.T)
@@ -82,9 +73,10 @@ class P1GradientLoad:
         test = form.arguments()[0]
         mesh = test.ufl_function_space().mesh
         cellname = form.integrals()[0].ufl_domain().ufl_cell().cellname() if form.integrals() else None
-        cell = [i for i in form.integrals()
-                if i.integral_type() == "cell" and i.subdomain_id() in ("everywhere", "otherwise")]
-        rest = [i for i in form.integrals() if not any(i is c for c in cell)]
+        cell, rest = [], []
+        for integral in form.integrals():
+            whole = integral.integral_type() == "cell" and integral.subdomain_id() in ("everywhere", "otherwise")
+            (cell if whole else rest).append(integral)
         coordinates = backend.p1_cell_coordinates(mesh)
         if (not cell or cellname not in ("triangle", "tetrahedron") or coordinates is None
                 or coordinates.shape[1] != coordinates.shape[2] + 1):  # simplices of the space's own dimension
@@ -95,7 +87,7 @@ class P1GradientLoad:
             return None
         if len({(plan.degree, plan.rule) for plan in plans}) != 1:
             return None
-        parsed = [_split(term, test) for plan in plans for term in _summands(plan.integrand)]
+        parsed = [_split(term, test) for plan in plans for term in flattened(plan.integrand, Sum)]
         if not parsed or any(p is None for p in parsed):
             return None
         roots = list(dict.fromkeys(g for _, _, g in parsed))  # each G once, in order
@@ -113,8 +105,8 @@ class P1GradientLoad:
             terms.append((roots.index(g), out, direction))
         points, weights = reference_quadrature(cellname, plans[0].degree, plans[0].rule)
         barycentric = np.column_stack([1.0 - points.sum(axis=1), points])
-        evaluator = cls(backend, form, ufl.Form(rest) if rest else None, roots, fields, terms,
-                        (barycentric, weights), coordinates)
+        rest = _assembler(backend, ufl.Form(rest)) if rest else None
+        evaluator = cls(backend, form, rest, roots, fields, terms, (barycentric, weights), coordinates)
         if evaluator._program is None:
             return None
         return evaluator if evaluator._agrees_with_assembly(coordinates) else None
@@ -135,54 +127,35 @@ class P1GradientLoad:
         backend = self.backend
         if b is None:
             b = backend.assemble_vector(self.form)  # the layout only: its values are overwritten
-        target = b
-        if self._rest is not None:
-            b = self._rest_load.assemble(b) if self._rest_load is not None else backend.assemble_vector(self._rest, b=b)
-            if self._extra is None:
-                self._extra = b.duplicate()
-            target = self._extra
-        with target.localForm() as local:  # owned and ghost rows, as an assembly adds them (a serial Vec: itself)
-            values = local.getArray()
-            if self._spread is None:  # made at the first use, when the vector's local size is known
-                rows, columns, entries = self._entries
-                shape = (values.size, self._shape[0] * self._shape[1])
-                self._spread = csr_matrix((entries, (rows, columns)), shape=shape)
-                self._entries = None
-            values[:] = self._spread @ self.integrals()
-        target.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        if target is not b:
-            b.axpy(1.0, target)
+        if self._rest is None:
+            return write_local(b, self._add)
+        b = self._rest(b)
+        if self._extra is None:
+            self._extra = b.duplicate()
+        b.axpy(1.0, write_local(self._extra, self._add))
         return b
 
+    def _add(self, values: np.ndarray) -> None:
+        if self._spread is None:  # made at the first use, when the vector's local size is known
+            rows, columns, entries = self._entries
+            shape = (values.size, self._shape[0] * self._shape[1])
+            self._spread = csr_matrix((entries, (rows, columns)), shape=shape)
+            self._entries = None
+        values[:] = self._spread @ self.integrals()
+
     def _agrees_with_assembly(self, coordinates: np.ndarray) -> bool:
-        """Both ways on smooth positive fields (set for the check, then restored): the same vector to
-        CHECK_TOLERANCE."""
-        backend = self.backend
-        kept = {key: backend.local_array(f).copy() for key, (f, _) in self._fields.items()}
+        """The check against assembly, every field read a smooth positive function of its nodes, each its own."""
         x, y = coordinates[..., 0], coordinates[..., -1]
-        try:
-            for number, (function, dofs) in enumerate(self._fields.values()):
-                smooth = np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y)
-                backend.local_array(function)[dofs] = 1.0 + 0.25 * smooth
-            vector = backend.assemble_vector(self.form)
-            assembled = vector.getArray(readonly=True).copy()
-            mine = self.assemble(vector).getArray(readonly=True)
-            size = max(float(largest(backend.comm, np.abs(assembled).max(initial=0.0))), 1e-300)
-            difference = float(largest(backend.comm, np.abs(mine - assembled).max(initial=0.0)))
-        finally:
-            for key, (function, _) in self._fields.items():
-                backend.local_array(function)[:] = kept[key]
-        agrees = difference <= CHECK_TOLERANCE * size
-        if not agrees:
-            logger.debug("the per-cell gradient load differs from assembly by %.3g of %.3g: assembled",
-                         difference, size)
-        return agrees
+        settings = [(function, dofs, 1.0 + 0.25 * np.sin((1.0 + 0.3 * number) * x + 0.3) * np.cos(0.7 * y))
+                    for number, (function, dofs) in enumerate(self._fields.values())]
+        return agrees_with_assembly(self, settings, "the per-cell gradient load")
 
 
-def _summands(expression) -> list:
-    if isinstance(expression, Sum):
-        return [t for operand in expression.ufl_operands for t in _summands(operand)]
-    return [expression]
+def _assembler(backend, form):
+    """``form`` into a vector b -> b: from vectors assembled once when it reads only constants (a traction),
+    else by the backend."""
+    load = ConstantLoad.recognise(backend, form)
+    return load.assemble if load is not None else lambda b: backend.assemble_vector(form, b=b)
 
 
 def _split(term, test):

@@ -183,8 +183,9 @@ def _solver_defaults(preconditioner: str, ranks: int, gdim: int, *, constant: bo
     """
     if preconditioner == "lu":
         direct = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
-        return {**direct, "solve_on_one_rank": True} if constant and gdim == 2 and 1 < ranks <= GATHERED_RANKS \
-            else direct
+        if constant and gdim == 2 and 1 < ranks <= GATHERED_RANKS:
+            direct["solve_on_one_rank"] = True
+        return direct
     return {"ksp_type": "gmres", "ksp_rtol": 1e-10, "ksp_atol": 1e-14, "ksp_max_it": 500, "ksp_pc_side": "right",
             "pc_type": "fieldsplit", "pc_fieldsplit_type": "schur", "pc_fieldsplit_schur_fact_type": "lower",
             "pc_fieldsplit_schur_precondition": "a11",
