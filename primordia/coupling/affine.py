@@ -29,9 +29,28 @@ from ufl.algorithms import expand_derivatives
 
 from primordia.coupling.constant_load import ConstantLoad
 from primordia.coupling.nodal import NodalGroup, nodal_form, nodal_part
+from primordia.coupling.p1_advection import P1Advection
 from primordia.coupling.p1_gradient_load import P1GradientLoad
 
 _UNDECIDED = object()  # a closed form not yet looked for
+
+#: What evaluates a linear form without cell-by-cell assembly, tried in this order (each reads the form's UFL
+#: and passes a check against assembly before its first use, or declines).
+CLOSED_FORMS = (P1Advection, P1GradientLoad, ConstantLoad)
+
+
+def closed_form(backend, form):
+    """The first of :data:`CLOSED_FORMS` that evaluates ``form`` (a linear form), or None: assemble it.
+
+    The one place the choice is made, for a subproblem's own remainder (:class:`AffineResidual`) and for
+    several remainders assembled as one form (:class:`~primordia.coupling.batched.RemainderBatch`).  It is
+    collective: every rank must ask, with the same form.
+    """
+    for kind in CLOSED_FORMS:
+        evaluator = kind.recognise(backend, form)
+        if evaluator is not None:
+            return evaluator
+    return None
 
 
 def _constants_state(constants) -> tuple:
@@ -198,7 +217,7 @@ class AffineResidual:
         self._scratch = self._shifted = self._lift = None
         #: (batch, index) when the assembled remainder is assembled with other subproblems' (batched.py)
         self.batch = None
-        # the remainder evaluated without cell-by-cell assembly (P1GradientLoad, ConstantLoad); None: assembled
+        # the remainder evaluated without cell-by-cell assembly (closed_form); None: assembled
         self._closed_remainder = _UNDECIDED
 
     @property
@@ -265,8 +284,7 @@ class AffineResidual:
         if self._assembled_remainder is not None:
             if self.batch is None:
                 if self._closed_remainder is _UNDECIDED:  # decided at the first solve, on every rank alike
-                    self._closed_remainder = (P1GradientLoad.recognise(backend, self._assembled_remainder)
-                                              or ConstantLoad.recognise(backend, self._assembled_remainder))
+                    self._closed_remainder = closed_form(backend, self._assembled_remainder)
                 if self._closed_remainder is not None:
                     b = self._closed_remainder.assemble(b)
                 else:

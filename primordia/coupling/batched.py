@@ -15,9 +15,10 @@ each cell computes the K rows in one pass.  The physics is the members' own UFL.
 78.2 against 78.4 and 79.9 ms/step; skfem unchanged (104.8-105.1 against 104.7-104.9), whose
 kept field values already spared the velocity's interpolation per species.
 
-When every member is the advection of a P1 field by a P1 velocity (example 1b's m, f and b),
-the batch is evaluated from its closed form instead of assembled
-(:mod:`primordia.coupling.p1_advection`, checked against assembly before its first use).
+When the merged form has a closed form (every member the advection of a P1 field by a P1
+velocity, as example 1b's m, f and b: :mod:`primordia.coupling.p1_advection`), the batch is
+evaluated from it instead of assembled, chosen as a lone remainder's is
+(:func:`~primordia.coupling.affine.closed_form`, checked against assembly before its first use).
 
 Members share a P1 scalar space's DOFs.  The batch is assembled when its first member asks
 (each pass over the solvers asks in their order, the first member first) and serves the
@@ -33,8 +34,8 @@ import operator
 import numpy as np
 import ufl
 
+from primordia.coupling.affine import closed_form
 from primordia.coupling.nodal import _is_p1_scalar
-from primordia.coupling.p1_advection import P1Advection
 
 
 class RemainderBatch:
@@ -46,7 +47,7 @@ class RemainderBatch:
         self._positions = positions  # per member: where its owned DOFs sit in the blocked vector's owned array
         self._vector = None
         self._values = None
-        self.closed_form = P1Advection.recognise(backend, form)  # P1 advection terms only: their closed form
+        self.closed_form = closed_form(backend, form)  # e.g. P1 advection terms only: their closed form
 
     @classmethod
     def build(cls, backend, remainders: list):

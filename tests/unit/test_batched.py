@@ -10,8 +10,9 @@ import pytest
 
 from primordia import Model
 from primordia.core.config import apply_overrides, load_config
-from primordia.coupling import batched
+from primordia.coupling import batched, orchestrator
 from primordia.coupling.batched import batch_remainders
+from primordia.coupling.p1_advection import P1Advection
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -33,6 +34,26 @@ def test_the_species_explicit_terms_assembled_together_equal_each_assembled_alon
         scale = np.abs(alone.getArray()).max()
         assert scale > 0, name
         np.testing.assert_allclose(together.getArray(), alone.getArray(), rtol=0, atol=1e-13 * scale, err_msg=name)
+
+
+@pytest.mark.parametrize("backend", ["fenicsx", "skfem"])
+def test_a_remainder_left_out_of_a_batch_gets_the_closed_form_a_batch_would(backend, tmp_path, monkeypatch):
+    """The closed form is chosen in one place (affine.closed_form): example 1b with nothing batched evaluates
+    each species' advection by the solid velocity from its closed form, alone, and ends where the batched
+    run does."""
+    config = apply_overrides(load_config(EXAMPLES / "ex01b.toml"),
+                             ["mesh.cells=[12,12]", "time.t_final=0.4", "output.times=[0.4]", "output.pictures=false"])
+    batched_run = Model.from_config(config).run(backend=backend, out=tmp_path / "batched")
+    monkeypatch.setattr(orchestrator, "batch_remainders", lambda backend, solvers: [])
+    alone = Model.from_config(config).run(backend=backend, out=tmp_path / "alone")
+    closed = {solver.sub.name: type(solver._affine._closed_remainder) for solver in alone.solvers
+              if solver.sub.name.startswith("chemotaxis.") and solver._affine.assembled_remainder is not None}
+    assert closed == dict.fromkeys(["chemotaxis.m", "chemotaxis.f", "chemotaxis.b"], P1Advection)  # e has none
+    together, apart = batched_run.vertex_values(), alone.vertex_values()
+    for name, values in together.items():
+        scale = np.abs(values).max()
+        assert scale > 0, name
+        np.testing.assert_allclose(apart[name], values, rtol=0, atol=1e-11 * scale, err_msg=name)
 
 
 def _fake(name, reads=()):
