@@ -34,9 +34,12 @@ package, the splits and their sub-solvers, AMG settings), and, at the top level,
 a ``ksp_type = "preonly"`` that only made sense with a direct solve.
 
 Mistakes are one line (:class:`~primordia.core.errors.ConfigError`, exit status
-2): an unknown KSP, PC, SNES or factor-package type when the solver is made; an
-option PETSc never read (misspelt, or meaningless for the chosen solver) after
-the first solve; a table naming no subproblem of the run, when the run is set up.
+2): an unknown KSP, PC, SNES or factor-package type, or a tolerance or iteration
+count out of its range (``ksp_rtol = -1``, which PETSc would take for its default;
+``ksp_max_it = 0``), when the solver is made; a value PETSc cannot read (``"abc"``
+for a number), with PETSc's reason; an option PETSc never read (misspelt, or
+meaningless for the chosen solver) after the first solve; a table naming no
+subproblem of the run, when the run is set up.
 """
 
 from __future__ import annotations
@@ -213,6 +216,68 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
             if not _checked.setdefault(("package", value), _factor_package_available(value)):
                 raise ConfigError(f"{where}: factor package '{value}' in {key} is not available in this PETSc "
                                   f"(e.g. mumps, petsc, superlu, umfpack)")
+
+
+#: Numeric options checked before PETSc reads them, by the option's name without its level: (what the value
+#: must be, the test).  PETSc takes a negative tolerance for "the default" and a zero iteration count for a
+#: solve that fails at once, and stops with a traceback on a value it cannot parse.
+_FRACTION = ("a number in [0, 1)", lambda v: isinstance(v, float) and 0.0 <= v < 1.0)
+_NONNEGATIVE = ("a number >= 0", lambda v: isinstance(v, float) and v >= 0.0)
+_POSITIVE = ("a number > 0", lambda v: isinstance(v, float) and v > 0.0)
+_COUNT = ("a whole number >= 1", lambda v: isinstance(v, int) and v >= 1)
+_LEVELS = ("a whole number >= 0", lambda v: isinstance(v, int) and v >= 0)
+NUMERIC_OPTIONS = {
+    "ksp_rtol": _FRACTION, "snes_rtol": _FRACTION,
+    "ksp_atol": _NONNEGATIVE, "snes_atol": _NONNEGATIVE, "snes_stol": _NONNEGATIVE,
+    "ksp_divtol": _POSITIVE,
+    "ksp_max_it": _COUNT, "snes_max_it": _COUNT, "snes_max_funcs": _COUNT, "ksp_gmres_restart": _COUNT,
+    "pc_mg_levels": _COUNT,
+    "pc_factor_levels": _LEVELS, "pc_asm_overlap": _LEVELS, "pc_gamg_agg_nsmooths": _LEVELS,
+}
+#: Words PETSc reads in place of a number (its defaults and infinities): left to PETSc.
+_PETSC_WORDS = {"default", "petsc_default", "decide", "petsc_decide", "determine", "petsc_determine",
+                "infinity", "-infinity", "petsc_infinity", "petsc_ninfinity"}
+
+
+def check_values(options: Mapping[str, Any], where: str) -> None:
+    """Every tolerance and iteration count in ``options`` (:data:`NUMERIC_OPTIONS`, at any level) is one PETSc
+    reads as meant, or one line naming it."""
+    for key, value in options.items():
+        for name, (wanted, valid) in NUMERIC_OPTIONS.items():
+            if key.endswith(name) and _ends_level(key, name):
+                if isinstance(value, str) and value.strip().lower() in _PETSC_WORDS:
+                    continue
+                if not valid(_as_number(value, integer=wanted.startswith("a whole"))):
+                    raise ConfigError(f"{where}.{key} must be {wanted}, got {value!r}")
+
+
+def _as_number(value, integer: bool):
+    """``value`` (a TOML number, or a string as PETSc's options hold them) as an int or a float; None if it
+    is neither (true/false, text, a fraction where a count is meant)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, str):
+        try:
+            value = int(value) if integer else float(value)
+        except ValueError:
+            return None
+    if integer:
+        return value if isinstance(value, int) else None
+    return float(value) if isinstance(value, (int, float)) and value == value else None  # NaN is no number
+
+
+def read_options(petsc_object, where: str, options: Mapping[str, Any] | None = None) -> None:
+    """``petsc_object.setFromOptions()``, with a value PETSc refuses one line naming the solver table, PETSc's
+    own reason (not its traceback) and the option of ``options`` whose value the reason quotes, if one does."""
+    try:
+        petsc_object.setFromOptions()
+    except PETSc.Error as error:
+        lines = [line.partition("] ")[2] or line for line in str(error).splitlines()[1:]]
+        reason = lines[-1] if lines else str(error)
+        quoted = [f"{key} = {option_text(value)!r}" for key, value in (options or {}).items()
+                  if option_text(value) and re.search(rf"(?<!\S){re.escape(option_text(value))}(?!\S)", reason)]
+        named = f" (in {quoted[0]})" if len(quoted) == 1 else ""
+        raise ConfigError(f"{where}: PETSc refused the options: {reason}{named}") from None
 
 
 def _ends_level(key: str, suffix: str) -> bool:

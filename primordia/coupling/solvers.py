@@ -43,7 +43,8 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, combine, flatten, option_text, parallel_safe)
+    FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
+    read_options)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -110,6 +111,7 @@ def solver_options(defaults: dict, overrides: dict | None, where: str, parallel:
     user = flatten(overrides or {}, where)
     options = parallel_safe(combine(flatten(defaults, f"the defaults of {where}"), user), parallel)
     check_types(options, where)
+    check_values(options, where)
     return options, list(user)
 
 
@@ -367,7 +369,7 @@ class LinearSolver(_Solver):
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF if self._gather else backend.comm)
         self.ksp.setOptionsPrefix(subproblem.prefix)
         self._configure(self.ksp.getPC())
-        self.ksp.setFromOptions()
+        read_options(self.ksp, self.where, self.options)
         self._increment = None
         self._affine = AffineResidual(backend, subproblem)
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
@@ -756,7 +758,7 @@ class NewtonSolver(_Solver):
         self.ksp = self.snes.getKSP()
         self._assembly_seconds = no_time()  # in the SNES callbacks, taken off its solve time
         self._configure(self.ksp.getPC())
-        self.snes.setFromOptions()
+        read_options(self.snes, self.where, self.options)
         self.history: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
 
     # -- SNES callbacks ----------------------------------------------------------------------

@@ -9,7 +9,7 @@ from petsc4py import PETSc
 
 from primordia.core.errors import ConfigError
 from primordia.coupling.solver_options import (
-    GATHER, check_tables, check_types, check_used, combine, flatten, option_text, parallel_safe)
+    GATHER, check_tables, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe)
 from primordia.coupling.solvers import write_options
 
 
@@ -113,6 +113,21 @@ def test_an_option_petsc_never_read_is_named():
     ksp.destroy()
 
 
+@pytest.mark.parametrize("key, value", [
+    ("ksp_rtol", -0.5), ("ksp_rtol", 1.0), ("snes_rtol", "abc"), ("ksp_atol", -1e-3), ("snes_stol", True),
+    ("ksp_divtol", 0), ("fieldsplit_u_ksp_max_it", -3), ("snes_max_it", 2.5), ("sub_pc_factor_levels", -1),
+    ("pc_asm_overlap", "1.5"), ("ksp_rtol", float("nan"))])
+def test_a_tolerance_or_count_petsc_would_misread_is_named(key, value):
+    with pytest.raises(ConfigError, match=rf"^solver\.x\.{key} must be "):
+        check_values({key: value}, "solver.x")
+
+
+def test_tolerances_and_counts_petsc_reads_as_meant_pass():
+    check_values({"ksp_rtol": 1e-8, "snes_rtol": "1e-6", "ksp_atol": 0, "snes_atol": 1e-12, "ksp_divtol": 1e4,
+                  "ksp_max_it": 50, "fieldsplit_u_ksp_max_it": "3", "sub_pc_factor_levels": 0, "pc_asm_overlap": 2,
+                  "ksp_rtol_extra": -1, "fieldsplit_p_ksp_atol": "DEFAULT", "snes_max_it": "PETSC_DEFAULT"}, "solver.x")
+
+
 def test_a_table_naming_no_subproblem_is_named_with_the_known_ones():
     check_tables({"chemotaxis_m": {}}, ["chemotaxis_m_", "chemotaxis_f_"])
     with pytest.raises(ConfigError, match=r"unknown solver table \[solver.chemotaxis_n\].*did you mean chemotaxis_m"
@@ -138,6 +153,12 @@ BAD_SOLVER_SETTINGS = [
     (['solver.chemotaxis_f.pc_factor_mat_solver_type="pardiso"'], ["factor package 'pardiso'"]),
     (['solver.chemotaxis_f.pc_type="fieldsplit"', "solver.chemotaxis_f.solve_on_one_rank=true"],
      ["solver.chemotaxis_f.solve_on_one_rank", "whole-matrix preconditioner, not fieldsplit"]),
+    # values: PETSc takes a negative tolerance for its default and stops with a traceback on what it cannot parse
+    (["solver.chemotaxis_m.ksp_rtol=-1"], ["solver.chemotaxis_m.ksp_rtol must be a number in [0, 1), got -1"]),
+    (["solver.chemotaxis_m.ksp_max_it=0"], ["solver.chemotaxis_m.ksp_max_it must be a whole number >= 1"]),
+    (["solver.chemotaxis_m.ksp_gmres_restart=2.5"], ["solver.chemotaxis_m.ksp_gmres_restart", "got 2.5"]),
+    (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'], ["solver.chemotaxis_m: PETSc refused the options",
+                                                     "zz has no numeric value", "(in ksp_gmres_haptol = 'zz')"]),
 ]
 
 
