@@ -235,6 +235,9 @@ class _Solver:
         options, self._user_keys = solver_options({**self.defaults, **subproblem.petsc_options}, overrides,
                                                   self.where, backend.comm.size > 1)
         self._splits = options.pop(SPLITS, None)
+        if self._splits is not None and str(options.get("pc_type")) != "fieldsplit":
+            raise ConfigError(f"{self.where}.{SPLITS} names the splits of pc_type = \"fieldsplit\"; this solver's "
+                              f"pc_type is {option_text(options.get('pc_type', 'PETSc default'))!r}")
         self._rebuild_after = options.pop(REBUILD, 0) or None  # see NewtonSolver
         gather = bool(options.pop(GATHER, False))
         self._gather = gather and backend.comm.size > 1  # see LinearSolver

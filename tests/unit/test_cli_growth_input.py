@@ -24,8 +24,14 @@ COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "ou
      ["unknown boundary condition type 'springs'", "robin"]),
     (["--set", "physics.chemotaxis.accumulation=lagrangian"], ["accumulation must be one of material, conservative"]),
     (["--set", "growth_law.directions=[[1.0, 1.0], [0.0, 1.0]]"], ["growth_law.directions must be orthonormal"]),
+    (["--set", "physics.poroelastic_growth.stabilisation=[-1.0, 0.1]"],
+     ["physics.poroelastic_growth.stabilisation[0] (beta_s) must be a number > 0, got -1.0"]),
+    (["--set", "physics.poroelastic_growth.stabilisation=[1.0, -0.1]"], ["stabilisation[1] (beta_f) must be a number >= 0"]),
+    (["--set", 'solver.poroelastic_growth.splits=[["u"], ["psi", "p"]]'],
+     ["solver.poroelastic_growth.splits names the splits of pc_type = \"fieldsplit\"", "pc_type is 'lu'"]),
 ], ids=["unknown-law", "law-of-the-wrong-dimension", "active-stress-with-growth", "negative-growth-rate",
-        "zero-shear-modulus", "unknown-condition-kind", "unknown-accumulation", "skewed-directions"])
+        "zero-shear-modulus", "unknown-condition-kind", "unknown-accumulation", "skewed-directions",
+        "negative-psi-stabilisation", "negative-p-stabilisation", "splits-without-fieldsplit"])
 def test_a_bad_growth_config_is_one_line(primordia_cli, tmp_path, overrides, fragments):
     result = primordia_cli("run", EX02A, *COARSE, *overrides, "--out", tmp_path / "out")
     assert_one_line_error(result, *fragments)
