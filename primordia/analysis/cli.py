@@ -58,9 +58,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--y", metavar="NAME:LO:HI:N", help="map: second parameter axis")
     parser.add_argument("--critical", metavar="NAME",
                         help="map: parameter whose critical value gives panels 2-3 (default: the --x one)")
-    parser.add_argument("--theta", choices=("corrected", "seed"), default="corrected",
+    parser.add_argument("--theta", choices=("corrected", "seed"), default=None,
                         help="map, coupled: theta_i of section 3.6 for the boundary curves (default corrected)")
-    parser.add_argument("--nk", type=int, default=64, help="map: number of wavenumbers searched (default 64)")
+    parser.add_argument("--nk", type=int, default=None, help="map: number of wavenumbers searched (default 64)")
     parser.set_defaults(func=run)
     return parser
 
@@ -77,8 +77,8 @@ def run(args) -> int:
     stem = Path(config).stem if config else None
     if mapping:
         return _run_map(args, config, stem)
-    if args.x or args.y or args.critical:
-        raise ConfigError("--x, --y and --critical apply to 'primordia stability map'")
+    if args.x or args.y or args.critical or args.theta is not None or args.nk is not None:
+        raise ConfigError("--x, --y, --critical, --theta and --nk apply to 'primordia stability map'")
     return _run_dispersion(args, config, stem)
 
 
@@ -174,15 +174,15 @@ def _run_map(args, config, stem) -> int:
 
     if not args.x or not args.y:
         raise ConfigError("stability map needs --x NAME:LO:HI:N and --y NAME:LO:HI:N")
-    number(args.nk, "--nk", integer=True, at_least=2)
+    nk = number(64 if args.nk is None else args.nk, "--nk", integer=True, at_least=2)
     params, coupled = _seed_map_parameters(args, config)
     x, y = ParameterRange.parse(args.x), ParameterRange.parse(args.y)
     if args.critical is not None:
         params.declaration(args.critical)
     start = time.perf_counter()
     kind = "coupled" if coupled else "uncoupled"
-    ds = patterning_space(x, y, params=params, coupled=coupled, nk=args.nk,
-                          critical_parameter=args.critical, theta_variant=args.theta)
+    ds = patterning_space(x, y, params=params, coupled=coupled, nk=nk,
+                          critical_parameter=args.critical, theta_variant=args.theta or "corrected")
     print(f"primordia stability map: {x.name} x {y.name} ({x.n} x {y.n}), {kind}, seed's model, "
           f"parameters: {_describe(params)}")
     k = ds["k"].values

@@ -114,7 +114,8 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     (["stability", "--set", "D_m=1"], "--set key must name a section and a key"),
     (["stability", "--set", "parameters.D_m=fast"], "value must be a number"),
     (["stability", "missing.toml"], "config file not found: missing.toml"),
-    (["stability", "--x", "m0:0:1:3"], "--x, --y and --critical apply to 'primordia stability map'"),
+    (["stability", "--x", "m0:0:1:3"], "--x, --y, --critical, --theta and --nk apply to 'primordia stability map'"),
+    (["stability", "--nk", "-3"], "--nk apply to 'primordia stability map'"),  # was silently ignored
     (["stability", "map", "--x", "m0:0.1:4", "--y", "alpha:0:1:5"], "parameter range must be NAME:LO:HI:N"),
     (["stability", "map", "--x", "m0:4:0.1:5", "--y", "alpha:0:1:5"], "need LO < HI"),
     (["stability", "map", "--x", "m0:0.1:4:five", "--y", "alpha:0:1:5"], "N must be an integer"),
