@@ -28,6 +28,8 @@ from primordia.core.errors import ConfigError
 from primordia.core.validation import number
 
 DEFAULT_OUT = Path("out") / "stability"
+#: The map's defaults (its options are None unless given: outside the map they are a mistake).
+DEFAULT_THETA, DEFAULT_NK = "corrected", 64
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -59,8 +61,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--critical", metavar="NAME",
                         help="map: parameter whose critical value gives panels 2-3 (default: the --x one)")
     parser.add_argument("--theta", choices=("corrected", "seed"), default=None,
-                        help="map, coupled: theta_i of section 3.6 for the boundary curves (default corrected)")
-    parser.add_argument("--nk", type=int, default=None, help="map: number of wavenumbers searched (default 64)")
+                        help=f"map, coupled: theta_i of section 3.6 for the boundary curves (default {DEFAULT_THETA})")
+    parser.add_argument("--nk", type=int, default=None, help=f"map: number of wavenumbers searched (default {DEFAULT_NK})")
     parser.set_defaults(func=run)
     return parser
 
@@ -174,7 +176,7 @@ def _run_map(args, config, stem) -> int:
 
     if not args.x or not args.y:
         raise ConfigError("stability map needs --x NAME:LO:HI:N and --y NAME:LO:HI:N")
-    nk = number(64 if args.nk is None else args.nk, "--nk", integer=True, at_least=2)
+    nk = number(DEFAULT_NK if args.nk is None else args.nk, "--nk", integer=True, at_least=2)
     params, coupled = _seed_map_parameters(args, config)
     x, y = ParameterRange.parse(args.x), ParameterRange.parse(args.y)
     if args.critical is not None:
@@ -182,7 +184,7 @@ def _run_map(args, config, stem) -> int:
     start = time.perf_counter()
     kind = "coupled" if coupled else "uncoupled"
     ds = patterning_space(x, y, params=params, coupled=coupled, nk=nk,
-                          critical_parameter=args.critical, theta_variant=args.theta or "corrected")
+                          critical_parameter=args.critical, theta_variant=args.theta or DEFAULT_THETA)
     print(f"primordia stability map: {x.name} x {y.name} ({x.n} x {y.n}), {kind}, seed's model, "
           f"parameters: {_describe(params)}")
     k = ds["k"].values

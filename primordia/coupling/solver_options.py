@@ -54,6 +54,7 @@ from petsc4py import PETSc
 
 from primordia.core.errors import ConfigError
 from primordia.core.petsc_library import petsc_library
+from primordia.core.validation import number
 
 #: Not a PETSc option: the fields of each split of a fieldsplit preconditioner (lists of field names).
 SPLITS = "splits"
@@ -218,14 +219,11 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
                                   f"(e.g. mumps, petsc, superlu, umfpack)")
 
 
-#: Numeric options checked before PETSc reads them, by the option's name without its level: (what the value
-#: must be, the test).  PETSc takes a negative tolerance for "the default" and a zero iteration count for a
-#: solve that fails at once, and stops with a traceback on a value it cannot parse.
-_FRACTION = ("a number in [0, 1)", lambda v: isinstance(v, float) and 0.0 <= v < 1.0)
-_NONNEGATIVE = ("a number >= 0", lambda v: isinstance(v, float) and v >= 0.0)
-_POSITIVE = ("a number > 0", lambda v: isinstance(v, float) and v > 0.0)
-_COUNT = ("a whole number >= 1", lambda v: isinstance(v, int) and v >= 1)
-_LEVELS = ("a whole number >= 0", lambda v: isinstance(v, int) and v >= 0)
+#: Numeric options checked before PETSc reads them, by the option's name without its level: the bounds of
+#: :func:`~primordia.core.validation.number`.  PETSc takes a negative tolerance for "the default" and a zero
+#: iteration count for a solve that fails at once, and stops with a traceback on a value it cannot parse.
+_FRACTION, _NONNEGATIVE, _POSITIVE = dict(at_least=0, below=1), dict(at_least=0), dict(above=0)
+_COUNT, _LEVELS = dict(at_least=1, integer=True), dict(at_least=0, integer=True)
 NUMERIC_OPTIONS = {
     "ksp_rtol": _FRACTION, "snes_rtol": _FRACTION,
     "ksp_atol": _NONNEGATIVE, "snes_atol": _NONNEGATIVE, "snes_stol": _NONNEGATIVE,
@@ -241,29 +239,19 @@ _PETSC_WORDS = {"default", "petsc_default", "decide", "petsc_decide", "determine
 
 def check_values(options: Mapping[str, Any], where: str) -> None:
     """Every tolerance and iteration count in ``options`` (:data:`NUMERIC_OPTIONS`, at any level) is one PETSc
-    reads as meant, or one line naming it."""
+    reads as meant, or one line naming it.  A string (as PETSc's options hold them) is read as the number it
+    writes; what is no number is refused as it stands."""
     for key, value in options.items():
-        for name, (wanted, valid) in NUMERIC_OPTIONS.items():
+        for name, bounds in NUMERIC_OPTIONS.items():
             if key.endswith(name) and _ends_level(key, name):
-                if isinstance(value, str) and value.strip().lower() in _PETSC_WORDS:
-                    continue
-                if not valid(_as_number(value, integer=wanted.startswith("a whole"))):
-                    raise ConfigError(f"{where}.{key} must be {wanted}, got {value!r}")
-
-
-def _as_number(value, integer: bool):
-    """``value`` (a TOML number, or a string as PETSc's options hold them) as an int or a float; None if it
-    is neither (true/false, text, a fraction where a count is meant)."""
-    if isinstance(value, bool):
-        return None
-    if isinstance(value, str):
-        try:
-            value = int(value) if integer else float(value)
-        except ValueError:
-            return None
-    if integer:
-        return value if isinstance(value, int) else None
-    return float(value) if isinstance(value, (int, float)) and value == value else None  # NaN is no number
+                if isinstance(value, str):
+                    if value.strip().lower() in _PETSC_WORDS:
+                        continue
+                    try:
+                        value = int(value) if bounds.get("integer") else float(value)
+                    except ValueError:
+                        pass
+                number(value, f"{where}.{key}", **bounds)
 
 
 def read_options(petsc_object, where: str, options: Mapping[str, Any] | None = None) -> None:

@@ -167,8 +167,8 @@ class PoroelasticGrowth(Physics):
         if self.settings["preconditioner"] not in PRECONDITIONERS:
             raise ConfigError(f"{where}.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
                               f"got {self.settings['preconditioner']!r}")
-        numbers(self.settings["stabilisation"], f"{where}.stabilisation", length=2)  # [beta_s, beta_f]
-        beta_s, beta_f = self.settings["stabilisation"]  # a psi block of zero, or of the wrong sign, is no preconditioner
+        # [beta_s, beta_f] of seed section 5.2: a psi block of zero, or of the wrong sign, is no preconditioner
+        beta_s, beta_f = numbers(self.settings["stabilisation"], f"{where}.stabilisation", length=2)
         number(beta_s, f"{where}.stabilisation[0] (beta_s)", above=0)
         number(beta_f, f"{where}.stabilisation[1] (beta_f)", at_least=0)
         if self.growth_law is None:

@@ -155,7 +155,7 @@ BAD_SOLVER_SETTINGS = [
      ["solver.chemotaxis_f.solve_on_one_rank", "whole-matrix preconditioner, not fieldsplit"]),
     # values: PETSc takes a negative tolerance for its default and stops with a traceback on what it cannot parse
     (["solver.chemotaxis_m.ksp_rtol=-1"], ["solver.chemotaxis_m.ksp_rtol must be a number in [0, 1), got -1"]),
-    (["solver.chemotaxis_m.ksp_max_it=0"], ["solver.chemotaxis_m.ksp_max_it must be a whole number >= 1"]),
+    (["solver.chemotaxis_m.ksp_max_it=0"], ["solver.chemotaxis_m.ksp_max_it must be an integer >= 1"]),
     (["solver.chemotaxis_m.ksp_gmres_restart=2.5"], ["solver.chemotaxis_m.ksp_gmres_restart", "got 2.5"]),
     (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'], ["solver.chemotaxis_m: PETSc refused the options",
                                                      "zz has no numeric value", "(in ksp_gmres_haptol = 'zz')"]),
