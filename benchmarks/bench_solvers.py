@@ -10,6 +10,14 @@ For each system and size it prints, per preconditioner (a named set of config ov
 * peak memory of the run (its own process) and bytes per unknown (peak / all unknowns of the run),
 * the ratio of ms/step to the direct solver's at the same size (the first preconditioner listed).
 
+With more than one size it ends with, per system and preconditioner, the Krylov iterations per Newton
+step at each size and their change from the first size to the last, and the cost per doubling of the
+unknowns between consecutive sizes, (ms_2 / ms_1) ** (log 2 / log(N_2 / N_1)) (issue 9's bar: 2.3).
+One run of a size can be 10-20% off on a shared machine (example 4 at 10 boxes a side: 727 to 904
+ms/step within an hour), which moves a factor per doubling by about as much: ``--repeats N`` runs each
+size N times, a repeat running the sizes one after another, and the summary gives the medians' factor
+and the range over the repeats.
+
 Systems (``--systems``):
 
 * ``growth2d``: the (u, psi, p) Newton system of example 2a (``examples/ex02a.toml``, fixed-point coupling);
@@ -29,6 +37,7 @@ timed with, ``--clock``), and their ratio, then each subproblem's share; with ``
 
     .venv/bin/python benchmarks/bench_solvers.py --systems growth2d --sizes 43 86 171 --steps 3
     .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 40 --steps 2
+    .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 30 --preconditioners schur --repeats 3
     .venv/bin/python benchmarks/bench_solvers.py --systems biot cells --sizes 43 86 171 342
     .venv/bin/python benchmarks/bench_solvers.py --share ex01a ex01b --sizes 171 --backends fenicsx skfem --steps 40
 """
@@ -37,8 +46,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -228,11 +239,15 @@ def main() -> None:
     parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu")
     parser.add_argument("--set", action="append", default=[], help="an extra config override for every run")
     parser.add_argument("--one", nargs=3, metavar=("SYSTEM", "PRECONDITIONER", "SIZE"), help=argparse.SUPPRESS)
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="run every size N times (each repeat runs the sizes in turn) and summarise medians")
     parser.add_argument("--json", help="also append every row to this file (JSON lines)")
     parser.add_argument("--share", nargs="+", metavar="EXAMPLE", help="step cost against linear solves instead")
     parser.add_argument("--backends", nargs="+", default=["fenicsx"], help="backends of --share")
     parser.add_argument("--share-one", nargs=3, metavar=("EXAMPLE", "BACKEND", "SIZE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1, got {args.repeats}")
     if args.share_one:
         example, backend, size = args.share_one
         row = share(example, backend, int(size), args.steps, args.warmup, args.set, args.clock)
@@ -255,24 +270,76 @@ def main() -> None:
     header = (f"{'system':>10} {'preconditioner':>14} {'size':>5} {'ranks':>5} {'unknowns':>9} {'Krylov/Newton':>13} "
               f"{'Newton/step':>11} {'ms/step':>9} {'peak MB':>8} {'B/unknown':>9} {'/direct':>7}")
     print(header, flush=True)
-    for system in args.systems:
-        names = args.preconditioners or list(SYSTEMS[system]["preconditioners"])
-        for size in args.sizes:
-            direct = None
-            for name in names:
-                row = child(system, name, size, args)
-                if row is None:
-                    continue
-                direct = direct or row["ms_per_step"]
-                newton = f"{row['newton_per_step']:.1f}" if row["newton_per_step"] is not None else "-"
-                print(f"{system:>10} {name:>14} {size:>5} {row['ranks']:>5} {row['unknowns']:>9} "
-                      f"{row['krylov_per_newton']:>13.1f} {newton:>11} {row['ms_per_step']:>9.0f} "
-                      f"{row['peak_bytes'] / 2**20:>8.0f} {row['bytes_per_unknown']:>9.0f} "
-                      f"{row['ms_per_step'] / direct:>7.2f}", flush=True)
-                if args.json:
-                    with open(args.json, "a") as stream:
-                        stream.write(json.dumps({**row, "ratio_to_direct": row["ms_per_step"] / direct}) + "\n")
+    runs: dict = {}  # (system, preconditioner, size) -> {repeat: row}
+    for repeat in range(args.repeats):  # outermost: the sizes of one repeat run one after another
+        for system in args.systems:
+            names = args.preconditioners or list(SYSTEMS[system]["preconditioners"])
+            for size in args.sizes:
+                direct = None
+                for name in names:
+                    row = child(system, name, size, args)
+                    if row is None:
+                        continue
+                    runs.setdefault((system, name, size), {})[repeat] = row
+                    direct = direct or row["ms_per_step"]
+                    newton = f"{row['newton_per_step']:.1f}" if row["newton_per_step"] is not None else "-"
+                    print(f"{system:>10} {name:>14} {size:>5} {row['ranks']:>5} {row['unknowns']:>9} "
+                          f"{row['krylov_per_newton']:>13.1f} {newton:>11} {row['ms_per_step']:>9.0f} "
+                          f"{row['peak_bytes'] / 2**20:>8.0f} {row['bytes_per_unknown']:>9.0f} "
+                          f"{row['ms_per_step'] / direct:>7.2f}", flush=True)
+                    if args.json:
+                        with open(args.json, "a") as stream:
+                            stream.write(json.dumps({**row, "ratio_to_direct": row["ms_per_step"] / direct}) + "\n")
+    if len(args.sizes) > 1:
+        print_growth(runs, args)
 
+
+def per_doubling(unknowns: tuple[float, float], ms: tuple[float, float]) -> float:
+    """The factor by which the cost per step grows for each doubling of the unknowns between two sizes:
+    (ms_2 / ms_1) ** (log 2 / log(N_2 / N_1)); 2 is linear cost, and issue 9's bar is 2.3."""
+    return (ms[1] / ms[0]) ** (math.log(2.0) / math.log(unknowns[1] / unknowns[0]))
+
+
+def growth_lines(by_size: dict[int, dict[int, dict]]) -> list[str]:
+    """What one preconditioner's runs say about growth over the sizes: Krylov iterations per Newton step
+    (median, and the change from the first size to the last), and the cost per doubling of the unknowns
+    between consecutive sizes, from the median ms/step and over the repeats (each repeat ran its sizes one
+    after the other, so a pair of one repeat saw the same machine)."""
+    sizes = sorted(by_size)
+    median = {size: statistics.median(row["ms_per_step"] for row in by_size[size].values()) for size in sizes}
+    krylov = {size: statistics.median(row["krylov_per_newton"] for row in by_size[size].values()) for size in sizes}
+    unknowns = {size: next(iter(by_size[size].values()))["unknowns"] for size in sizes}
+    first, last = krylov[sizes[0]], krylov[sizes[-1]]
+    change = f"{100.0 * (last / first - 1.0):+.0f}%" if first > 0 else "-"
+    lines = [f"Krylov/Newton {', '.join(f'{krylov[size]:.1f}' for size in sizes)} ({change} from {sizes[0]} to {sizes[-1]})"]
+    for small, large in zip(sizes, sizes[1:]):
+        factor = per_doubling((unknowns[small], unknowns[large]), (median[small], median[large]))
+        pairs = [per_doubling((unknowns[small], unknowns[large]),
+                              (by_size[small][k]["ms_per_step"], by_size[large][k]["ms_per_step"]))
+                 for k in sorted(set(by_size[small]) & set(by_size[large]))]
+        spread = f" (repeats {min(pairs):.2f}-{max(pairs):.2f})" if len(pairs) > 1 else ""
+        lines.append(f"{small} -> {large}: {_ms(median[small])} -> {_ms(median[large])} ms/step, "
+                     f"{unknowns[large] / unknowns[small]:.2f}x the unknowns, {factor:.2f}x per doubling{spread}")
+    return lines
+
+
+def _ms(value: float) -> str:
+    return f"{value:.0f}" if value >= 100 else f"{value:.3g}"
+
+
+def print_growth(runs: dict, args) -> None:
+    """Per system and preconditioner, the growth over the sizes (medians when ``--repeats`` > 1)."""
+    print(f"growth over the sizes (medians of {args.repeats} run(s) each):", flush=True)
+    grouped: dict = {}
+    for (system, name, size), rows in runs.items():
+        grouped.setdefault((system, name), {})[size] = rows
+    for (system, name), by_size in grouped.items():
+        if len(by_size) < 2:
+            continue
+        lines = growth_lines(by_size)
+        print(f"  {system} {name}: {lines[0]}", flush=True)
+        for line in lines[1:]:
+            print(f"    {line}", flush=True)
 
 if __name__ == "__main__":
     main()

@@ -1,0 +1,54 @@
+"""The solver study's growth summary (benchmarks/bench_solvers.py): the cost per doubling of the unknowns."""
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    sys.path.insert(0, str(BENCHMARKS))  # bench_solvers imports its neighbour machine.py
+    try:
+        spec = importlib.util.spec_from_file_location("bench_solvers", BENCHMARKS / "bench_solvers.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+
+
+def test_linear_cost_is_a_factor_of_two_per_doubling_whatever_the_refinement(bench):
+    assert bench.per_doubling((1000, 4000), (10.0, 40.0)) == pytest.approx(2.0)
+    assert bench.per_doubling((1000, 3770), (10.0, 37.7)) == pytest.approx(2.0)
+    # N^1.5 (a banded direct solve): 2 ** 1.5 per doubling
+    assert bench.per_doubling((1000, 3000), (1.0, 3.0 ** 1.5)) == pytest.approx(2.0 ** 1.5)
+
+
+def _row(unknowns, ms, krylov):
+    return {"unknowns": unknowns, "ms_per_step": ms, "krylov_per_newton": krylov}
+
+
+def test_the_summary_takes_medians_and_pairs_each_repeat_with_itself(bench):
+    by_size = {
+        10: {0: _row(8793, 800.0, 18.1), 1: _row(8793, 700.0, 18.1), 2: _row(8793, 900.0, 18.1)},
+        20: {0: _row(33153, 3400.0, 18.3), 1: _row(33153, 3300.0, 18.3), 2: _row(33153, 3500.0, 18.3)},
+    }
+    krylov, step = bench.growth_lines(by_size)
+    assert krylov == "Krylov/Newton 18.1, 18.3 (+1% from 10 to 20)"
+    factor = lambda a, b: (b / a) ** (math.log(2.0) / math.log(33153 / 8793))  # noqa: E731
+    low, high = sorted((factor(800, 3400), factor(700, 3300), factor(900, 3500)))[::2]
+    assert step == (f"10 -> 20: 800 -> 3400 ms/step, 3.77x the unknowns, {factor(800, 3400):.2f}x per doubling "
+                    f"(repeats {low:.2f}-{high:.2f})")
+
+
+def test_a_repeat_that_failed_at_one_size_is_left_out_of_the_pairs(bench):
+    by_size = {43: {0: _row(7744, 1.0, 4.0), 1: _row(7744, 1.2, 4.0)},
+               86: {1: _row(30276, 2.4, 4.8)}}
+    _, step = bench.growth_lines(by_size)
+    assert "repeats" not in step  # one pair left: no range to give
+    assert step.startswith("43 -> 86: 1.1 -> 2.4 ms/step")
