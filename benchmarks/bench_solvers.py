@@ -16,7 +16,8 @@ unknowns between consecutive sizes, (ms_2 / ms_1) ** (log 2 / log(N_2 / N_1)) (i
 One run of a size can be 10-20% off on a shared machine (example 4 at 10 boxes a side: 727 to 904
 ms/step within an hour), which moves a factor per doubling by about as much: ``--repeats N`` runs each
 size N times, a repeat running the sizes one after another, and the summary gives the medians' factor
-and the range over the repeats.
+and the range over the repeats.  With ``--share``, ``--repeats N`` ends with each case's median
+step/solves ratio and its range.
 
 Systems (``--systems``):
 
@@ -203,29 +204,44 @@ def child(system, preconditioner, size, args) -> dict | None:
 
 def share_table(args) -> None:
     print(f"{'example':>8} {'backend':>8} {'size':>5} {'ms/step':>9} {'solves ms':>10} {'step/solves':>11}", flush=True)
-    for example in args.share:
-        for size in args.sizes:
-            for backend in args.backends:
-                command = [sys.executable, __file__, "--share-one", example, backend, str(size), "--steps",
-                           str(args.steps), "--warmup", str(args.warmup), "--clock", args.clock,
-                           *sum((["--set", s] for s in args.set), [])]
-                env = os.environ
-                if args.ranks > 1:
-                    command = ["mpirun", "-n", str(args.ranks), *command]
-                    env = {**env, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-                done = subprocess.run(command, capture_output=True, text=True, env=env)
-                lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
-                if done.returncode != 0 or not lines:
-                    print(f"  {example} {backend} {size}: failed ({(done.stderr.strip().splitlines() or ['?'])[-1]})")
-                    continue
-                row = json.loads(lines[-1])
-                print(f"{example:>8} {backend:>8} {size:>5} {row['ms_per_step']:>9.1f} {row['solve_ms_per_step']:>10.1f} "
-                      f"{row['ratio']:>11.2f}", flush=True)
-                shares = ", ".join(f"{name} {ms:.1f}" for name, ms in row["solves_ms_per_step"].items())
-                print(f"{'':>8} solves on {row['ranks']} rank(s), ms/step: {shares}", flush=True)
-                if args.json:
-                    with open(args.json, "a") as stream:
-                        stream.write(json.dumps(row) + "\n")
+    ratios: dict = {}  # (example, backend, size) -> [step/solves of each repeat]
+    for _ in range(args.repeats):  # outermost: a repeat runs every case once, so the repeats alternate
+        for example in args.share:
+            for size in args.sizes:
+                for backend in args.backends:
+                    row = share_child(example, backend, size, args)
+                    if row is None:
+                        continue
+                    ratios.setdefault((example, backend, size), []).append(row["ratio"])
+                    print(f"{example:>8} {backend:>8} {size:>5} {row['ms_per_step']:>9.1f} {row['solve_ms_per_step']:>10.1f} "
+                          f"{row['ratio']:>11.2f}", flush=True)
+                    shares = ", ".join(f"{name} {ms:.1f}" for name, ms in row["solves_ms_per_step"].items())
+                    print(f"{'':>8} solves on {row['ranks']} rank(s), ms/step: {shares}", flush=True)
+                    if args.json:
+                        with open(args.json, "a") as stream:
+                            stream.write(json.dumps(row) + "\n")
+    if args.repeats > 1:
+        print(f"step/solves, median of {args.repeats} runs (range):", flush=True)
+        for (example, backend, size), values in ratios.items():
+            print(f"  {example} {backend} {size}: {statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})",
+                  flush=True)
+
+
+def share_child(example: str, backend: str, size: int, args) -> dict | None:
+    """One ``--share-one`` run in a child process (under ``mpirun`` with ``--ranks``), or None if it failed."""
+    command = [sys.executable, __file__, "--share-one", example, backend, str(size), "--steps",
+               str(args.steps), "--warmup", str(args.warmup), "--clock", args.clock,
+               *sum((["--set", s] for s in args.set), [])]
+    env = os.environ
+    if args.ranks > 1:
+        command = ["mpirun", "-n", str(args.ranks), *command]
+        env = {**env, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    done = subprocess.run(command, capture_output=True, text=True, env=env)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+    if done.returncode != 0 or not lines:
+        print(f"  {example} {backend} {size}: failed ({(done.stderr.strip().splitlines() or ['?'])[-1]})")
+        return None
+    return json.loads(lines[-1])
 
 
 def main() -> None:
