@@ -188,8 +188,15 @@ def _max():
 
 
 def child(system, preconditioner, size, args) -> dict | None:
-    command = [sys.executable, __file__, "--one", system, preconditioner, str(size), "--steps", str(args.steps),
-               "--warmup", str(args.warmup), "--clock", args.clock, *sum((["--set", s] for s in args.set), [])]
+    """One ``--one`` run in a child process, or None if it failed."""
+    return _run_child(["--one", system, preconditioner, str(size)], f"{system} {preconditioner} {size}", args)
+
+
+def _run_child(what: list[str], label: str, args) -> dict | None:
+    """Run this script with ``what`` (``--one ...`` or ``--share-one ...``) and the shared options in a child
+    process, under ``mpirun`` with ``--ranks``; its last JSON line, or None (and a line saying why)."""
+    command = [sys.executable, __file__, *what, "--steps", str(args.steps), "--warmup", str(args.warmup),
+               "--clock", args.clock, *sum((["--set", s] for s in args.set), [])]
     if args.ranks > 1:
         command = ["mpirun", "-n", str(args.ranks), *command]
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
@@ -197,7 +204,7 @@ def child(system, preconditioner, size, args) -> dict | None:
     lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
     if done.returncode != 0 or not lines:
         reason = (done.stderr.strip().splitlines() or ["no output"])[-1]
-        print(f"  {system} {preconditioner} {size}: failed ({reason[:160]})", flush=True)
+        print(f"  {label}: failed ({reason[:160]})", flush=True)
         return None
     return json.loads(lines[-1])
 
@@ -228,20 +235,8 @@ def share_table(args) -> None:
 
 
 def share_child(example: str, backend: str, size: int, args) -> dict | None:
-    """One ``--share-one`` run in a child process (under ``mpirun`` with ``--ranks``), or None if it failed."""
-    command = [sys.executable, __file__, "--share-one", example, backend, str(size), "--steps",
-               str(args.steps), "--warmup", str(args.warmup), "--clock", args.clock,
-               *sum((["--set", s] for s in args.set), [])]
-    env = os.environ
-    if args.ranks > 1:
-        command = ["mpirun", "-n", str(args.ranks), *command]
-        env = {**env, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-    done = subprocess.run(command, capture_output=True, text=True, env=env)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
-    if done.returncode != 0 or not lines:
-        print(f"  {example} {backend} {size}: failed ({(done.stderr.strip().splitlines() or ['?'])[-1]})")
-        return None
-    return json.loads(lines[-1])
+    """One ``--share-one`` run in a child process, or None if it failed."""
+    return _run_child(["--share-one", example, backend, str(size)], f"{example} {backend} {size}", args)
 
 
 def main() -> None:
