@@ -102,6 +102,11 @@ SYSTEMS = {
             "hypre_hmis": ["solver.chemotaxis_m.pc_type=\"hypre\"",
                            "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
                            "solver.chemotaxis_m.pc_hypre_boomeramg_interp_type=\"ext+i\""],
+            # the same built afresh at every solve (the others keep theirs while it works: "fresh+1")
+            "hypre_hmis_fresh": ["solver.chemotaxis_m.pc_type=\"hypre\"",
+                                 "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
+                                 "solver.chemotaxis_m.pc_hypre_boomeramg_interp_type=\"ext+i\"",
+                                 "solver.chemotaxis_m.rebuild_preconditioner_after=0"],
         },
     },
     "chemotaxis": {

@@ -30,8 +30,11 @@ outside (``PETSC_OPTIONS``, the command line of petsc4py).  A user table that
 changes ``pc_type`` (at any level: ``fieldsplit_u = { pc_type = "hypre" }``)
 drops the defaults that only made sense for the preconditioner it replaces: the
 defaults' options of that level other than ``ksp_*`` and ``snes_*`` (the factor
-package, the splits and their sub-solvers, AMG settings), and, at the top level,
-a ``ksp_type = "preonly"`` that only made sense with a direct solve.
+package, the splits and their sub-solvers, AMG settings, a ``rebuild_preconditioner_after``
+count), and, at the top level, a ``ksp_type = "preonly"`` that only made sense with a
+direct solve.  A relative ``rebuild_preconditioner_after = "fresh+K"`` stays: it measures
+the kept preconditioner against a fresh one of whatever kind (the cell density's default;
+``pc_type = "hypre"`` there keeps BoomerAMG over steps instead of building it at each).
 
 Mistakes are one line (:class:`~primordia.core.errors.ConfigError`, exit status
 2): an unknown KSP, PC, SNES or factor-package type, or a tolerance or iteration
@@ -135,12 +138,20 @@ def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, A
         level = key[: -len("pc_type")]
         for name in list(kept):
             rest = name[len(level):]
-            if name.startswith(level) and name != key and not rest.startswith(_KEPT_ACROSS_PC):
+            if (name.startswith(level) and name != key and not rest.startswith(_KEPT_ACROSS_PC)
+                    and not _relative_rebuild(rest, kept[name])):
                 del kept[name]
         if (level == "" and str(defaults.get("pc_type")) in DIRECT and "ksp_type" not in user
                 and kept.get("ksp_type") == "preonly"):
             del kept["ksp_type"]
     return {**kept, **user}
+
+
+def _relative_rebuild(name: str, value) -> bool:
+    """Whether ``name = value`` is the relative rebuild rule ("fresh+K"), which holds for any preconditioner:
+    it compares a kept one with what a fresh one of the same kind needs.  A number of iterations was chosen
+    for the preconditioner it came with, and goes with it."""
+    return name == REBUILD and isinstance(value, str) and value.startswith(FRESH)
 
 
 def parallel_safe(options: Mapping[str, Any], parallel: bool) -> dict[str, Any]:

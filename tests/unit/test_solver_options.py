@@ -57,6 +57,18 @@ def test_a_new_pc_type_drops_what_only_made_sense_for_the_old_one():
     assert combine(DEFAULTS, {"pc_type": "gamg", "ksp_type": "preonly"})["ksp_type"] == "preonly"  # unless asked
 
 
+def test_a_relative_rebuild_rule_outlives_a_new_pc_type_and_a_count_of_iterations_does_not():
+    """"fresh+K" compares a kept preconditioner with a fresh one of its own kind, so it holds for any; a count
+    was chosen for the preconditioner it came with (10 GMRES iterations with a kept LU)."""
+    cells = {"ksp_type": "gmres", "pc_type": "bjacobi", "rebuild_preconditioner_after": "fresh+1",
+             "sub_pc_factor_mat_ordering_type": "rcm"}
+    assert combine(cells, {"pc_type": "hypre"}) == {"ksp_type": "gmres", "pc_type": "hypre",
+                                                    "rebuild_preconditioner_after": "fresh+1"}
+    counted = {**cells, "rebuild_preconditioner_after": 10}
+    assert "rebuild_preconditioner_after" not in combine(counted, {"pc_type": "hypre"})
+    assert combine(counted, {"pc_type": "bjacobi"}) == counted  # the same preconditioner keeps its count
+
+
 def test_a_new_pc_type_of_one_split_drops_that_split_s_settings_only():
     defaults = flatten({"pc_type": "fieldsplit", "splits": [["u"], ["p"]],
                         "fieldsplit_u": {"ksp_type": "preonly", "pc_type": "gamg", "pc_gamg_threshold": 0.02},
