@@ -21,7 +21,24 @@ def petsc_library():
         _library.PetscOptionsUsed.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int)]
         _library.MatUpdateMPIAIJWithArray.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         _library.MatUpdateMPIAIJWithArray.restype = ctypes.c_int
+        _library.MatInitializePackage.restype = ctypes.c_int
+        _library.PetscFunctionListFind_Private.argtypes = [ctypes.c_void_p, ctypes.c_char_p,
+                                                           ctypes.POINTER(ctypes.c_void_p)]
+        _library.PetscFunctionListFind_Private.restype = ctypes.c_int
     return _library
+
+
+def matrix_ordering_registered(name: str) -> bool:
+    """Whether PETSc has the matrix ordering ``name`` (``pc_factor_mat_ordering_type``), looked up in its
+    ``MatOrderingList`` without running it: some registered orderings abort the process on this PETSc."""
+    library = petsc_library()
+    if library.MatInitializePackage():  # registers the orderings (once)
+        return False
+    found = ctypes.c_void_p()
+    listed = ctypes.c_void_p.in_dll(library, "MatOrderingList")
+    if library.PetscFunctionListFind_Private(listed, name.encode(), ctypes.byref(found)):
+        return False
+    return bool(found.value)
 
 
 def update_mpiaij_values(matrix, values: np.ndarray) -> None:

@@ -37,7 +37,8 @@ the kept preconditioner against a fresh one of whatever kind (the cell density's
 ``pc_type = "hypre"`` there keeps BoomerAMG over steps instead of building it at each).
 
 Mistakes are one line (:class:`~primordia.core.errors.ConfigError`, exit status
-2): an unknown KSP, PC, SNES or factor-package type, or a tolerance or iteration
+2): an unknown KSP, PC, SNES or factor-package type or matrix ordering (or ``wbm``,
+which aborts the process on this PETSc), or a tolerance or iteration
 count out of its range (``ksp_rtol = -1``, which PETSc would take for its default;
 ``ksp_max_it = 0``), when the solver is made; a value PETSc cannot read (``"abc"``
 for a number), with PETSc's reason; an option PETSc never read (misspelt, or
@@ -56,7 +57,7 @@ from typing import Any
 from petsc4py import PETSc
 
 from primordia.core.errors import ConfigError
-from primordia.core.petsc_library import petsc_library
+from primordia.core.petsc_library import matrix_ordering_registered, petsc_library
 from primordia.core.validation import number
 
 #: Not a PETSc option: the fields of each split of a fieldsplit preconditioner (lists of field names).
@@ -216,7 +217,8 @@ _checked: dict[tuple[str, str], bool] = {}
 
 
 def check_types(options: Mapping[str, Any], where: str) -> None:
-    """Every KSP, PC, SNES type and factor package in ``options`` exists here, or one line naming it."""
+    """Every KSP, PC, SNES type, factor package and matrix ordering in ``options`` exists here, or one line
+    naming it."""
     for key, value in options.items():
         value = option_text(value)
         for suffix, (label, kind) in _KINDS.items():
@@ -228,6 +230,34 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
             if not _checked.setdefault(("package", value), _factor_package_available(value)):
                 raise ConfigError(f"{where}: factor package '{value}' in {key} is not available in this PETSc "
                                   f"(e.g. mumps, petsc, superlu, umfpack)")
+        if key.endswith(ORDERING) and _ends_level(key, ORDERING):
+            refusal = _ordering_refusal(value)
+            if refusal:
+                raise ConfigError(f"{where}: matrix ordering '{value}' in {key} {refusal}")
+
+
+#: The option naming a factorisation's fill-reducing ordering (at any level, e.g. ``sub_`` of block Jacobi).
+ORDERING = "pc_factor_mat_ordering_type"
+#: Orderings PETSc registers that primordia does not hand it, and why.
+REFUSED_ORDERINGS = {
+    "wbm": "calls SuperLU_DIST's MC64 (HSL code, left out of Debian's build), which aborts the whole process "
+           "here; it is a weighted matching for pivoting, not a fill-reducing ordering: try nd, amd or qmd",
+}
+
+
+def _ordering_refusal(name: str) -> str:
+    """Why the matrix ordering ``name`` cannot be used here ("" if it can)."""
+    if name in REFUSED_ORDERINGS:
+        return REFUSED_ORDERINGS[name]
+    if not _checked.setdefault(("ordering", name), matrix_ordering_registered(name)):
+        known = [o for o in _known_orderings() if o not in REFUSED_ORDERINGS]
+        return f"is not one this PETSc has{_suggestion(name, known) or ' (it has ' + ', '.join(known) + ')'}"
+    return ""
+
+
+def _known_orderings() -> list[str]:
+    names = [getattr(PETSc.Mat.OrderingType, n) for n in dir(PETSc.Mat.OrderingType) if n.isupper()]
+    return sorted(n for n in names if isinstance(n, str) and matrix_ordering_registered(n))
 
 
 #: Numeric options checked before PETSc reads them, by the option's name without its level: the bounds of

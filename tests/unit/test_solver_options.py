@@ -171,6 +171,14 @@ BAD_SOLVER_SETTINGS = [
     (["solver.chemotaxis_m.ksp_gmres_restart=2.5"], ["solver.chemotaxis_m.ksp_gmres_restart", "got 2.5"]),
     (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'], ["solver.chemotaxis_m: PETSc refused the options",
                                                      "zz has no numeric value", "(in ksp_gmres_haptol = 'zz')"]),
+    # an ordering is read when the factorisation is made: a traceback after the first step's retries, before
+    (['solver.chemotaxis_f.pc_factor_mat_ordering_type="zz"'],
+     ["solver.chemotaxis_f: matrix ordering 'zz' in pc_factor_mat_ordering_type is not one this PETSc has",
+      "(it has ", "nd, "]),
+    (['solver.chemotaxis_m.sub_pc_factor_mat_ordering_type="rmc"'],
+     ["matrix ordering 'rmc' in sub_pc_factor_mat_ordering_type", "did you mean rcm"]),
+    (['solver.chemotaxis_f.pc_factor_mat_ordering_type="wbm"'],  # registered, but SIGABRT in Debian's SuperLU_DIST
+     ["matrix ordering 'wbm'", "aborts the whole process", "try nd, amd or qmd"]),
 ]
 
 
