@@ -37,8 +37,8 @@ the kept preconditioner against a fresh one of whatever kind (the cell density's
 ``pc_type = "hypre"`` there keeps BoomerAMG over steps instead of building it at each).
 
 Mistakes are one line (:class:`~primordia.core.errors.ConfigError`, exit status
-2): an unknown KSP, PC, SNES or factor-package type or matrix ordering (or ``wbm``,
-which aborts the process on this PETSc), or a tolerance or iteration
+2): an unknown KSP, PC, SNES or factor-package type or matrix ordering, a value this
+PETSc answers by aborting the process (:data:`ABORTING`), or a tolerance or iteration
 count out of its range (``ksp_rtol = -1``, which PETSc would take for its default;
 ``ksp_max_it = 0``), when the solver is made; a value PETSc cannot read (``"abc"``
 for a number), with PETSc's reason; an option PETSc never read (misspelt, or
@@ -230,29 +230,26 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
             if not _checked.setdefault(("package", value), _factor_package_available(value)):
                 raise ConfigError(f"{where}: factor package '{value}' in {key} is not available in this PETSc "
                                   f"(e.g. mumps, petsc, superlu, umfpack)")
+        for suffix, refused in ABORTING.items():
+            read = value if suffix == ORDERING else value.lower()  # PETSc looks orderings up case by case
+            if key.endswith(suffix) and _ends_level(key, suffix) and read in refused:
+                raise ConfigError(f"{where}: {key} = '{value}' {MC64} {refused[read]}")
         if key.endswith(ORDERING) and _ends_level(key, ORDERING):
-            refusal = _ordering_refusal(value)
-            if refusal:
-                raise ConfigError(f"{where}: matrix ordering '{value}' in {key} {refusal}")
+            if not _checked.setdefault(("ordering", value), matrix_ordering_registered(value)):
+                known = [o for o in _known_orderings() if o not in ABORTING[ORDERING]]
+                raise ConfigError(f"{where}: matrix ordering '{value}' in {key} is not one this PETSc has"
+                                  f"{_suggestion(value, known) or ' (it has ' + ', '.join(known) + ')'}")
 
 
 #: The option naming a factorisation's fill-reducing ordering (at any level, e.g. ``sub_`` of block Jacobi).
 ORDERING = "pc_factor_mat_ordering_type"
-#: Orderings PETSc registers that primordia does not hand it, and why.
-REFUSED_ORDERINGS = {
-    "wbm": "calls SuperLU_DIST's MC64 (HSL code, left out of Debian's build), which aborts the whole process "
-           "here; it is a weighted matching for pivoting, not a fill-reducing ordering: try nd, amd or qmd",
+MC64 = ("calls SuperLU_DIST's MC64, HSL code left out of Debian's build, whose stand-in aborts the whole "
+        "process (no summary, no checkpoint):")
+#: Option values PETSc accepts and this PETSc answers by aborting the process, with what to use instead.
+ABORTING = {
+    ORDERING: {"wbm": "wbm is a weighted matching for pivoting, not a fill-reducing ordering: try nd, amd or qmd"},
+    "mat_superlu_dist_rowperm": {"largediag_mc64": "try LargeDiag_AWPM or NOROWPERM"},
 }
-
-
-def _ordering_refusal(name: str) -> str:
-    """Why the matrix ordering ``name`` cannot be used here ("" if it can)."""
-    if name in REFUSED_ORDERINGS:
-        return REFUSED_ORDERINGS[name]
-    if not _checked.setdefault(("ordering", name), matrix_ordering_registered(name)):
-        known = [o for o in _known_orderings() if o not in REFUSED_ORDERINGS]
-        return f"is not one this PETSc has{_suggestion(name, known) or ' (it has ' + ', '.join(known) + ')'}"
-    return ""
 
 
 def _known_orderings() -> list[str]:

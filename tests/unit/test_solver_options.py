@@ -177,8 +177,13 @@ BAD_SOLVER_SETTINGS = [
       "(it has ", "nd, "]),
     (['solver.chemotaxis_m.sub_pc_factor_mat_ordering_type="rmc"'],
      ["matrix ordering 'rmc' in sub_pc_factor_mat_ordering_type", "did you mean rcm"]),
-    (['solver.chemotaxis_f.pc_factor_mat_ordering_type="wbm"'],  # registered, but SIGABRT in Debian's SuperLU_DIST
-     ["matrix ordering 'wbm'", "aborts the whole process", "try nd, amd or qmd"]),
+    # accepted by PETSc, answered by SIGABRT in Debian's SuperLU_DIST (no summary, the test process gone)
+    (['solver.chemotaxis_f.pc_factor_mat_ordering_type="wbm"'],
+     ["solver.chemotaxis_f: pc_factor_mat_ordering_type = 'wbm' calls SuperLU_DIST's MC64", "aborts the whole process",
+      "try nd, amd or qmd"]),
+    (['solver.chemotaxis_f.pc_factor_mat_solver_type="superlu_dist"',
+      'solver.chemotaxis_f.mat_superlu_dist_rowperm="LargeDiag_MC64"'],
+     ["mat_superlu_dist_rowperm = 'LargeDiag_MC64'", "aborts the whole process", "try LargeDiag_AWPM"]),
 ]
 
 
