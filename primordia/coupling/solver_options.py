@@ -224,8 +224,11 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
         for suffix, (label, kind) in _KINDS.items():
             if key.endswith(suffix) and _ends_level(key, suffix):
                 if not _checked.setdefault((suffix, value), _try_type(kind, value)):
-                    raise ConfigError(f"{where}: unknown {label} type '{value}' in {key}"
-                                      f"{_suggestion(value, _known_types(kind))}")
+                    known = _known_types(kind)
+                    if value in known:  # petsc4py names it, this PETSc was built without it
+                        raise ConfigError(f"{where}: {label} type '{value}' in {key} is not available in this PETSc "
+                                          f"(built without it)")
+                    raise ConfigError(f"{where}: unknown {label} type '{value}' in {key}{_suggestion(value, known)}")
         if key.endswith("pc_factor_mat_solver_type"):
             if not _checked.setdefault(("package", value), _factor_package_available(value)):
                 raise ConfigError(f"{where}: factor package '{value}' in {key} is not available in this PETSc "
