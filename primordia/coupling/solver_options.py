@@ -216,6 +216,13 @@ _KINDS = {"ksp_type": ("KSP", PETSc.KSP), "pc_type": ("PC", PETSc.PC), "snes_typ
 _checked: dict[tuple[str, str], bool] = {}
 
 
+def _exists(kind: str, value: str, probe) -> bool:
+    """``probe(value)``, asked once per (kind, value) in a process: a type, package or ordering PETSc has."""
+    if (kind, value) not in _checked:
+        _checked[kind, value] = probe(value)
+    return _checked[kind, value]
+
+
 def check_types(options: Mapping[str, Any], where: str) -> None:
     """Every KSP, PC, SNES type, factor package and matrix ordering in ``options`` exists here, or one line
     naming it."""
@@ -223,14 +230,14 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
         value = option_text(value)
         for suffix, (label, kind) in _KINDS.items():
             if key.endswith(suffix) and _ends_level(key, suffix):
-                if not _checked.setdefault((suffix, value), _try_type(kind, value)):
+                if not _exists(suffix, value, lambda name: _try_type(kind, name)):
                     known = _known_types(kind)
                     if value in known:  # petsc4py names it, this PETSc was built without it
                         raise ConfigError(f"{where}: {label} type '{value}' in {key} is not available in this PETSc "
                                           f"(built without it)")
                     raise ConfigError(f"{where}: unknown {label} type '{value}' in {key}{_suggestion(value, known)}")
         if key.endswith("pc_factor_mat_solver_type"):
-            if not _checked.setdefault(("package", value), _factor_package_available(value)):
+            if not _exists("package", value, _factor_package_available):
                 raise ConfigError(f"{where}: factor package '{value}' in {key} is not available in this PETSc "
                                   f"(e.g. mumps, petsc, superlu, umfpack)")
         for suffix, refused in ABORTING.items():
@@ -238,7 +245,7 @@ def check_types(options: Mapping[str, Any], where: str) -> None:
             if key.endswith(suffix) and _ends_level(key, suffix) and read in refused:
                 raise ConfigError(f"{where}: {key} = '{value}' {MC64} {refused[read]}")
         if key.endswith(ORDERING) and _ends_level(key, ORDERING):
-            if not _checked.setdefault(("ordering", value), matrix_ordering_registered(value)):
+            if not _exists("ordering", value, matrix_ordering_registered):
                 known = [o for o in _known_orderings() if o not in ABORTING[ORDERING]]
                 raise ConfigError(f"{where}: matrix ordering '{value}' in {key} is not one this PETSc has"
                                   f"{_suggestion(value, known) or ' (it has ' + ', '.join(known) + ')'}")
