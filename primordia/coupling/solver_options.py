@@ -308,12 +308,19 @@ def read_options(petsc_object, where: str, options: Mapping[str, Any] | None = N
     try:
         petsc_object.setFromOptions()
     except PETSc.Error as error:
-        lines = [line.partition("] ")[2] or line for line in str(error).splitlines()[1:]]
-        reason = lines[-1] if lines else str(error)
+        reason = petsc_reason(error)
         quoted = [f"{key} = {option_text(value)!r}" for key, value in (options or {}).items()
                   if option_text(value) and re.search(rf"(?<!\S){re.escape(option_text(value))}(?!\S)", reason)]
         named = f" (in {quoted[0]})" if len(quoted) == 1 else ""
         raise ConfigError(f"{where}: PETSc refused the options: {reason}{named}") from None
+
+
+def petsc_reason(error: PETSc.Error) -> str:
+    """PETSc's own last word on ``error`` (the message under its traceback, e.g. "Unknown or unregistered type:
+    metisnd"), or its error code when it left none."""
+    lines = [line.partition("] ")[2] or line for line in str(error).splitlines()[1:]]
+    lines = [line.strip() for line in lines if line.strip()]
+    return lines[-1] if lines else str(error)
 
 
 def _ends_level(key: str, suffix: str) -> bool:

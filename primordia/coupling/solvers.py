@@ -44,7 +44,7 @@ from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
     FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
-    read_options)
+    petsc_reason, read_options)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -545,8 +545,8 @@ class LinearSolver(_Solver):
         if failed and self._switch_to_mumps(self.ksp):
             self.ksp.solve(b, solution)
         elif raised is not None:
-            raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}); "
-                              f"try other options under -{self.sub.prefix}") from None
+            raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}: "
+                              f"{petsc_reason(raised)}); try other options under -{self.sub.prefix}") from None
 
 
 #: Why rebuild_preconditioner_after cannot apply to a direct solve (the start of the one-line refusal).
@@ -614,7 +614,7 @@ class _OnOneRank:
         self._x = self._b.duplicate()
         self._scatter = PETSc.Scatter().create(b, self._rows, self._b, None)
         self._local = None
-        self._outcome = (1, PETSc.KSP.ConvergedReason.CONVERGED_ITS, 0)  # iterations, reason, PETSc error
+        self._outcome = (1, PETSc.KSP.ConvergedReason.CONVERGED_ITS, None)  # iterations, reason, PETSc error
         self._comm = comm
 
     def set_matrix(self, A) -> None:
@@ -639,9 +639,9 @@ class _OnOneRank:
         try:
             self.ksp.solve(self._b, self._x)
         except PETSc.Error as error:  # told on every rank by result()
-            self._outcome = (0, 0, error.ierr)
+            self._outcome = (0, 0, f"{error.ierr}: {petsc_reason(error)}")
         else:
-            self._outcome = (max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason(), 0)
+            self._outcome = (max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason(), None)
 
     def return_to(self, x) -> None:
         self._scatter.begin(self._x, x, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.REVERSE)
@@ -853,8 +853,8 @@ class NewtonSolver(_Solver):
         try:
             self.snes.solve(None, self._x)
         except PETSc.Error as error:
-            raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}); "
-                              f"try other options under -{self.sub.prefix}") from None
+            raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}: "
+                              f"{petsc_reason(error)}); try other options under -{self.sub.prefix}") from None
         finally:
             add_since(self.linear_solve_seconds, start, minus=self._assembly_seconds)
 

@@ -180,6 +180,9 @@ BAD_SOLVER_SETTINGS = [
       "(it has ", "nd, "]),
     (['solver.chemotaxis_m.sub_pc_factor_mat_ordering_type="rmc"'],
      ["matrix ordering 'rmc' in sub_pc_factor_mat_ordering_type", "did you mean rcm"]),
+    # a preconditioner PETSc takes but cannot set up: the failure carries PETSc's reason, not its code alone
+    (['solver.chemotaxis_m.pc_type="composite"'],
+     ["chemotaxis.m: the linear solve failed (PETSc error 73: No composite preconditioners supplied"]),
     # accepted by PETSc, answered by SIGABRT in Debian's SuperLU_DIST (no summary, the test process gone)
     (['solver.chemotaxis_f.pc_factor_mat_ordering_type="wbm"'],
      ["solver.chemotaxis_f: pc_factor_mat_ordering_type = 'wbm' calls SuperLU_DIST's MC64", "aborts the whole process",
