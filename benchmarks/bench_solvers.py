@@ -59,6 +59,10 @@ from machine import describe  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
+#: The cell density by BoomerAMG with HMIS coarsening and extended+i interpolation (hypre's advice for 2D and 3D).
+HMIS = ["solver.chemotaxis_m.pc_type=\"hypre\"", "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
+        "solver.chemotaxis_m.pc_hypre_boomeramg_interp_type=\"ext+i\""]
+
 #: What each system runs: the example, how a size maps to mesh cells, the subproblem studied, preconditioners.
 SYSTEMS = {
     "growth2d": {
@@ -98,15 +102,9 @@ SYSTEMS = {
             "bjacobi_ilu": ["solver.chemotaxis_m.pc_type=\"bjacobi\""],
             "gamg": ["solver.chemotaxis_m.pc_type=\"gamg\""],
             "hypre": ["solver.chemotaxis_m.pc_type=\"hypre\""],
-            # BoomerAMG with HMIS coarsening and extended+i interpolation (hypre's advice for 2D and 3D)
-            "hypre_hmis": ["solver.chemotaxis_m.pc_type=\"hypre\"",
-                           "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
-                           "solver.chemotaxis_m.pc_hypre_boomeramg_interp_type=\"ext+i\""],
+            "hypre_hmis": HMIS,
             # the same built afresh at every solve (the others keep theirs while it works: "fresh+1")
-            "hypre_hmis_fresh": ["solver.chemotaxis_m.pc_type=\"hypre\"",
-                                 "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
-                                 "solver.chemotaxis_m.pc_hypre_boomeramg_interp_type=\"ext+i\"",
-                                 "solver.chemotaxis_m.rebuild_preconditioner_after=0"],
+            "hypre_hmis_fresh": [*HMIS, "solver.chemotaxis_m.rebuild_preconditioner_after=0"],
         },
     },
     "chemotaxis": {

@@ -264,7 +264,7 @@ ABORTING = {
 
 def _known_orderings() -> list[str]:
     names = [getattr(PETSc.Mat.OrderingType, n) for n in dir(PETSc.Mat.OrderingType) if n.isupper()]
-    return sorted(n for n in names if isinstance(n, str) and matrix_ordering_registered(n))
+    return sorted(n for n in names if isinstance(n, str) and _exists("ordering", n, matrix_ordering_registered))
 
 
 #: Numeric options checked before PETSc reads them, by the option's name without its level: the bounds of
