@@ -21,8 +21,10 @@ not PETSc's, keeps a preconditioner built for an earlier matrix until a Krylov s
 needs more than N iterations: a Newton solve's over Newton steps and time steps (see
 :class:`~primordia.coupling.solvers.NewtonSolver`), a linear subproblem's over time
 steps when its matrix changes at every step (see
-:class:`~primordia.coupling.solvers.LinearSolver`), where ``"fresh+K"`` also says: more
-than K iterations above the first solve after the last build.
+:class:`~primordia.coupling.solvers.LinearSolver`).  ``"fresh+K"`` says instead: more
+than K iterations above what the preconditioner needed fresh (a linear subproblem: its
+first solve after the build; a Newton solve: the most any Newton step needed, from the
+build to the end of that Newton solve).
 
 Who wins, from weakest to strongest: the solver layer's defaults, the physics
 module's (``Subproblem.petsc_options``), the config's table, options given
@@ -65,8 +67,8 @@ SPLITS = "splits"
 #: Not a PETSc option: a solve keeps its preconditioner (a factorisation, an AMG hierarchy) until a Krylov
 #: solve takes more than this many iterations, then builds it anew from the current matrix (0: whenever the
 #: matrix changed, PETSc's default).  A Newton solve keeps it over Newton steps and time steps (see
-#: NewtonSolver), a linear subproblem whose matrix changes at every step over time steps, where the value
-#: may also be "fresh+K": K iterations more than the first solve after the last build (see LinearSolver).
+#: NewtonSolver), a linear subproblem whose matrix changes at every step over time steps (see LinearSolver).
+#: The value may also be "fresh+K": K iterations more than the preconditioner needed fresh.
 REBUILD = "rebuild_preconditioner_after"
 #: How the relative form of REBUILD starts: "fresh+K", the iterations of a fresh preconditioner plus K.
 FRESH = "fresh"

@@ -553,6 +553,11 @@ class LinearSolver(_Solver):
 NEEDS_KRYLOV = 'needs a Krylov method (ksp_type "gmres", ...): with ksp_type = "preonly"'
 
 
+def relative_margin(after: str) -> int:
+    """K of a relative ``rebuild_preconditioner_after = "fresh+K"`` (as solver_options normalises it)."""
+    return int(after[len(FRESH) + 1:])
+
+
 class KeptPreconditioner:
     """When a linear subproblem builds its preconditioner again (``rebuild_preconditioner_after``).
 
@@ -567,7 +572,7 @@ class KeptPreconditioner:
 
     def __init__(self, after: int | str):
         relative = isinstance(after, str)  # "fresh+K", as solver_options normalises it
-        self._above = int(after[len(FRESH) + 1:]) if relative else None
+        self._above = relative_margin(after) if relative else None
         self._limit = None if relative else int(after)
         self._last = None  # iterations of the last solve; None: build at the next
         self._fresh = None  # iterations of the first solve after the last build; None until it is done
@@ -722,7 +727,15 @@ class NewtonSolver(_Solver):
     current tangent, but the preconditioning matrix (a copy of an earlier tangent) is
     only refreshed, and its factorisation or AMG hierarchy built again, after a Krylov
     solve took more than N iterations, or when a Newton solve failed in its linear
-    solve (then the solve is repeated once with a fresh one).  PETSc's own
+    solve (then the solve is repeated once with a fresh one).  ``"fresh+K"``: after a
+    Krylov solve took more than K iterations above the most any Newton step took with
+    the fresh preconditioner, from its build to the end of that Newton solve (the first
+    Newton step of a time step needs far fewer than the later ones: 5 against about 30
+    on coarse example 2a, so one solve alone is no measure).  A fresh AMG hierarchy's
+    count grows slowly with the mesh (the growth system's Schur fieldsplit in 3D: 18.3,
+    20.5, 21.3 per Newton step at 20, 30, 40 boxes a side), so a fixed bound leaves a
+    kept one less and less room and at some size rebuilds it at every Newton step,
+    where the relative bound keeps the same margin at every size.  PETSc's own
     ``snes_lag_preconditioner`` rebuilds at fixed intervals instead, whether the old
     preconditioner still works or not.  PETSc sets up a preconditioner again only when
     its matrix changed, which is what keeps the old one.
@@ -752,10 +765,11 @@ class NewtonSolver(_Solver):
             if REBUILD in self._user_keys:
                 raise ConfigError(f"{self.where}.{REBUILD} {NEEDS_KRYLOV} a kept preconditioner would freeze the tangent")
             self._rebuild_after = None
-        if isinstance(self._rebuild_after, str):
-            raise ConfigError(f"{self.where}.{REBUILD} of a Newton solve is a number of Krylov iterations, got "
-                              f"{self._rebuild_after!r}: \"fresh+K\" is for linear subproblems")
         self._kept = None  # the preconditioning matrix kept while it works (rebuild_preconditioner_after)
+        #: with "fresh+K": the most Krylov iterations a Newton step took with the kept matrix fresh (from its
+        #: build to the end of that Newton solve, while ``_measuring_fresh``); the bound is that plus K
+        self._fresh_iterations = 0
+        self._measuring_fresh = False
         self._rebuild = False  # refresh it at the next tangent (a Newton solve failed in its linear solve)
         self.preconditioner_builds = 0  # refreshes of the kept preconditioning matrix
         self.ksp = self.snes.getKSP()
@@ -786,7 +800,7 @@ class NewtonSolver(_Solver):
         matrix_free = J.getType() == PETSc.Mat.Type.MFFD
         if matrix_free:
             J.assemble()  # its new base point x
-        refresh = self._kept is not None and (self._rebuild or self.ksp.getIterationNumber() > self._rebuild_after)
+        refresh = self._kept is not None and (self._rebuild or self._kept_too_old())
         if self._kept is None or refresh or not matrix_free:
             tangent, _ = self._assemble_jacobian()  # into the matrices handed to SNES (same objects)
             if self._kept is None:
@@ -795,6 +809,29 @@ class NewtonSolver(_Solver):
                 self._refresh_kept(tangent)
         add_since(self._assembly_seconds, start)
 
+    def _kept_too_old(self) -> bool:
+        """Whether the last Krylov solve took more iterations than the kept preconditioner may
+        (``rebuild_preconditioner_after``: N, or K above what it needed fresh)."""
+        last = self.ksp.getIterationNumber()
+        if not isinstance(self._rebuild_after, str):
+            return last > self._rebuild_after
+        if self._measuring_fresh:
+            self._fresh_iterations = max(self._fresh_iterations, last)
+            return False
+        return last > self._fresh_iterations + relative_margin(self._rebuild_after)
+
+    def _built_kept(self) -> None:
+        """The kept preconditioning matrix was (re)built: the Newton solve under way measures it fresh."""
+        self.preconditioner_builds += 1
+        self._fresh_iterations, self._measuring_fresh = 0, True
+        self.ksp.setIterationNumber(0)  # a count read before this matrix's first solve is not its own
+
+    def _fresh_measured(self) -> None:
+        """The end of a Newton solve: its last Krylov solve was not read by a tangent; a fresh count is complete."""
+        if self._measuring_fresh:
+            self._fresh_iterations = max(self._fresh_iterations, self.ksp.getIterationNumber())
+            self._measuring_fresh = False
+
     def _attach_tangent(self) -> None:
         """Create the tangent (and preconditioning) matrices once, at the initial state."""
         tangent, _ = self._assemble_jacobian()
@@ -802,7 +839,7 @@ class NewtonSolver(_Solver):
         if self._rebuild_after is not None:  # a matrix of its own, which keeps its values while the tangent moves on
             self._kept = preconditioner.duplicate(copy=True) if preconditioner is tangent else preconditioner
             preconditioner = self._kept
-            self.preconditioner_builds += 1
+            self._built_kept()
         self.snes.setJacobian(_weakly(self._tangent), tangent, preconditioner)
         self._tangent_matrices = (tangent, preconditioner)
 
@@ -812,7 +849,7 @@ class NewtonSolver(_Solver):
         if preconditioner is tangent:
             tangent.copy(self._kept, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self._rebuild = False
-        self.preconditioner_builds += 1
+        self._built_kept()
 
     # -- one solve ---------------------------------------------------------------------------
     def solve(self) -> SolveStats:
@@ -852,6 +889,7 @@ class NewtonSolver(_Solver):
         self._assembly_seconds, start = no_time(), clock_now()
         try:
             self.snes.solve(None, self._x)
+            self._fresh_measured()
         except PETSc.Error as error:
             raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}: "
                               f"{petsc_reason(error)}); try other options under -{self.sub.prefix}") from None

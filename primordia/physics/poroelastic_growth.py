@@ -340,7 +340,8 @@ SCHUR_FIELDSPLIT = {
     "fieldsplit_u": {"ksp_type": "preonly", "pc_type": "gamg"},
     "fieldsplit_psi_p": {"ksp_type": "preonly", "pc_type": "hypre"},
     # the AMG hierarchies are kept over Newton and time steps until GMRES needs more than 25 iterations
-    # (about 19 with fresh ones): example 4 at 20 x 20 x 2, 12 steps, 5.1 -> 4.1 s/step, 19.6 -> 19.8 its
+    # (about 19 with fresh ones): example 4 at 20 x 20 x 2, 12 steps, 5.1 -> 4.1 s/step, 19.6 -> 19.8 its.
+    # The relative "fresh+3" (NewtonSolver) was no clear gain at 20, 30, 40 boxes (README, "Solvers")
     "rebuild_preconditioner_after": 25,
 }
 

@@ -118,6 +118,51 @@ def test_a_kept_preconditioner_is_rebuilt_when_krylov_needs_more_iterations_and_
     assert np.abs(kept - fresh).max() < 1e-5 * scale and np.abs(eager - fresh).max() < 1e-5 * scale
 
 
+def test_a_relative_bound_rebuilds_the_kept_preconditioner_after_a_solve_k_above_its_fresh_ones(tmp_path):
+    """``rebuild_preconditioner_after = "fresh+K"`` on a Newton solve (the Schur fieldsplit's default): the
+    kept AMG hierarchies are built again right after, and only after, a Krylov solve that needed more than K
+    iterations above the most a Newton step needed with them fresh (from their build to the end of that
+    Newton solve); a smaller K builds more often, and the runs agree to the Newton tolerance."""
+    def run(after):
+        model = Model.from_file(EXAMPLES / "ex02a.toml", [*COARSE, "mesh.cells=[12,12]", "time.t_final=3.0",
+                                                          "output.times=[3.0]",
+                                                          'physics.poroelastic_growth.preconditioner="schur"',
+                                                          f'solver.poroelastic_growth.rebuild_preconditioner_after="{after}"'])
+        sim = Simulation(model, backend="fenicsx", out_dir=tmp_path / after).setup()
+        solver = growth_solver(sim)
+        events = []  # ("solve", Krylov iterations), ("build", None), ("newton", None) at a Newton solve's end
+        solver.ksp.setMonitor(lambda ksp, its, rnorm: events.append(("solve", its)) if its == 0
+                              else events.__setitem__(-1, ("solve", its)))
+        built, newton = type(solver)._built_kept, type(solver)._run_snes
+        solver._built_kept = lambda: events.append(("build", None)) or built(solver)
+        solver._run_snes = lambda: newton(solver) or events.append(("newton", None))
+        while sim.step_index < model.num_steps:
+            sim.step()
+        return sim.backend.local_array(sim.disc.unknown("u")).copy(), events
+
+    def rebuilds_where_due(events, margin):
+        fresh, measuring, due = 0, False, False
+        for kind, iterations in events:
+            if kind == "build":
+                assert due or not fresh, "built again though no solve went over the bound"
+                fresh, measuring, due = 0, True, False
+            elif kind == "newton":
+                measuring = False
+            elif measuring:
+                fresh = max(fresh, iterations)
+            else:
+                assert not due, "a solve over the bound was not followed by a build"
+                due = iterations > fresh + margin
+        return sum(kind == "build" for kind, _ in events)
+
+    tight, tight_events = run("fresh+0")
+    loose, loose_events = run("fresh+6")
+    tight_builds, loose_builds = rebuilds_where_due(tight_events, 0), rebuilds_where_due(loose_events, 6)
+    solves = sum(kind == "solve" for kind, _ in loose_events)
+    assert 1 <= loose_builds < tight_builds < solves / 2, (loose_builds, tight_builds, solves)
+    assert np.abs(tight - loose).max() < 1e-5 * np.abs(tight).max()
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_matrix_free_tangent_is_assembled_only_for_the_kept_preconditioner_and_gives_the_same_run(
         backend, tmp_path, monkeypatch):
