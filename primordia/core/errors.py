@@ -26,7 +26,16 @@ class PluginError(PrimordiaError):
 
 
 class SolverError(PrimordiaError):
-    """A solve failed (diverged linear or nonlinear solver, NaN in a field)."""
+    """A solve failed (diverged linear or nonlinear solver, NaN in a field).
+
+    ``depends_on_step``: whether a smaller time step may succeed where this one failed.  False for
+    a solver that cannot work at any step (PETSc refused its options at set-up: a usage error); an
+    adaptive run then stops at once instead of halving dt down to ``time.dt_min`` first.
+    """
+
+    def __init__(self, message: str, *, depends_on_step: bool = True):
+        super().__init__(message)
+        self.depends_on_step = depends_on_step
 
 
 class InterruptedRun(KeyboardInterrupt):

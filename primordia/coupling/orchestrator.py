@@ -595,6 +595,10 @@ class Simulation:
                 self._undo(saved, saved_physics)
                 raise InterruptedRun(INTERRUPTS.received) from None
             failure = self._name_fields(str(error))
+            if not error.depends_on_step:  # no smaller step can mend it: stop now, not after halving to dt_min
+                self._undo(saved, saved_physics)
+                raise SolverError(f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g}): {failure}",
+                                  depends_on_step=False) from None
         except BaseException:
             self._undo(saved, saved_physics)
             raise

@@ -317,6 +317,19 @@ def read_options(petsc_object, where: str, options: Mapping[str, Any] | None = N
         raise ConfigError(f"{where}: PETSc refused the options: {reason}{named}") from None
 
 
+#: PETSc's error classes that say a solver was set up wrongly, not that it met numbers it could not solve
+#: (petscerror.h): no support (56, 57), argument errors (60-64, 68-70, 73, 75, 80, 85, 86, 89), a missing
+#: factor package (92), an option overwritten (93), the wrong number of ranks (94), bad user input (95).  A
+#: smaller time step cannot mend them.  A zero pivot (71, 81), a floating-point error (72), a failed
+#: convergence (82, 91), memory (55) and an external library's failure (76, 77) may depend on the step.
+USAGE_ERRORS = frozenset({56, 57, 60, 61, 62, 63, 64, 68, 69, 70, 73, 75, 80, 85, 86, 89, 92, 93, 94, 95})
+
+
+def depends_on_step(error_code: int) -> bool:
+    """Whether a PETSc error (its code) may go away with a smaller time step: not for a usage error."""
+    return int(error_code) not in USAGE_ERRORS
+
+
 def petsc_reason(error: PETSc.Error) -> str:
     """PETSc's own last word on ``error`` (the message under its traceback, e.g. "Unknown or unregistered type:
     metisnd"), or its error code when it left none."""

@@ -44,7 +44,7 @@ from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
     FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
-    petsc_reason, read_options)
+    depends_on_step, petsc_reason, read_options)
 
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
@@ -546,7 +546,8 @@ class LinearSolver(_Solver):
             self.ksp.solve(b, solution)
         elif raised is not None:
             raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}: "
-                              f"{petsc_reason(raised)}); try other options under -{self.sub.prefix}") from None
+                              f"{petsc_reason(raised)}); try other options under -{self.sub.prefix}",
+                              depends_on_step=depends_on_step(raised.ierr)) from None
 
 
 #: Why rebuild_preconditioner_after cannot apply to a direct solve (the start of the one-line refusal).
@@ -644,7 +645,7 @@ class _OnOneRank:
         try:
             self.ksp.solve(self._b, self._x)
         except PETSc.Error as error:  # told on every rank by result()
-            self._outcome = (0, 0, f"{error.ierr}: {petsc_reason(error)}")
+            self._outcome = (0, 0, (error.ierr, petsc_reason(error)))
         else:
             self._outcome = (max(self.ksp.getIterationNumber(), 1), self.ksp.getConvergedReason(), None)
 
@@ -658,8 +659,10 @@ class _OnOneRank:
         """(Krylov iterations, converged reason) of the owner's solve, on every rank."""
         iterations, reason, error = self._comm.bcast(self._outcome, root=self.owner)
         if error:
-            raise SolverError(f"{self.name}: the linear solve on rank {self.owner} failed (PETSc error {error}); "
-                              f"try other options under -{self.ksp.getOptionsPrefix()}")
+            code, reason = error
+            raise SolverError(f"{self.name}: the linear solve on rank {self.owner} failed (PETSc error {code}: "
+                              f"{reason}); try other options under -{self.ksp.getOptionsPrefix()}",
+                              depends_on_step=depends_on_step(code))
         return int(iterations), int(reason)
 
 
@@ -892,7 +895,8 @@ class NewtonSolver(_Solver):
             self._fresh_measured()
         except PETSc.Error as error:
             raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}: "
-                              f"{petsc_reason(error)}); try other options under -{self.sub.prefix}") from None
+                              f"{petsc_reason(error)}); try other options under -{self.sub.prefix}",
+                              depends_on_step=depends_on_step(error.ierr)) from None
         finally:
             add_since(self.linear_solve_seconds, start, minus=self._assembly_seconds)
 

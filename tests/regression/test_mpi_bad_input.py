@@ -23,7 +23,7 @@ def _assert_one_line_on_every_rank(result, *fragments):
 
 
 @pytest.mark.parametrize("case", ["out-is-a-file", "boundary-formula", "binary-config", "failed-solve",
-                                  "unused-option-on-one-rank"])
+                                  "unused-option-on-one-rank", "usage-error-on-one-rank"])
 def test_bad_input_under_two_ranks(case, small_config, tmp_path):
     (tmp_path / "a_file").write_text("not a directory")
     (tmp_path / "binary.toml").write_bytes(bytes(range(256)))
@@ -39,8 +39,16 @@ def test_bad_input_under_two_ranks(case, small_config, tmp_path):
         # its verdict is every rank's
         "unused-option-on-one-rank": ([small_config(), "--set", "solver.chemotaxis_b.pc_factor_levels=2"],
                                       ["solver.chemotaxis_b", "PETSc did not use option 'pc_factor_levels'"]),
+        # f's owner (rank 0) alone meets PETSc's usage error; every rank stops at the first try, not after the
+        # dt halvings (which would say "retried down to")
+        "usage-error-on-one-rank": ([small_config(), "--set", 'solver.chemotaxis_f.pc_factor_mat_solver_type="mumps"',
+                                     "--set", "solver.chemotaxis_f.mat_mumps_icntl_7=99"],
+                                    ["step 1 (t = 0 -> 0.2): chemotaxis.f: the linear solve on rank 0 failed",
+                                     "PETSc error 63", "Valid values are"]),
     }[case]
     if "--out" not in arguments:
         arguments += ["--out", tmp_path / "out"]
     result = rc.run("run", *arguments, "--no-progress", ranks=2, timeout=180)
     _assert_one_line_on_every_rank(result, *fragments)
+    if case == "usage-error-on-one-rank":
+        assert "retried" not in rc.primordia_lines(result.stderr)[0]

@@ -10,6 +10,7 @@ are hit exactly.
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -128,3 +129,23 @@ def test_without_adaptive_steps_a_failure_stops_the_run_at_once(primordia_cli, s
                            "--set", "time.adaptive=false", "--set", "solver.chemotaxis_m.ksp_max_it=1")
     line = assert_one_line_error(result, "step 1 (t = 0 -> 0.2)", "chemotaxis.m", "linear solver diverged")
     assert "retried" not in line
+
+
+def test_a_solver_petsc_cannot_set_up_stops_an_adaptive_run_at_once(primordia_cli, small_config, tmp_path):
+    """A usage error (PETSc error 73: composite without its sub-preconditioners) cannot depend on dt: the run
+    stops at the first try with PETSc's reason, where it used to halve dt down to dt_min (11 set-ups) first."""
+    out = tmp_path / "out"
+    result = primordia_cli("run", small_config(), "--out", out, "--no-progress",
+                           "--set", 'solver.chemotaxis_m.pc_type="composite"')
+    line = assert_one_line_error(result, "step 1 (t = 0 -> 0.2)", "chemotaxis.m", "PETSc error 73",
+                                 "No composite preconditioners")
+    assert "retried" not in line
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["rejected_steps"] == 0 and summary["status"].startswith("stopped at t = 0")
+
+
+def test_petsc_usage_errors_do_not_depend_on_the_step_and_numerical_failures_may():
+    from primordia.coupling.solver_options import depends_on_step
+
+    assert not any(depends_on_step(code) for code in (56, 62, 63, 73, 75, 86, 92))  # support, arguments, factor
+    assert all(depends_on_step(code) for code in (55, 71, 72, 76, 77, 81, 82, 91))  # memory, pivots, FP, libs
