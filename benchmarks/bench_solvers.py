@@ -38,7 +38,7 @@ timed with, ``--clock``), and their ratio, then each subproblem's share; with ``
 
     .venv/bin/python benchmarks/bench_solvers.py --systems growth2d --sizes 43 86 171 --steps 3
     .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 40 --steps 2
-    .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 30 --preconditioners schur --repeats 3
+    .venv/bin/python benchmarks/bench_solvers.py --systems growth3d --sizes 10 20 30 --preconditioners schur --steps 8 --repeats 2
     .venv/bin/python benchmarks/bench_solvers.py --systems biot cells --sizes 43 86 171 342
     .venv/bin/python benchmarks/bench_solvers.py --share ex01a ex01b --sizes 171 --backends fenicsx skfem --steps 100 --clock wall --repeats 3
 """

@@ -259,6 +259,9 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             stiffness.getSizes(), (self._indptr.astype(PETSc.IntType), self._columns.astype(PETSc.IntType), self._values),
             comm=comm)
         self._A.assemble()
+        # every later change (the update's rows, shifted()'s diagonal) is to this rank's own rows: an assembly
+        # then skips PETSc's reduction over the ranks for entries to send (two a step of example 1a)
+        self._A.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, True)
         return True
 
     def _gather(self, name: str) -> np.ndarray:

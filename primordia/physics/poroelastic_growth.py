@@ -339,10 +339,12 @@ SCHUR_FIELDSPLIT = {
     "pc_fieldsplit_schur_precondition": "a11",
     "fieldsplit_u": {"ksp_type": "preonly", "pc_type": "gamg"},
     "fieldsplit_psi_p": {"ksp_type": "preonly", "pc_type": "hypre"},
-    # the AMG hierarchies are kept over Newton and time steps until GMRES needs more than 25 iterations
-    # (about 19 with fresh ones): example 4 at 20 x 20 x 2, 12 steps, 5.1 -> 4.1 s/step, 19.6 -> 19.8 its.
-    # The relative "fresh+3" (NewtonSolver) was no clear gain at 20, 30, 40 boxes (README, "Solvers")
-    "rebuild_preconditioner_after": 25,
+    # the AMG hierarchies are kept over Newton and time steps until GMRES needs more than 3 iterations above
+    # the most a Newton step needed with them fresh (NewtonSolver).  Kept at all: example 4 at 20 x 20 x 2,
+    # 12 steps, 5.1 -> 4.1 s/step.  Relative, not the fixed 25 it was: fresh hierarchies need more on finer
+    # meshes (18.3, 20.5, 21.3 a Newton step at 20, 30, 40 boxes a side), and over 8 steps (two alternating
+    # repeats) 3,029-3,104 against 3,125-3,495 ms/step at 20 boxes, 11,266-11,334 against 11,671-11,912 at 30
+    "rebuild_preconditioner_after": "fresh+3",
 }
 
 #: GMRES preconditioned by a MUMPS LU factorisation kept over Newton iterations and time steps while it
