@@ -559,7 +559,7 @@ class Simulation:
             self._notify("rejection", event)
             self._create_solvers()  # nothing of the failed try (e.g. a lagged preconditioner) may carry over
             if not self.controller.rejected():
-                where = f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g})"
+                where = self._step_label(t_next)
                 if not self.model.adaptive:
                     raise SolverError(f"{where}: {failure}")
                 raise SolverError(f"{where}: {failure}; retried down to dt = {dt:g}, and dt may not fall below "
@@ -567,6 +567,10 @@ class Simulation:
         self.step_index += 1
         self.time = t_end
         self._collect_petsc_garbage()
+
+    def _step_label(self, t_next: float) -> str:
+        """The step under way and the try that failed, for a failure's line: "step N (t = a -> b)"."""
+        return f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g})"
 
     def _collect_petsc_garbage(self) -> None:
         """Destroy the PETSc objects dropped during the step (collective: every rank steps).
@@ -597,8 +601,7 @@ class Simulation:
             failure = self._name_fields(str(error))
             if not error.depends_on_step:  # no smaller step can mend it: stop now, not after halving to dt_min
                 self._undo(saved, saved_physics)
-                raise SolverError(f"step {self.step_index + 1} (t = {self.time:g} -> {t_next:g}): {failure}",
-                                  depends_on_step=False) from None
+                raise SolverError(f"{self._step_label(t_next)}: {failure}", depends_on_step=False) from None
         except BaseException:
             self._undo(saved, saved_physics)
             raise

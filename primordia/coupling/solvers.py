@@ -46,6 +46,13 @@ from primordia.coupling.solver_options import (
     FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
     depends_on_step, petsc_reason, read_options)
 
+def petsc_failure(solve: str, code: int, reason: str, prefix: str) -> SolverError:
+    """One line for a solve PETSc stopped with error ``code``: which solve, PETSc's reason, where the options
+    are; a usage error (:func:`~primordia.coupling.solver_options.depends_on_step`) is not retried smaller."""
+    return SolverError(f"{solve} failed (PETSc error {code}: {reason}); try other options under -{prefix}",
+                       depends_on_step=depends_on_step(code))
+
+
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
     "snes_type": "newtonls",
@@ -545,53 +552,54 @@ class LinearSolver(_Solver):
         if failed and self._switch_to_mumps(self.ksp):
             self.ksp.solve(b, solution)
         elif raised is not None:
-            raise SolverError(f"{self.sub.name}: the linear solve failed (PETSc error {raised.ierr}: "
-                              f"{petsc_reason(raised)}); try other options under -{self.sub.prefix}",
-                              depends_on_step=depends_on_step(raised.ierr)) from None
+            raise petsc_failure(f"{self.sub.name}: the linear solve", raised.ierr, petsc_reason(raised),
+                                self.sub.prefix) from None
 
 
 #: Why rebuild_preconditioner_after cannot apply to a direct solve (the start of the one-line refusal).
 NEEDS_KRYLOV = 'needs a Krylov method (ksp_type "gmres", ...): with ksp_type = "preonly"'
 
 
-def relative_margin(after: str) -> int:
-    """K of a relative ``rebuild_preconditioner_after = "fresh+K"`` (as solver_options normalises it)."""
-    return int(after[len(FRESH) + 1:])
-
-
 class KeptPreconditioner:
-    """When a linear subproblem builds its preconditioner again (``rebuild_preconditioner_after``).
+    """When a solve builds its kept preconditioner again (``rebuild_preconditioner_after``).
 
     ``N``: once a solve needed more than N Krylov iterations.  ``"fresh+K"``: once a solve
-    needed more than K iterations above the first solve after the last build, which is
-    what a fresh preconditioner gives; that count grows with the mesh and the ranks (the
-    cell density's block Jacobi/ILU: 4, 5, 7, 11 iterations at 43, 86, 171, 342 cells per
-    side; additive Schwarz on 2 ranks 9 at 171), so one relative default serves every size.
-    The count of solves is deterministic, unlike a rule on measured times, so a run gives
-    the same iterates each time.
+    needed more than K iterations above what a fresh preconditioner needed; that count grows
+    with the mesh and the ranks (the cell density's block Jacobi/ILU: 4, 5, 7, 11 iterations
+    at 43, 86, 171, 342 cells per side; additive Schwarz on 2 ranks 9 at 171), so one
+    relative default serves every size.  "Fresh" is the solves from the build until one
+    that settles the count: a linear subproblem's first solve, a Newton solve's last
+    (:class:`NewtonSolver`: the most any of its Newton steps needed).  The count of solves
+    is deterministic, unlike a rule on measured times, so a run gives the same iterates
+    each time.
     """
 
     def __init__(self, after: int | str):
         relative = isinstance(after, str)  # "fresh+K", as solver_options normalises it
-        self._above = relative_margin(after) if relative else None
+        self._above = int(after[len(FRESH) + 1:]) if relative else None
         self._limit = None if relative else int(after)
         self._last = None  # iterations of the last solve; None: build at the next
-        self._fresh = None  # iterations of the first solve after the last build; None until it is done
+        self._fresh = None  # the most iterations a solve needed since the last build
+        self._settled = True  # whether ``_fresh`` is complete
 
     def keeps(self) -> bool:
-        """Whether the next solve keeps the preconditioner (never the first, nor after :meth:`discard`)."""
+        """Whether the next solve keeps the preconditioner (never the first, nor after :meth:`discard`;
+        always while a relative bound is still measuring the fresh one)."""
         if self._last is None:
             return False
-        limit = self._limit if self._above is None else self._fresh + self._above
-        return self._last <= limit
+        if self._above is None:
+            return self._last <= self._limit
+        return not self._settled or self._last <= self._fresh + self._above
 
     def built(self) -> None:
-        self._fresh = None
+        self._fresh, self._settled = None, False
 
-    def solved(self, iterations: int) -> None:
+    def solved(self, iterations: int, *, settles: bool = True) -> None:
+        """A solve took ``iterations``; ``settles``: it ends the fresh preconditioner's count."""
         self._last = iterations
-        if self._fresh is None:
-            self._fresh = iterations
+        if not self._settled:
+            self._fresh = max(self._fresh or 0, iterations)
+            self._settled = settles
 
     def discard(self) -> None:
         """Build the preconditioner at the next solve (dt changed, a solve failed with the kept one)."""
@@ -659,10 +667,7 @@ class _OnOneRank:
         """(Krylov iterations, converged reason) of the owner's solve, on every rank."""
         iterations, reason, error = self._comm.bcast(self._outcome, root=self.owner)
         if error:
-            code, reason = error
-            raise SolverError(f"{self.name}: the linear solve on rank {self.owner} failed (PETSc error {code}: "
-                              f"{reason}); try other options under -{self.ksp.getOptionsPrefix()}",
-                              depends_on_step=depends_on_step(code))
+            raise petsc_failure(f"{self.name}: the linear solve on rank {self.owner}", *error, self.ksp.getOptionsPrefix())
         return int(iterations), int(reason)
 
 
@@ -769,10 +774,7 @@ class NewtonSolver(_Solver):
                 raise ConfigError(f"{self.where}.{REBUILD} {NEEDS_KRYLOV} a kept preconditioner would freeze the tangent")
             self._rebuild_after = None
         self._kept = None  # the preconditioning matrix kept while it works (rebuild_preconditioner_after)
-        #: with "fresh+K": the most Krylov iterations a Newton step took with the kept matrix fresh (from its
-        #: build to the end of that Newton solve, while ``_measuring_fresh``); the bound is that plus K
-        self._fresh_iterations = 0
-        self._measuring_fresh = False
+        self._rebuild_rule = KeptPreconditioner(self._rebuild_after) if self._rebuild_after is not None else None
         self._rebuild = False  # refresh it at the next tangent (a Newton solve failed in its linear solve)
         self.preconditioner_builds = 0  # refreshes of the kept preconditioning matrix
         self.ksp = self.snes.getKSP()
@@ -813,33 +815,25 @@ class NewtonSolver(_Solver):
         add_since(self._assembly_seconds, start)
 
     def _kept_too_old(self) -> bool:
-        """Whether the last Krylov solve took more iterations than the kept preconditioner may
-        (``rebuild_preconditioner_after``: N, or K above what it needed fresh)."""
+        """Whether the last Krylov solve, within a Newton solve, took more iterations than the kept
+        preconditioner may (:class:`KeptPreconditioner`; none since a build: no)."""
         last = self.ksp.getIterationNumber()
-        if not isinstance(self._rebuild_after, str):
-            return last > self._rebuild_after
-        if self._measuring_fresh:
-            self._fresh_iterations = max(self._fresh_iterations, last)
+        if last == 0:
             return False
-        return last > self._fresh_iterations + relative_margin(self._rebuild_after)
+        self._rebuild_rule.solved(last, settles=False)  # the Newton solve goes on: a fresh count may grow
+        return not self._rebuild_rule.keeps()
 
     def _built_kept(self) -> None:
         """The kept preconditioning matrix was (re)built: the Newton solve under way measures it fresh."""
         self.preconditioner_builds += 1
-        self._fresh_iterations, self._measuring_fresh = 0, True
+        self._rebuild_rule.built()
         self.ksp.setIterationNumber(0)  # a count read before this matrix's first solve is not its own
-
-    def _fresh_measured(self) -> None:
-        """The end of a Newton solve: its last Krylov solve was not read by a tangent; a fresh count is complete."""
-        if self._measuring_fresh:
-            self._fresh_iterations = max(self._fresh_iterations, self.ksp.getIterationNumber())
-            self._measuring_fresh = False
 
     def _attach_tangent(self) -> None:
         """Create the tangent (and preconditioning) matrices once, at the initial state."""
         tangent, _ = self._assemble_jacobian()
         preconditioner = self._assemble_preconditioner(tangent)
-        if self._rebuild_after is not None:  # a matrix of its own, which keeps its values while the tangent moves on
+        if self._rebuild_rule is not None:  # a matrix of its own, which keeps its values while the tangent moves on
             self._kept = preconditioner.duplicate(copy=True) if preconditioner is tangent else preconditioner
             preconditioner = self._kept
             self._built_kept()
@@ -892,11 +886,11 @@ class NewtonSolver(_Solver):
         self._assembly_seconds, start = no_time(), clock_now()
         try:
             self.snes.solve(None, self._x)
-            self._fresh_measured()
+            if self._kept is not None and self.ksp.getIterationNumber():
+                self._rebuild_rule.solved(self.ksp.getIterationNumber())  # its last Krylov solve: no tangent read it
         except PETSc.Error as error:
-            raise SolverError(f"{self.sub.name}: the nonlinear solve failed (PETSc error {error.ierr}: "
-                              f"{petsc_reason(error)}); try other options under -{self.sub.prefix}",
-                              depends_on_step=depends_on_step(error.ierr)) from None
+            raise petsc_failure(f"{self.sub.name}: the nonlinear solve", error.ierr, petsc_reason(error),
+                                self.sub.prefix) from None
         finally:
             add_since(self.linear_solve_seconds, start, minus=self._assembly_seconds)
 

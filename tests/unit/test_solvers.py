@@ -109,3 +109,18 @@ def test_a_kept_preconditioner_is_built_again_after_a_solve_over_its_bound():
     _builds(rule, [7])
     rule.discard()  # dt changed, or a solve failed with the kept one
     assert not rule.keeps()
+
+
+def test_a_relative_bound_measures_a_fresh_preconditioner_until_a_solve_settles_the_count():
+    """A Newton solve's steps report unsettled counts (the first needs far fewer than the later ones); the bound
+    is K above the most of them, and the rule keeps the preconditioner while it is still measuring."""
+    rule = KeptPreconditioner("fresh+2")
+    rule.built()
+    for count in (5, 30):
+        rule.solved(count, settles=False)
+        assert rule.keeps()  # still fresh
+    rule.solved(28)  # the Newton solve's last step settles the count at 30
+    rule.solved(32, settles=False)
+    assert rule.keeps()
+    rule.solved(33, settles=False)
+    assert not rule.keeps()
