@@ -147,10 +147,12 @@ def _checkpointed_config(out: Path) -> dict:
 
 def _report_dry_run(model, out: Path) -> int:
     from primordia.core.outputs import directory_problem, existing_run
+    from primordia.coupling.orchestrator import Simulation
 
     problem = directory_problem(out)
     if problem is not None:
         raise ConfigError(problem)
+    Simulation(model, backend=model.backend, out_dir=out).check_choices()  # the backend and splitting scheme
     found = existing_run(out)
     if is_root_process():
         print(f"primordia: the input is valid: {model.mesh_data.num_cells} cells, {model.num_steps} steps of "

@@ -107,6 +107,14 @@ class Simulation:
         self._first_step = self.step_index
         return self
 
+    def check_choices(self) -> None:
+        """Ask the choosers for this run's backend and splitting scheme, as :meth:`setup` would, and drop
+        the answers: an unknown or unavailable backend or scheme is one ConfigError/PluginError now
+        (``primordia run --dry-run``), with nothing discretised, allocated or written."""
+        self._choose_backend()
+        self._choose_splitting()
+        self.backend = self.scheme = None
+
     def _choose_backend(self):
         from primordia.core.backend import Backend
 

@@ -140,11 +140,30 @@ class Chemotaxis(Physics):
             if self.settings[key] not in allowed:
                 raise ConfigError(f"{where}.{key} must be one of {', '.join(allowed)}, got {self.settings[key]!r}")
         number(self.settings["perturbation"], f"{where}.perturbation", at_least=0, below=1)
-        number(self.settings["seed"], f"{where}.seed", integer=True)
+        number(self.settings["seed"], f"{where}.seed", at_least=0, integer=True)
         numbers(self.settings["wavenumber"], f"{where}.wavenumber", length=(1, 2, 3))
         if self.settings["solve"] == "coupled" and self.settings["flux_scheme"] == "exponential_fitting":
             raise ConfigError(f"{where}.solve = \"coupled\" needs flux_scheme = \"galerkin\" "
                               "(the exponentially fitted flux acts on the species as separate fields)")
+
+    def check_inputs(self, mesh_data, times) -> None:
+        """Also the kinetics' initial state at the mesh's vertices at the first time: parameters it cannot be
+        evaluated with (a Hill exponent P_2 = 2000 overflows K_2^P_2) are one line naming the kinetics, not a
+        traceback at set-up (or a state of NaNs every step would be rejected for)."""
+        super().check_inputs(mesh_data, times)
+        where = f"kinetics {self.kinetics.name}"
+        try:
+            with np.errstate(all="ignore"):
+                state = self.kinetics.initial_state(times[0], NUMPY.at(tuple(mesh_data.points.T)))
+                bad = next((name for name in self.kinetics.species_names
+                            if not np.all(np.isfinite(np.asarray(state[name], dtype=float)))), None)
+        except (ArithmeticError, ValueError) as error:
+            reason = "it overflows" if isinstance(error, OverflowError) else f"{type(error).__name__}: {error}"
+            raise ConfigError(f"{where}: the initial state cannot be evaluated with these parameters ({reason}); "
+                              f"are they in the model's (dimensionless) units?") from None
+        if bad is not None:
+            raise ConfigError(f"{where}: the initial state of {bad} is not finite with these parameters; are "
+                              f"they in the model's (dimensionless) units?")
 
     @property
     def species(self) -> tuple[Species, ...]:

@@ -375,3 +375,27 @@ def test_a_blow_up_names_the_time(primordia_cli, small_config, tmp_path):
                            "--set", "time.adaptive=false")
     line = assert_one_line_error(result, "step 2 (t = 0.2 -> 0.4)")
     assert "chemotaxis.m" in line
+
+
+@pytest.mark.parametrize("arguments, fragments", [
+    (["--backend", "deal.ii"], ["unknown backend 'deal.ii'", "fenicsx", "skfem"]),
+    (["--set", 'model.backend="deal.ii"'], ["unknown backend 'deal.ii'"]),
+    (["--set", "coupling.scheme=leapfrog"], ["unknown splitting scheme 'leapfrog'", "sequential"]),
+    (["--set", "coupling.scheme=fixed_point", "--set", "coupling.tolerance=-1"], ["coupling.tolerance", "-1"]),
+    (["--set", "physics.chemotaxis.seed=-1"], ["physics.chemotaxis.seed must be an integer >= 0", "-1"]),
+    (["--set", "parameters.P_2=2000"], ["kinetics painter2018: the initial state cannot be evaluated", "overflows"]),
+    (["--set", "parameters.m0=1e300"], ["kinetics painter2018: the initial state cannot be evaluated"]),
+], ids=["unknown-backend", "unknown-backend-in-config", "unknown-scheme", "scheme-option", "negative-seed",
+        "steep-hill-switch", "absurd-density"])
+def test_a_dry_run_refuses_what_the_run_would_refuse(capsys, small_config, tmp_path, arguments, fragments):
+    """``--dry-run`` said "the input is valid ... on deal.ii" where the run stops at once, and took a
+    negative seed that numpy refuses with a traceback in the run."""
+    assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", "--out", tmp_path / "out", *arguments),
+                    *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_negative_seed_through_the_real_command(primordia_cli, small_config, tmp_path):
+    result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                           "--set", "physics.chemotaxis.seed=-1")
+    assert_one_line_error(result, "physics.chemotaxis.seed must be an integer >= 0")
