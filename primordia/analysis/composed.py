@@ -113,7 +113,19 @@ class SteadyState:
 
 
 def homogeneous_steady_state(kinetics) -> SteadyState:
-    """The state the well-mixed kinetics rests at, from its initial state (see the module docstring)."""
+    """The state the well-mixed kinetics rests at, from its initial state (see the module docstring).
+
+    Parameters its rates cannot be evaluated with (a Hill exponent P_2 = 2000 overflows K_2^P_2 in
+    Python's floats) are one ConfigError naming the kinetics, not a traceback."""
+    try:
+        return _homogeneous_steady_state(kinetics)
+    except ArithmeticError as error:
+        reason = "they overflow" if isinstance(error, OverflowError) else f"{type(error).__name__}: {error}"
+        raise ConfigError(f"kinetics {kinetics.name}: its rates cannot be evaluated at its initial state with these "
+                          f"parameters ({reason})") from None
+
+
+def _homogeneous_steady_state(kinetics) -> SteadyState:
     names = kinetics.species_names
     start = kinetics.initial_state(0.0, DUAL)
     state = np.array([float(np.asarray(start[name])) for name in names])

@@ -43,6 +43,10 @@ from primordia.physics.seed_parameters import seed_parameters
 
 #: Multiples of the critical value drawn in the seed's panels (2) and (3).
 CRITICAL_SCALES = (0.5, 0.75, 1.0, 1.25, 1.5)
+#: Peak bytes of a patterning space per (y value, wavenumber searched) of a row, and per grid cell (measured:
+#: about 4 kB and well under 1 kB; 81 x 81 at 64 wavenumbers peaks near 200 MB).
+BYTES_PER_ROW_RATE = 5_000
+BYTES_PER_CELL = 1_000
 
 #: The seed's boundary curves: variable, label, matplotlib style (Figures 3.1, 3.2 captions).
 UNCOUPLED_CURVES = (
@@ -141,6 +145,35 @@ def _attrs_of(params: Mapping) -> dict:
     return {f"parameter_{name}": float(value) for name, value in params.items()}
 
 
+def _check_affordable(x: "ParameterRange", y: "ParameterRange", nk: int) -> None:
+    """ConfigError when the grid would need more memory than this machine has available (refused before
+    anything is allocated: ``--y alpha:0:12:100000000`` had the kernel kill the process at 24 GB)."""
+    from primordia.core.meshes import _bytes_text, available_memory
+
+    needed = y.n * (int(nk) + 1) * BYTES_PER_ROW_RATE + x.n * y.n * BYTES_PER_CELL
+    available = available_memory()
+    if needed > available:
+        raise ConfigError(f"a patterning space of {x.n:,} x {y.n:,} points and {int(nk):,} wavenumbers needs about "
+                          f"{_bytes_text(needed)} of memory, more than the {_bytes_text(available)} available: "
+                          f"use fewer points")
+
+
+def _check_finite(coefficients, x: "ParameterRange", y: "ParameterRange") -> None:
+    """ConfigError naming the first grid point whose linearisation is not finite (a Hill exponent P_2 = 3000
+    overflows K_2^P_2): its NaNs stopped the eigenvalue search with an AssertionError."""
+    import dataclasses
+
+    finite = np.ones((x.n, y.n), dtype=bool)
+    for field in dataclasses.fields(coefficients):
+        value = np.asarray(getattr(coefficients, field.name))
+        if np.issubdtype(value.dtype, np.number):
+            finite &= np.broadcast_to(np.isfinite(value), finite.shape)
+    if not finite.all():
+        i, j = (int(index[0]) for index in np.nonzero(~finite))
+        raise ConfigError(f"the linearisation is not finite at {x.name} = {x.values[i]:g}, {y.name} = {y.values[j]:g} "
+                          f"(its rates overflow): narrow the parameter ranges")
+
+
 def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 96,
                      critical_parameter: str | None = None, theta_variant: str = "corrected") -> xr.Dataset:
     """The patterning space over parameters ``x`` and ``y`` (seed Figures 3.1-3.3, panel 1 and 2-3).
@@ -154,11 +187,14 @@ def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 
     theta_i for the coupled conditions ("corrected" or the seed's "seed").
     """
     x, y = as_range(x), as_range(y)
+    _check_affordable(x, y, nk if k is None else np.size(k))
     base = _checked_base(params, (x, y), coupled)
     grid = dict(base)
     grid[x.name] = x.values[:, None]
     grid[y.name] = y.values[None, :]
-    coefficients = linearise(grid)
+    with np.errstate(all="ignore"):
+        coefficients = linearise(grid)
+    _check_finite(coefficients, x, y)
     k = default_wavenumbers(coefficients, nk, coupled) if k is None else np.asarray(k, dtype=float)
 
     found = evaluate_conditions(coefficients, coupled, theta_variant)

@@ -125,6 +125,17 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     (["stability", "map", "--x", "tau:0:1:5", "--y", "m0:1:2:5", "--uncoupled"], "--uncoupled sets xi_f = 0"),
     (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--set", "parameters.tau=1"],
      "unknown parameter 'tau'"),  # example 1a has no active stress
+    # a steep Hill switch or an absurd density overflowed Python's floats: a traceback
+    (["stability", "--set", "parameters.P_2=2000"], "kinetics painter2018: its rates cannot be evaluated"),
+    (["stability", "--set", "parameters.m0=1e300"], "kinetics painter2018: its rates cannot be evaluated"),
+    (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--set",
+      "parameters.P_2=2000"], "kinetics painter2018: the initial state cannot be evaluated"),
+    # a grid that cannot fit had the kernel kill the process (24 GB at --y alpha:0:12:100000000)
+    (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:100000000"], "use fewer points"),
+    (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3", "--nk", "100000000"], "use fewer points"),
+    # NaN coefficients at some grid points stopped the eigenvalue search with an AssertionError
+    (["stability", "map", "--x", "P_2:2:3000:3", "--y", "alpha:0:1:3"],
+     "the linearisation is not finite at P_2 = 1501, alpha = 0"),
 ])
 def test_bad_input_is_one_line_config_error(argv, message):
     with pytest.raises(ConfigError) as error:
