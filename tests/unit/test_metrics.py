@@ -199,3 +199,45 @@ def test_analyse_bad_input_is_one_line(tmp_path, primordia_cli, arguments, messa
     assert result.returncode == 2
     assert result.stderr.startswith("primordia: error: ") and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def _truncate_xdmf(directory):
+    xdmf = directory / "fields.xdmf"
+    xdmf.write_text(xdmf.read_text()[:300])
+
+
+def _remove_h5(directory):
+    import shutil
+
+    for h5 in [*directory.glob("*.h5"), *directory.glob("*_h5")]:
+        shutil.rmtree(h5) if h5.is_dir() else h5.unlink()
+
+
+@pytest.mark.parametrize("damage, message", [
+    (_truncate_xdmf, "fields.xdmf (or the HDF5 files it names) cannot be read"),
+    (_remove_h5, "fields.xdmf (or the HDF5 files it names) cannot be read"),
+    (lambda directory: (directory / "config.toml").write_text("garbage[\n"), "config.toml cannot be read"),
+], ids=["truncated-xdmf", "no-h5", "broken-config"])
+def test_a_damaged_run_directory_is_one_line(tmp_path, primordia_cli, damage, message):
+    """A run directory with a truncated fields.xdmf, its HDF5 data gone or a broken config.toml gave a traceback."""
+    write_run(tmp_path, stretch=1.0)
+    damage(tmp_path)
+    result = primordia_cli("analyse", tmp_path, "--no-pictures")
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("primordia: error: ") and message in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_broken_summary_only_loses_the_run_status(tmp_path):
+    write_run(tmp_path, stretch=1.0)
+    (tmp_path / "summary.json").write_text("[1, 2")
+    assert analyse_run(tmp_path, species=["m"], pictures=False).attrs["run_status"] == "unknown"
+
+
+def test_a_run_without_its_config_predicts_nothing(tmp_path):
+    """Without config.toml the prediction came from Table 3.1's defaults: another model's wavelength."""
+    write_run(tmp_path, stretch=1.0)
+    (tmp_path / "config.toml").unlink()
+    ds = analyse_run(tmp_path, species=["m"], pictures=False)
+    assert np.isnan(float(ds["predicted_wavelength"])) and np.isnan(float(ds["predicted_wavenumber"]))
+    assert "no config.toml" in ds.attrs["linear_analysis"]

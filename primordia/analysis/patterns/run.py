@@ -150,23 +150,39 @@ def read_run(directory: str | Path) -> RunFields:
     xdmf = directory / "fields.xdmf"
     if not xdmf.is_file():
         raise ConfigError(f"{directory}: no fields.xdmf (not a run directory, or the run wrote no output time yet)")
-    reader = meshio.xdmf.TimeSeriesReader(str(xdmf))
-    points, blocks = reader.read_points_cells()
-    triangles = [block.data for block in blocks if block.type == "triangle"]
-    if not triangles:
-        raise ConfigError(f"{xdmf}: pattern metrics need a triangle mesh (2D); found {[b.type for b in blocks]}")
-    times, snapshots = [], []
-    for index in range(reader.num_steps):
-        t, fields, _ = reader.read_data(index)
-        times.append(float(t))
-        snapshots.append({name: np.asarray(values) for name, values in fields.items()})
+    try:  # a damaged run directory (a truncated fields.xdmf, fields_h5/ gone) is named, not a traceback
+        reader = meshio.xdmf.TimeSeriesReader(str(xdmf))
+        points, blocks = reader.read_points_cells()
+        triangles = [block.data for block in blocks if block.type == "triangle"]
+        if not triangles:
+            raise ConfigError(f"{xdmf}: pattern metrics need a triangle mesh (2D); found {[b.type for b in blocks]}")
+        times, snapshots = [], []
+        for index in range(reader.num_steps):
+            t, fields, _ = reader.read_data(index)
+            times.append(float(t))
+            snapshots.append({name: np.asarray(values) for name, values in fields.items()})
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, SyntaxError) as error:
+        raise ConfigError(f"{xdmf} (or the HDF5 files it names) cannot be read: {_reason(error)}") from None
     if not snapshots:
         raise ConfigError(f"{xdmf}: no output time written")
     config_path, summary_path = directory / "config.toml", directory / "summary.json"
-    config = tomllib.loads(config_path.read_text()) if config_path.is_file() else {}
-    status = json.loads(summary_path.read_text()).get("status", "unknown") if summary_path.is_file() else "unknown"
+    try:
+        config = tomllib.loads(config_path.read_text()) if config_path.is_file() else {}
+    except (OSError, ValueError) as error:
+        raise ConfigError(f"{config_path} cannot be read: {_reason(error)}") from None
+    try:
+        summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+        status = str(summary.get("status", "unknown"))
+    except (OSError, ValueError, AttributeError):
+        status = "unknown"  # only the run's status is read from it, for the report
     return RunFields(directory, np.asarray(points)[:, :2], triangles[0], tuple(times), tuple(snapshots),
                      config, status)
+
+
+def _reason(error: BaseException) -> str:
+    """The first line of an exception's message, or its type when it has none."""
+    text = (str(error).splitlines() or [""])[0].strip()
+    return text or type(error).__name__
 
 
 @dataclass(frozen=True)
@@ -263,7 +279,15 @@ def pattern_kind(ds: xr.Dataset, **where) -> np.ndarray:
 def run_metrics(directory: str | Path, species: Sequence[str] | None = None) -> xr.Dataset:
     """The pattern metrics of a run directory (nothing is written)."""
     run = read_run(directory)
-    return metrics_dataset(run, measure(run, species), predicted_mode(run.config))
+    return metrics_dataset(run, measure(run, species), _prediction(run))
+
+
+def _prediction(run: RunFields) -> PredictedMode:
+    """The linear analysis of the run's own configuration; none without its config.toml (Table 3.1's
+    defaults would predict another model's wavelength: 4.49 where example 1a's is 2.78)."""
+    if not (run.directory / "config.toml").is_file():
+        return PredictedMode(np.nan, np.nan, np.nan, "no linear analysis: the run directory has no config.toml")
+    return predicted_mode(run.config)
 
 
 def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pictures: bool = True) -> xr.Dataset:
@@ -272,7 +296,7 @@ def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pic
 
     run = read_run(directory)
     measurements = measure(run, species)
-    predicted = predicted_mode(run.config)
+    predicted = _prediction(run)
     ds = metrics_dataset(run, measurements, predicted)
     save_dataset(ds, run.directory / METRICS_FILE)
     if pictures:
