@@ -131,6 +131,12 @@ class Sweep:
         if len(set(keys)) != len(keys):
             raise ConfigError(f"a key is varied twice: {', '.join(k for k in keys if keys.count(k) > 1)}")
         model = Model.from_file(self.config, list(self.fixed))  # missing config, bad --set: one line
+        from primordia.core.outputs import directory_problem
+
+        for directory in (self.out, self.out / "runs"):  # before any worker fails to make its run's folder
+            problem = directory_problem(directory)
+            if problem is not None:
+                raise ConfigError(problem)
         resolved = model.resolved_config()
         for key in keys:
             if key.startswith("parameters.") and key.count(".") == 1:

@@ -116,6 +116,21 @@ def test_sweep_bad_input_is_one_line(small_config, primordia_cli, tmp_path, argu
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("make, message", [
+    (lambda out: out.write_text("a file"), "is a file, not a directory"),
+    (lambda out: (out.mkdir(), (out / "runs").write_text("a file")), "runs is a file, not a directory"),
+], ids=["out-is-a-file", "runs-is-a-file"])
+def test_sweep_into_an_output_that_cannot_be_a_directory(small_config, primordia_cli, tmp_path, make, message):
+    """Refused before any worker starts: each worker's run died on mkdir with a dask traceback on stderr."""
+    out = tmp_path / "out"
+    make(out)
+    result = primordia_cli("sweep", small_config(), "--vary", "parameters.alpha=2:4:2", "--workers", "1",
+                           "--out", out, "--no-progress")
+    assert result.returncode == 2
+    assert result.stderr.startswith("primordia: error: ") and message in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
 def test_sweep_of_a_missing_config(primordia_cli, tmp_path):
     result = primordia_cli("sweep", tmp_path / "missing.toml", "--vary", "parameters.alpha=2:8:3")
     assert result.returncode == 2 and result.stderr.startswith("primordia: error: config file not found")
