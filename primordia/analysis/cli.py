@@ -77,6 +77,11 @@ def run(args) -> int:
         raise ConfigError(f"stability takes at most one CONFIG.toml, got {' '.join(inputs)}")
     config = inputs[0] if inputs else None
     stem = Path(config).stem if config else None
+    from primordia.core.outputs import directory_problem
+
+    problem = directory_problem(args.out or DEFAULT_OUT)  # before the analysis, not after printing it
+    if problem is not None:
+        raise ConfigError(problem)
     if mapping:
         return _run_map(args, config, stem)
     if args.x or args.y or args.critical or args.theta is not None or args.nk is not None:

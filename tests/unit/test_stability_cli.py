@@ -144,6 +144,17 @@ def test_bad_input_is_one_line_config_error(argv, message):
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.parametrize("argv", [["stability"], ["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3"]],
+                         ids=["dispersion", "map"])
+def test_an_output_that_is_a_file_is_refused_before_the_analysis(tmp_path, capsys, argv):
+    """The whole analysis was computed and printed before the output path was refused."""
+    target = tmp_path / "a_file"
+    target.write_text("x")
+    with pytest.raises(ConfigError, match="is a file, not a directory"):
+        run([*argv, "--out", str(target)])
+    assert capsys.readouterr().out == ""
+
+
 def test_invalid_toml_and_non_numeric_parameter(tmp_path):
     broken = tmp_path / "broken.toml"
     broken.write_text("[parameters\nm0 = 1\n")
