@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core import config as config_
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError, PrimordiaError
 from primordia.core.mesh_data import MeshData
-from primordia.core.parameters import ParameterSet
+from primordia.core.parameters import Parameter, ParameterSet
 from primordia.core.plugins import lookup, registry
 from primordia.core.validation import flag, number, numbers
 
@@ -113,10 +113,11 @@ class Model:
 
     # -- validation pieces -------------------------------------------------------------------
     def _parameter_set(self, overrides: dict) -> ParameterSet:
-        declarations = [p for cls in self.physics_classes for p in cls.parameters]
-        for piece in (self.kinetics_class, self.growth_law_class):
+        pieces = [(f"physics {cls.name}", cls) for cls in self.physics_classes]
+        for label, piece in (("kinetics", self.kinetics_class), ("growth law", self.growth_law_class)):
             if piece is not None:
-                declarations += list(piece.parameters)
+                pieces.append((f"{label} {piece.name}", piece))
+        declarations = _declarations(pieces)
         if not isinstance(overrides, dict):
             raise ConfigError("[parameters] must be a table of name = value")
         return ParameterSet(declarations, overrides)
@@ -164,17 +165,17 @@ class Model:
         self.kinetics_object = None
         if self.kinetics_class is not None:
             options = {k: v for k, v in self.kinetics_spec.items() if k != "name"}
-            self.kinetics_object = self.kinetics_class(self.parameters, **options)
+            self.kinetics_object = _construct("kinetics", self.kinetics_class, self.parameters, **options)
         self.growth_law_object = None
         if self.growth_law_class is not None:
             options = {k: v for k, v in self.growth_law_spec.items() if k != "name"}
-            self.growth_law_object = self.growth_law_class(self.parameters, **options)
-        self.physics_objects = [cls(self.parameters, kinetics=self.kinetics_object, growth_law=self.growth_law_object,
-                                    **self.physics_options[cls.name])
+            self.growth_law_object = _construct("growth law", self.growth_law_class, self.parameters, **options)
+        self.physics_objects = [_construct("physics", cls, self.parameters, kinetics=self.kinetics_object,
+                                           growth_law=self.growth_law_object, **self.physics_options[cls.name])
                                 for cls in self.physics_classes]
         for module in self.physics_objects:
             module.check_composition(self.physics_objects)
-        fields = [f.name for p in self.physics_objects for f in p.fields()]
+        fields = _unique_fields(self.physics_objects, self.kinetics_object)
         for key in self._field_options:  # output options that name fields (OutputOption.names_fields)
             if self.output[key] is None:
                 self.output[key] = fields[:1]
@@ -253,6 +254,60 @@ class Model:
         """
         return [key for key in _differences(self.resolved_config(), resolved)
                 if not any(key == a or key.startswith(a + ".") for a in allowed) and _has(resolved, key)]
+
+
+def _declarations(pieces) -> list[Parameter]:
+    """The parameters the pieces of a model declare, checked: a default that is no valid value of its parameter,
+    or one name declared with two defaults, is one line naming the pieces (a plugin's mistake, not the user's)."""
+    declarations: list[Parameter] = []
+    owners: dict[str, tuple[Parameter, str]] = {}
+    for owner, piece in pieces:
+        declared = piece.parameters
+        if not isinstance(declared, (list, tuple)) or not all(isinstance(p, Parameter) for p in declared):
+            raise PluginError(f"{owner}: its parameters must be a tuple of primordia.core.parameters.Parameter, "
+                              f"got {declared!r}")
+        for parameter in declared:
+            try:
+                parameter.check(parameter.default)
+            except ConfigError as error:
+                raise PluginError(f"{owner} declares parameter {parameter.name} with the default "
+                                  f"{parameter.default!r}, not a valid value of it: {error}") from None
+            if parameter.name in owners and owners[parameter.name][0].default != parameter.default:
+                first, first_owner = owners[parameter.name]
+                raise PluginError(f"parameter {parameter.name} is declared by {first_owner} (default {first.default:g}) "
+                                  f"and by {owner} (default {parameter.default:g}): one model has one value per "
+                                  f"name, so one of them must rename it")
+            owners.setdefault(parameter.name, (parameter, owner))
+            declarations.append(parameter)
+    return declarations
+
+
+def _construct(label: str, cls, *args, **kwargs):
+    """``cls(*args, **kwargs)`` for a piece of the model; a piece whose constructor fails other than with a
+    one-line error of primordia (a bug of its plugin) is one line naming it, not a traceback."""
+    try:
+        return cls(*args, **kwargs)
+    except PrimordiaError:
+        raise
+    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
+        reason = "; ".join(line for line in f"{type(error).__name__}: {error}".splitlines() if line.strip())
+        raise PluginError(f"{label} {getattr(cls, 'name', cls.__name__)} ({cls.__module__}.{cls.__qualname__}) "
+                          f"could not be set up: {reason}") from error
+
+
+def _unique_fields(modules, kinetics) -> list[str]:
+    """The fields of the model's modules, each owned by one module (a kinetics' species named like another
+    module's field, say ``u``, is one line naming both)."""
+    owners: dict[str, str] = {}
+    for module in modules:
+        for spec in module.fields():
+            owner = f"physics {module.name}"
+            if module.needs_kinetics and kinetics is not None and spec.name in kinetics.species_names:
+                owner += f" (a species of kinetics {kinetics.name})"
+            if spec.name in owners:
+                raise ConfigError(f"field '{spec.name}' is provided by both {owners[spec.name]} and {owner}")
+            owners[spec.name] = owner
+    return list(owners)
 
 
 def _without_none(value):

@@ -18,8 +18,10 @@ needs a model's physics, so only a run finds it broken.
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import importlib.metadata
+import inspect
 from dataclasses import dataclass, field
 
 import pluggy
@@ -94,6 +96,7 @@ class LoadReport:
     sources: dict[str, str] = field(default_factory=dict)  # plugin name -> origin
     failures: list[str] = field(default_factory=list)  # one message per broken plugin and hook
     broken: dict[str, list[str]] = field(default_factory=dict)  # plugin name -> what is wrong with it
+    skipped: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, piece name) -> why it was skipped
 
     def report(self, plugin: str, message: str) -> None:
         """Record (and warn, the first time) that ``plugin`` is broken."""
@@ -127,6 +130,7 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
             plugin = entry_point.load()
             _check_contract(plugin)
             pm.register(plugin, name=entry_point.name)
+            _check_hook_names(pm, plugin, entry_point.name)
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
             message = f"plugin '{entry_point.name}' ({origin}) failed to load and is skipped: {_reason(exc)}"
             pm.load_report.report(entry_point.name, message)
@@ -144,6 +148,20 @@ def _check_contract(plugin) -> None:
         raise PluginError(f"it was written for version {stated} of primordia's hook contract, this is {major}")
 
 
+def _check_hook_names(pm, plugin, name: str) -> None:
+    """Refuse (unregistered again) a plugin with an ``@hookimpl`` named like no hook: a misspelt hook would
+    otherwise be silently never called."""
+    unknown = sorted(caller.name for caller in pm.get_hookcallers(plugin) or ()
+                     if not caller.has_spec() and not any(impl.optionalhook for impl in caller.get_hookimpls()
+                                                          if impl.plugin is plugin))  # optionalhook: said on purpose
+    if unknown:
+        pm.unregister(plugin, name=name)
+        hooks = [hook for hook in dir(hookspecs) if hook.startswith("primordia_")]
+        close = difflib.get_close_matches(unknown[0], hooks, n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise PluginError(f"its @hookimpl {unknown[0]} is not a hook of primordia{hint}")
+
+
 def _distribution_label(entry_point) -> str:
     dist = getattr(entry_point, "dist", None)
     if dist is None:
@@ -152,7 +170,9 @@ def _distribution_label(entry_point) -> str:
 
 
 def _reason(exc: BaseException) -> str:
-    return (f"{type(exc).__name__}: {exc}".splitlines() or [type(exc).__name__])[0]
+    """The exception in one line (a message of several lines, such as pluggy's validation errors, joined)."""
+    lines = [line.strip() for line in f"{type(exc).__name__}: {exc}".splitlines() if line.strip()]
+    return "; ".join(lines) or type(exc).__name__
 
 
 def _origin(pm, plugin_name: str) -> str:
@@ -194,7 +214,12 @@ def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
         return {}
     problem = _junk(kind, pieces, taken)
     if problem:
-        pm.load_report.report(plugin, f"{where} {problem}; its {kind.replace('_', ' ')} are skipped")
+        message = f"{where} {problem}; its {kind.replace('_', ' ')} are skipped"
+        pm.load_report.report(plugin, message)
+        for piece in pieces if isinstance(pieces, (list, tuple)) else ():
+            name = getattr(piece, "name", None)
+            if isinstance(name, str) and name:  # a config naming it is told why it is missing
+                pm.load_report.skipped.setdefault((kind, name), message)
         return {}
     return {piece.name: piece for piece in pieces}
 
@@ -213,6 +238,9 @@ def _junk(kind: str, pieces, taken: dict) -> str | None:
         name = getattr(piece, "name", None)
         if not isinstance(name, str) or not name:
             return f"returned {piece!r}, which has no name"
+        if inspect.isabstract(piece):
+            missing = ", ".join(sorted(piece.__abstractmethods__))
+            return f"returned {name!r} ({piece.__name__}), which does not define the required {missing}"
         if name in taken or name in names:
             owner = taken[name][1] if name in taken else "the same hook"
             return f"reuses the name '{name}', taken by {owner}"
@@ -301,10 +329,16 @@ def ask_backend_choosers(pm: pluggy.PluginManager | None = None) -> None:
 
 def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):
     """The registered piece of ``kind`` called ``name``; an unknown name names the known ones."""
+    pm = pm or get_plugin_manager()
     table = registry(kind, pm)
     try:
         return table[name][0]
     except KeyError:
         known = ", ".join(sorted(table)) or "none"
         label = kind.replace("_", " ") if kind in ("physics", "kinetics") else kind.replace("_", " ")[:-1]
-        raise PluginError(f"unknown {label} '{name}' (registered: {known})") from None
+        report = pm.load_report
+        if (kind, name) in report.skipped:
+            raise PluginError(f"{label} '{name}' was skipped: {report.skipped[kind, name]}") from None
+        broken = "" if not report.broken else (f"; plugin{'s' if len(report.broken) > 1 else ''} skipped as broken: "
+                                               f"{', '.join(sorted(report.broken))}")
+        raise PluginError(f"unknown {label} '{name}' (registered: {known}{broken})") from None

@@ -67,7 +67,7 @@ from primordia.core.ops import NUMPY, UFL
 from primordia.core.validation import number, numbers
 from primordia.physics.base import GATHERED_RANKS, Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.edge_flux import ExponentiallyFittedFlux
-from primordia.physics.kinetics.base import Species
+from primordia.physics.kinetics.base import Species, checked_evaluation
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
 EDGE_OPS = compiled.numpy_ops()  # the sensitivity at every edge at every step: exp by the compiled loop
@@ -154,7 +154,7 @@ class Chemotaxis(Physics):
         where = f"kinetics {self.kinetics.name}"
         try:
             with np.errstate(all="ignore"):
-                state = self.kinetics.initial_state(times[0], NUMPY.at(tuple(mesh_data.points.T)))
+                state, _ = checked_evaluation(self.kinetics, times[0], NUMPY.at(tuple(mesh_data.points.T)))
                 bad = next((name for name in self.kinetics.species_names
                             if not np.all(np.isfinite(np.asarray(state[name], dtype=float)))), None)
         except (ArithmeticError, ValueError) as error:

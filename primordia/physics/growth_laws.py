@@ -49,7 +49,7 @@ import numpy as np
 import ufl
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError, PrimordiaError
 from primordia.core.parameters import Parameter
 
 #: Regularisation of the square roots of growth factors (see the module docstring).
@@ -124,9 +124,41 @@ class GrowthLaw(Configured, ABC):
     def growth_tensor(self, fields: Mapping[str, Any], t, X, dimension: int):
         """F_g = I + sum_i s_i k_i (x) k_i (the unnumbered equation after seed (4.12)), a UFL tensor."""
         tensor = ufl.Identity(dimension)
-        for stretch, k in zip(self.stretches(self.factors(fields, t, X, dimension)), self.directions_at(X, dimension)):
+        for stretch, k in zip(self.stretches(checked_factors(self, fields, t, X, dimension)),
+                              self.directions_at(X, dimension)):
             tensor = tensor + stretch * ufl.outer(k, k)  # F_g, after (4.12c)
         return tensor
+
+
+def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: int) -> list:
+    """``law.factors(...)``, checked: one scalar (a number or a UFL expression) per direction, ``dimension`` of
+    them.  A law that breaks this, or whose code fails, is one line naming it (:class:`PluginError`)."""
+    where = f"growth law {law.name}"
+    try:
+        gammas = law.factors(fields, t, X, dimension)
+    except PrimordiaError:
+        raise
+    except KeyError as error:
+        raise PluginError(f"{where}: factors read the field {error}, which is not in its requires "
+                          f"({', '.join(law.requires) or 'none'})") from error
+    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
+        reason = "; ".join(line for line in f"{type(error).__name__}: {error}".splitlines() if line.strip())
+        raise PluginError(f"{where}: factors failed: {reason}") from error
+    if not isinstance(gammas, (list, tuple)) or len(gammas) != dimension:
+        raise PluginError(f"{where}: factors must return {dimension} growth factors in {dimension}D "
+                          f"(one per direction k_i), got "
+                          f"{len(gammas) if isinstance(gammas, (list, tuple)) else repr(gammas)}")
+    checked = []
+    for i, gamma in enumerate(gammas, start=1):
+        try:
+            expression = ufl.as_ufl(gamma)
+        except Exception:  # noqa: BLE001 - anything UFL cannot take is not a factor
+            expression = None
+        if expression is None or expression.ufl_shape != ():
+            raise PluginError(f"{where}: factors must return scalars (numbers or UFL expressions), "
+                              f"gamma_{i} is {gamma!r}")
+        checked.append(gamma)
+    return checked
 
 
 def saturating(m):
@@ -182,7 +214,7 @@ def fluid_source(law: GrowthLaw, ell_0: float, fields: Mapping[str, Any], rates:
     time = ufl.variable(t)
     variables = {name: ufl.variable(value) for name, value in fields.items()}
     total = 0
-    for gamma in law.factors(variables, time, X, dimension):
+    for gamma in checked_factors(law, variables, time, X, dimension):
         gamma = ufl.as_ufl(gamma)
         total = total + ufl.diff(gamma, time)
         for name, variable in variables.items():

@@ -174,6 +174,11 @@ class PoroelasticGrowth(Physics):
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
+    def check_inputs(self, mesh_data, times) -> None:
+        """Also the growth law against the mesh's dimension, so that ``--dry-run`` refuses what the set-up would."""
+        super().check_inputs(mesh_data, times)
+        self.growth_law.check_dimension(mesh_data.gdim)
+
     def fields(self):
         return [FieldSpec("u", degree=2, vector=True, group=GROUP, displacement=True,
                           description="displacement (reference configuration)"),

@@ -136,6 +136,12 @@ class Kinetics(Configured, ABC):
 def check_species(kinetics: Kinetics) -> None:
     """The declaration is consistent: unique names, known attractants and diffusivity parameters."""
     where = f"kinetics {kinetics.name}"
+    if not isinstance(kinetics.species, (list, tuple)) or not all(isinstance(s, Species) for s in kinetics.species):
+        raise PluginError(f"{where}: its species must be a tuple of primordia.physics.kinetics.base.Species, "
+                          f"got {kinetics.species!r}")
+    bad_name = next((s.name for s in kinetics.species if not isinstance(s.name, str) or not s.name.strip()), None)
+    if bad_name is not None:
+        raise PluginError(f"{where}: a species is named {bad_name!r}, not a name")
     names = [s.name for s in kinetics.species]
     if not names:
         raise PluginError(f"{where} declares no species")
@@ -152,3 +158,42 @@ def check_species(kinetics: Kinetics) -> None:
                                   f"which is not another of its species ({', '.join(names)})")
             if not species.mobile:
                 raise PluginError(f"{where}: species {species.name} climbs a gradient but has no diffusivity")
+
+
+def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dict[str, tuple[Any, Any]]]:
+    """``(initial_state(t0, ops), split_rates(state, t0, ops))``, checked against the contract.
+
+    Each must be a table with a value for every declared species (the rates: a pair production, loss rate,
+    and no other species).  A kinetics that breaks the contract, or whose code fails on numbers
+    (``ops = NUMPY``) in another way than arithmetic, is one line naming it (:class:`PluginError`);
+    arithmetic that fails (an overflow, a math domain error) propagates, for the caller to blame the parameters.
+    """
+    where = f"kinetics {kinetics.name}"
+    names = kinetics.species_names
+    state = _call(kinetics, "initial_state", t0, ops)
+    if not isinstance(state, Mapping) or set(names) - set(state):
+        missing = sorted(set(names) - set(state)) if isinstance(state, Mapping) else names
+        raise PluginError(f"{where}: initial_state must return a value for every species, got {state!r} "
+                          f"(missing: {', '.join(missing)})")
+    state = {name: state[name] for name in names}
+    rates = _call(kinetics, "split_rates", state, t0, ops)
+    if not isinstance(rates, Mapping) or set(rates) != set(names):
+        got = ", ".join(map(str, rates)) if isinstance(rates, Mapping) else repr(rates)
+        raise PluginError(f"{where}: split_rates must return {{species: (production, loss_rate)}} for its species "
+                          f"{', '.join(names)}, got {got}")
+    for name in names:
+        pair = rates[name]
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise PluginError(f"{where}: split_rates must give species {name} a pair (production, loss_rate), "
+                              f"got {pair!r}")
+    return state, dict(rates)
+
+
+def _call(kinetics: Kinetics, method: str, *args):
+    try:
+        return getattr(kinetics, method)(*args)
+    except (PluginError, ArithmeticError, ValueError):  # ValueError: a math domain error, blamed on parameters
+        raise
+    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
+        reason = "; ".join(line for line in f"{type(error).__name__}: {error}".splitlines() if line.strip())
+        raise PluginError(f"kinetics {kinetics.name}: {method} failed: {reason}") from error

@@ -1,0 +1,236 @@
+"""A plugin that breaks the contract of its kind is one line naming it, never a traceback.
+
+A kinetics or growth law without a required method, with a parameter whose default is no
+value of it or that another piece declares with another default, with species named like
+another module's field, or whose methods answer something of the wrong shape: each is
+refused when the model is composed (so ``--dry-run`` and ``stability`` refuse it too), or,
+for a growth law's factors, at set-up, with a :class:`PrimordiaError` naming the piece.
+A hook named like no hook is a broken plugin, not a silently unused one.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from primordia.core.errors import ConfigError, PluginError
+from primordia.core.meshes import rectangle
+from primordia.core.parameters import Parameter, ParameterSet
+from primordia.core.plugins import hookimpl, lookup
+from primordia.model import Model
+from primordia.physics.growth_laws import GrowthLaw
+from primordia.physics.kinetics.base import Kinetics, Species
+from primordia.testing import registered
+
+
+class Decay(Kinetics):
+    """dq/dt = k - q + D_q lap q: a well-behaved kinetics the broken ones below vary."""
+
+    name = "qa_decay"
+    species = (Species("q", "a substance", diffusivity="D_q", perturbed=True),)
+    parameters = (Parameter("D_q", 1.0, "diffusivity of q"), Parameter("k", 1.0, "production of q"))
+
+    def split_rates(self, c, t, ops):
+        return {"q": (self.params["k"], 1.0)}
+
+    def initial_state(self, t0, ops):
+        return {"q": self.params["k"]}
+
+
+def _kinetics(name, **attributes):
+    return type(f"Kinetics_{name}", (Decay,), {"name": name, **attributes})
+
+
+class Plugin:
+    def __init__(self, kinetics=(), growth_laws=()):
+        self.kinetics, self.growth_laws = list(kinetics), list(growth_laws)
+
+    @hookimpl
+    def primordia_kinetics(self):
+        return self.kinetics
+
+    @hookimpl
+    def primordia_growth_laws(self):
+        return self.growth_laws
+
+
+def _model(kinetics, physics=("chemotaxis",), **options):
+    return Model(physics=list(physics), kinetics=kinetics, mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.2,
+                 t_final=0.4, output={"pictures": False}, **options)
+
+
+def test_the_well_behaved_kinetics_composes():
+    with registered(Plugin([Decay])):
+        assert _model("qa_decay").kinetics_object.species_names == ("q",)
+
+
+def test_a_kinetics_without_its_rates_is_skipped_with_the_reason():
+    class NoRates(Kinetics):
+        name = "qa_no_rates"
+        species = Decay.species
+        parameters = Decay.parameters
+
+        def initial_state(self, t0, ops):
+            return {"q": 1.0}
+
+    with registered(Plugin([NoRates])), pytest.raises(PluginError) as error:
+        lookup("kinetics", "qa_no_rates")
+    assert "kinetics 'qa_no_rates' was skipped" in str(error.value)
+    assert "does not define the required split_rates" in str(error.value)
+
+
+@pytest.mark.parametrize("default, fragment", [(None, "with the default None"), ("abc", "with the default 'abc'"),
+                                               (-1.0, "must be > 0")])
+def test_a_parameter_default_that_is_no_value_of_it_names_the_kinetics(default, fragment):
+    broken = _kinetics("qa_bad_default", parameters=(Parameter("D_q", 1.0, "d"), Parameter("k", default, "k")))
+    with registered(Plugin([broken])), pytest.raises(PluginError) as error:
+        _model("qa_bad_default")
+    assert str(error.value).startswith("kinetics qa_bad_default declares parameter k") and fragment in str(error.value)
+
+
+def test_a_parameter_declared_with_another_default_names_both_pieces():
+    clash = _kinetics("qa_clash", parameters=Decay.parameters + (Parameter("E", 7.0, "not Young's modulus"),))
+    with registered(Plugin([clash])), pytest.raises(PluginError) as error:
+        _model("qa_clash", physics=["chemotaxis", "poroelasticity"],
+               physics_options={"poroelasticity": {"boundary": [{"boundary": "bottom", "type": "clamped"}]}})
+    assert str(error.value).startswith("parameter E is declared by physics poroelasticity (default 30000) "
+                                       "and by kinetics qa_clash (default 7)")
+
+
+def test_a_species_named_like_another_modules_field_names_both():
+    displaced = _kinetics("qa_species_u", species=(Species("u", "clashes", diffusivity="D_q", perturbed=True),),
+                          split_rates=lambda self, c, t, ops: {"u": (1.0, 1.0)},
+                          initial_state=lambda self, t0, ops: {"u": 1.0})
+    with registered(Plugin([displaced])), pytest.raises(ConfigError) as error:
+        _model("qa_species_u", physics=["chemotaxis", "poroelasticity"],
+               physics_options={"poroelasticity": {"boundary": [{"boundary": "bottom", "type": "clamped"}]}})
+    assert str(error.value) == ("field 'u' is provided by both physics chemotaxis (a species of kinetics "
+                                "qa_species_u) and physics poroelasticity")
+
+
+@pytest.mark.parametrize("attributes, message", [
+    ({"species": ("q",)}, "its species must be a tuple of primordia.physics.kinetics.base.Species"),
+    ({"initial_state": lambda self, t0, ops: {}}, "initial_state must return a value for every species"),
+    ({"split_rates": lambda self, c, t, ops: {"z": (1.0, 1.0)}}, "split_rates must return {species: "
+                                                                   "(production, loss_rate)} for its species q, got z"),
+    ({"split_rates": lambda self, c, t, ops: None}, "split_rates must return"),
+    ({"split_rates": lambda self, c, t, ops: {"q": 1.0}}, "split_rates must give species q a pair"),
+    ({"split_rates": lambda self, c, t, ops: {"q": (c["h"], 1.0)}}, "split_rates failed: KeyError: 'h'"),
+    ({"__init__": lambda self, params, **given: 1 / 0}, "could not be set up: ZeroDivisionError"),
+])
+def test_a_kinetics_breaking_its_contract_is_one_line_naming_it(attributes, message):
+    broken = _kinetics("qa_broken_kinetics", **attributes)
+    with registered(Plugin([broken])), pytest.raises(PluginError) as error:
+        _model("qa_broken_kinetics")
+    assert "qa_broken_kinetics" in str(error.value) and message in str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def _law(name, factors, requires=()):
+    return type(f"Law_{name}", (GrowthLaw,), {"name": name, "requires": requires, "dimensions": (2,),
+                                              "factors": lambda self, fields, t, X, dimension: factors(fields, t)})
+
+
+@pytest.mark.parametrize("factors, requires, message", [
+    (lambda fields, t: [0.1 * t], (), "factors must return 2 growth factors in 2D (one per direction k_i), got 1"),
+    (lambda fields, t: [t, t, t], (), "got 3"),
+    (lambda fields, t: None, (), "got None"),
+    (lambda fields, t: ["0.1 * t", 0.0], (), "gamma_1 is '0.1 * t'"),
+    (lambda fields, t: [fields["m"], t], (), "factors read the field 'm', which is not in its requires (none)"),
+])
+def test_a_growth_law_breaking_its_contract_is_one_line_naming_it(factors, requires, message):
+    law = _law("qa_broken_law", factors, requires)(ParameterSet(()))
+    with pytest.raises(PluginError) as error:
+        law.growth_tensor({name: 0.5 for name in requires}, 1.0, None, 2)
+    assert str(error.value).startswith("growth law qa_broken_law: ") and message in str(error.value)
+
+
+MISSPELT = """\
+from primordia.core.plugins import hookimpl
+
+@hookimpl
+def primordia_kinetic():
+    return []
+"""
+
+WRONG_ARGUMENTS = """\
+from primordia.core.plugins import hookimpl
+
+@hookimpl
+def primordia_kinetics(config):
+    return []
+"""
+
+NO_RATES = """\
+from primordia.core.plugins import hookimpl
+from primordia.core.parameters import Parameter
+from primordia.physics.kinetics.base import Kinetics, Species
+
+
+class NoRates(Kinetics):
+    name = "norates"
+    species = (Species("q", "q", diffusivity="D_q"),)
+    parameters = (Parameter("D_q", 1.0, "d"),)
+
+    def initial_state(self, t0, ops):
+        return {"q": 1.0}
+
+
+@hookimpl
+def primordia_kinetics():
+    return [NoRates]
+"""
+
+
+def test_a_misspelt_hook_and_a_hook_with_unknown_arguments_are_listed_as_broken(primordia_cli, plugin_distribution):
+    plugin_distribution("primordia-misspelt", "0.1", {"misspelt": MISSPELT}, {"misspelt": "misspelt"})
+    env = plugin_distribution("primordia-arguments", "0.1", {"arguments": WRONG_ARGUMENTS}, {"arguments": "arguments"})
+    listed = primordia_cli("plugins", env=env)
+    assert listed.returncode == 0 and "Traceback" not in listed.stderr, listed.stderr
+    warnings = listed.stderr.splitlines()
+    assert len(warnings) == 2, listed.stderr
+    assert any("plugin 'misspelt'" in line and "its @hookimpl primordia_kinetic is not a hook of primordia "
+               "(did you mean primordia_kinetics?)" in line for line in warnings), warnings
+    assert any("plugin 'arguments'" in line and "Argument(s) {'config'} are declared in the hookimpl" in line
+               for line in warnings), warnings
+
+
+def test_a_run_naming_a_skipped_kinetics_is_one_line_saying_why(primordia_cli, plugin_distribution, small_config,
+                                                                 tmp_path):
+    env = plugin_distribution("primordia-norates", "0.1", {"norates_plugin": NO_RATES}, {"norates": "norates_plugin"})
+    config = small_config(small_config.text.replace("m0 = 0.75\nD_m = 0.03\n", ""))
+    ran = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", "--set", "kinetics.name=norates", env=env)
+    assert ran.returncode == 2 and "Traceback" not in ran.stderr, ran.stderr
+    assert ran.stderr.splitlines()[-1] == (
+        "primordia: error: kinetics 'norates' was skipped: plugin 'norates' (primordia-norates 0.1): hook "
+        "primordia_kinetics returned 'norates' (NoRates), which does not define the required split_rates; "
+        "its kinetics are skipped")
+
+
+def test_a_hook_marked_optional_is_not_taken_for_a_misspelt_one():
+    """pluggy's ``optionalhook=True`` says on purpose that the hook may not exist (a newer primordia's)."""
+    from primordia.core.plugins import _check_hook_names, get_plugin_manager
+
+    class Ahead:
+        @hookimpl(optionalhook=True)
+        def primordia_a_later_hook(self):
+            return []
+
+    class Misspelt:
+        @hookimpl
+        def primordia_growth_law(self):
+            return []
+
+    pm = get_plugin_manager()
+    ahead, misspelt = Ahead(), Misspelt()
+    pm.register(ahead, name="tests.ahead")
+    pm.register(misspelt, name="tests.misspelt")
+    try:
+        _check_hook_names(pm, ahead, "tests.ahead")
+        with pytest.raises(PluginError, match="primordia_growth_law is not a hook of primordia "
+                                              r"\(did you mean primordia_growth_laws\?\)"):
+            _check_hook_names(pm, misspelt, "tests.misspelt")
+        assert pm.get_plugin("tests.misspelt") is None  # refused: unregistered again
+    finally:
+        for name in ("tests.ahead", "tests.misspelt"):
+            if pm.get_plugin(name) is not None:
+                pm.unregister(name=name)
