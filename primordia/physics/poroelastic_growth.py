@@ -174,6 +174,14 @@ class PoroelasticGrowth(Physics):
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
+    def check_composition(self, modules) -> None:
+        """The fields the growth law reads are provided by the model's modules (its ``requires``)."""
+        provided = {spec.name for module in modules for spec in module.fields()}
+        missing = [name for name in self.growth_law.requires if name not in provided]
+        if missing:
+            raise ConfigError(f"growth law {self.growth_law.name} reads {', '.join(missing)}, which no physics module "
+                              f"of this model provides (fields: {', '.join(sorted(provided))})")
+
     def check_inputs(self, mesh_data, times) -> None:
         """Also the growth law against the mesh's dimension, so that ``--dry-run`` refuses what the set-up would."""
         super().check_inputs(mesh_data, times)

@@ -234,3 +234,11 @@ def test_a_hook_marked_optional_is_not_taken_for_a_misspelt_one():
         for name in ("tests.ahead", "tests.misspelt"):
             if pm.get_plugin(name) is not None:
                 pm.unregister(name=name)
+
+
+def test_a_growth_law_reading_a_field_no_module_provides_is_refused_naming_it():
+    """Refused when the model is composed (so by --dry-run too); at set-up the line did not name the law."""
+    with pytest.raises(ConfigError, match=r"growth law seed2d reads m, which no physics module of this model "
+                                          r"provides \(fields: p, psi, u\)"):
+        Model(physics=["poroelastic_growth"], growth_law="seed2d", mesh=rectangle((0, 0), (1, 1), (2, 2)),
+              dt=0.1, t_final=0.2, output={"pictures": False})
