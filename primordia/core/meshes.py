@@ -326,6 +326,7 @@ def read_mesh(path: str | Path) -> MeshData:
     _check_not_degenerate(points, cells, path)
     cells = orient_cells(points, cells)
     _check_not_overlapping(cells, path)
+    _check_boundary_facets(cells, boundaries, path)
     return MeshData(points, cells, boundaries, description=f"read from {path}")
 
 
@@ -459,6 +460,45 @@ def _drop_unused_points(points, cells, boundaries):
         on_mesh = used[facets].all(axis=1)
         kept[name] = new_index[facets[on_mesh]]
     return points[used], new_index[cells], kept
+
+
+def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarray], path: Path) -> None:
+    """MeshError unless every named facet is an exterior facet of the cells, in one named boundary only.
+
+    A boundary condition acts on exterior facets, and a facet carries one boundary tag: a
+    tagged facet inside the domain, one that is no side of any cell, or one in two boundaries
+    was kept by one backend and dropped (or given the other name) by the other, so the same
+    file gave two results, or a traction was silently lost.
+    """
+    names = [name for name, facets in boundaries.items() if len(facets)]
+    if not names:
+        return
+    cell_facets = np.sort(np.vstack([np.delete(cells, i, axis=1) for i in range(cells.shape[1])]), axis=1)
+    named = [np.unique(np.sort(boundaries[name], axis=1), axis=0) for name in names]  # repeats are harmless
+    _, ids, counts = np.unique(np.vstack([cell_facets, *named]), axis=0, return_inverse=True, return_counts=True)
+    ids = ids.ravel()
+    in_cells = np.bincount(ids[: len(cell_facets)], minlength=len(counts))
+    owner = np.full(len(counts), -1)
+    offset = len(cell_facets)
+    for index, (name, facets) in enumerate(zip(names, named)):
+        mine = ids[offset: offset + len(facets)]
+        offset += len(facets)
+        for count, problem in ((0, "that no cell has as a side"),
+                               (2, "inside the domain (shared by two cells); boundary conditions act on the "
+                                   "mesh's boundary only")):
+            bad = np.count_nonzero(in_cells[mine] == count)
+            if bad:
+                raise MeshError(f"mesh file {path}: boundary '{name}' has {_facets_text(bad)} {problem}")
+        shared = owner[mine] >= 0
+        if shared.any():
+            other = names[owner[mine][shared][0]]
+            raise MeshError(f"mesh file {path}: {_facets_text(np.count_nonzero(shared))} in both boundary '{other}' "
+                            f"and boundary '{name}' (a facet can carry one boundary name)")
+        owner[mine] = index
+
+
+def _facets_text(count: int) -> str:
+    return f"{count} facet" if count == 1 else f"{count} facets"
 
 
 def _check_not_degenerate(points: np.ndarray, cells: np.ndarray, path: Path) -> None:

@@ -347,6 +347,45 @@ def test_read_mesh_errors_are_one_line(tmp_path, make_file, message):
     assert "\n" not in str(error.value)
 
 
+def _with_boundaries(mesh: MeshData, boundaries: dict) -> MeshData:
+    return MeshData(mesh.points, mesh.cells, boundaries)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        # an edge between two triangles, tagged "top": fenicsx and skfem both dropped it from the
+        # traction's integral without a word
+        (lambda m: {**m.boundaries, "top": m.cells[:1, 1:]}, "boundary 'top' has 1 facet inside the domain"),
+        # the diagonal of the whole square: fenicsx dropped it silently, skfem refused it
+        (lambda m: {**m.boundaries, "top": np.array([[0, m.num_vertices - 1]])},
+         "boundary 'top' has 1 facet that no cell has as a side"),
+        # the top edge in "left" too: fenicsx gave it one name and skfem the other (two results)
+        (lambda m: {**m.boundaries, "left": np.vstack([m.boundaries["left"], m.boundaries["top"]])},
+         "3 facets in both boundary 'left' and boundary 'top'"),
+    ],
+    ids=["interior", "no-side-of-a-cell", "in-two-boundaries"],
+)
+def test_read_mesh_refuses_named_facets_that_are_not_one_boundarys_exterior_facets(tmp_path, change, message):
+    square = rectangle((0, 0), (1, 1), (3, 3))
+    path = tmp_path / "tags.msh"
+    meshio.write(path, gmsh_mesh_from(_with_boundaries(square, change(square))), file_format="gmsh22")
+    with pytest.raises(MeshError, match=message) as error:
+        read_mesh(path)
+    assert "\n" not in str(error.value)
+
+
+def test_read_mesh_keeps_a_boundary_listed_twice_or_reversed(tmp_path):
+    square = rectangle((0, 0), (1, 1), (3, 3))
+    top = square.boundaries["top"]
+    path = tmp_path / "tags.msh"
+    twice = {**square.boundaries, "top": np.vstack([top, top[:, ::-1]])}
+    meshio.write(path, gmsh_mesh_from(_with_boundaries(square, twice)), file_format="gmsh22")
+    mesh = read_mesh(path)
+    assert list(mesh.boundaries) == list(square.boundaries)
+    assert facet_measures(mesh, "top").sum() == pytest.approx(2.0)  # as given; both backends tag each facet once
+
+
 # ---------------------------------------------------------------------------
 # mesh_from_config
 # ---------------------------------------------------------------------------
