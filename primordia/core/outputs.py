@@ -80,6 +80,10 @@ class Output:
     name: str
     #: The keys of ``[output]`` this output reads (none by default); a key belongs to one output.
     options: ClassVar[Mapping[str, OutputOption]] = {}
+    #: Whether :meth:`finish` comes after the other outputs' (slow work that nothing else describes,
+    #: such as pictures): ``summary.json`` then says why the run stopped before it starts.  mpirun
+    #: sends its ranks SIGTERM one second after its own Ctrl-C or SIGTERM, and SIGKILL a second later.
+    finishes_last: ClassVar[bool] = False
 
     def start(self, run) -> None:
         """Before the first step (after initial conditions are set)."""
@@ -209,6 +213,7 @@ class Pictures(Output):
     """
 
     name = "pictures"
+    finishes_last = True  # the final grids take about a second: summary.json says why the run stopped first
     options = {
         "pictures": OutputOption(True, flag, "draw the PNGs (false: none)"),
         "displacement_scale": OutputOption(1.0, partial(number, at_least=0),

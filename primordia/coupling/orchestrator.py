@@ -704,7 +704,10 @@ class Simulation:
 
     # -- outputs --------------------------------------------------------------------------
     def _notify(self, moment: str, *args):
-        for output in list(self.outputs):
+        outputs = list(self.outputs)
+        if moment == "finish":  # slow ones (the pictures) last, so that summary.json has the status before them
+            outputs.sort(key=lambda output: bool(getattr(output, "finishes_last", False)))
+        for output in outputs:
             self._call_output(output, moment, *args)
 
     def _call_output(self, output, moment: str, *args) -> None:

@@ -348,3 +348,29 @@ def test_a_run_stopped_early_draws_the_grid_of_the_snapshots_it_reached(tmp_path
     assert pictures == {"m_t0000.20.png", "m_t0000.40.png", "m_snapshots.png", "final_fields.png"}
     (output,) = [o for o in sim.outputs if o.name == "pictures"]
     assert list(output.snapshots["m"]) == ["m, t = 0.2", "m, t = 0.4"]
+
+
+def test_the_summary_says_why_the_run_stopped_before_the_last_pictures_are_drawn(tmp_path, monkeypatch):
+    """mpirun gives its ranks one second between the SIGTERM it forwards from a Ctrl-C and SIGKILL: the final
+    grids, drawn first, took most of it, and a small run on two ranks stopped that way kept "running"."""
+    from primordia.coupling.orchestrator import Simulation
+
+    statuses = []
+
+    def draw_the_final_grids(self, run, status):
+        statuses.append(json.loads((Path(run.out_dir) / "summary.json").read_text())["status"])
+
+    monkeypatch.setattr(Pictures, "finish", draw_the_final_grids)
+    sim = Simulation(small_model(pictures=True), backend="skfem", out_dir=tmp_path).setup()
+    step = Simulation.step
+
+    def interrupted(self):
+        if self.step_index == 2:
+            raise KeyboardInterrupt
+        step(self)
+
+    monkeypatch.setattr(Simulation, "step", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        sim.run()
+    assert statuses == ["interrupted at t = 0.4 (Ctrl-C)"]
+    assert [output.name for output in sim.outputs][-2:] == ["pictures", "summary"], "the other moments keep their order"
