@@ -10,9 +10,9 @@
 
 A user's mistake (unknown parameter, wrong sign, missing file, impossible mesh,
 unknown backend or plugin) is printed as one line ``primordia: error: ...`` and
-exits with status 2; outputs already written stay on disk.  Ctrl-C and SIGTERM
-stop a run between two steps with a checkpoint (exit status 128 + the signal:
-130, 143); ``--restart OUT_DIR`` continues it in place.
+exits with status 2; outputs already written stay on disk.  Ctrl-C, SIGTERM and
+SIGUSR1 (what to send ``mpirun``) stop a run between two steps with a checkpoint
+(exit status 128 + the signal: 130, 143, 138); ``--restart OUT_DIR`` continues it in place.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 from primordia.core import compiled
 from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, is_root_process
-from primordia.core.signals import INTERRUPTS, signal_name
+from primordia.core.signals import HANDLED, INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
 
@@ -240,7 +240,7 @@ def _interrupted(interrupted: KeyboardInterrupt) -> int:
     detail = str(interrupted) or f"interrupted ({signal_name(signum)}) during start-up, before the first step"
     if is_root_process():
         print(f"primordia: {detail}", file=sys.stderr)
-    for handled in (signal.SIGINT, signal.SIGTERM):  # everything is written: a late second signal changes nothing
+    for handled in HANDLED:  # everything is written: a late second signal changes nothing
         signal.signal(handled, signal.SIG_IGN)
     return 128 + signum
 

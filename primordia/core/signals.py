@@ -1,7 +1,10 @@
-"""Ctrl-C and SIGTERM: a run stops between two steps, says why, and can be continued.
+"""Ctrl-C, SIGTERM and SIGUSR1: a run stops between two steps, says why, and can be continued.
 
-A user presses Ctrl-C; a batch scheduler sends SIGTERM before it kills a job.
-Both mean "stop", and :data:`INTERRUPTS` handles them alike, in one of three modes:
+A user presses Ctrl-C; a batch scheduler sends SIGTERM before it kills a job.  Under
+``mpirun`` a Ctrl-C or SIGTERM reaches the ranks a second late and is followed by SIGKILL a
+second after that (Open MPI 4.1), while SIGUSR1 sent to ``mpirun`` is forwarded to every rank
+at once and nothing follows it: the way to stop a parallel run whose steps take longer.
+All three mean "stop", and :data:`INTERRUPTS` handles them alike, in one of three modes:
 
 * ``immediate`` (start-up: reading the input, building forms, initial solves): the
   signal raises :class:`~primordia.core.errors.InterruptedRun` where the program is;
@@ -24,16 +27,17 @@ import threading
 
 from primordia.core.errors import InterruptedRun
 
-HANDLED = (signal.SIGINT, signal.SIGTERM)
+HANDLED = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
 
 
 def signal_name(signum: int | None) -> str:
     """How a signal is named to the user."""
-    return {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM"}.get(signum, f"signal {signum}")
+    return {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGUSR1: "SIGUSR1"}.get(signum,
+                                                                                             f"signal {signum}")
 
 
 class Interrupts:
-    """The process's SIGINT and SIGTERM handler (see the module docstring)."""
+    """The process's handler of SIGINT, SIGTERM and SIGUSR1 (see the module docstring)."""
 
     def __init__(self):
         self.mode = "immediate"
@@ -44,7 +48,7 @@ class Interrupts:
 
     @contextlib.contextmanager
     def installed(self):
-        """Handle SIGINT and SIGTERM within the block (nested blocks share one installation)."""
+        """Handle the signals of :data:`HANDLED` within the block (nested blocks share one installation)."""
         if threading.current_thread() is not threading.main_thread():
             yield self  # only the main thread may install handlers: Python's defaults stay
             return

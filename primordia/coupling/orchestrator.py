@@ -15,7 +15,7 @@ A run survives what a long run meets:
 * checkpoints (every N steps, every M minutes, and whenever the run stops) hold
   everything the next step needs (:meth:`Simulation.write_checkpoint`), and a run
   set up with ``existing="restart"`` continues from the one in its directory, bit for bit;
-* Ctrl-C and SIGTERM stop the run between two steps (:mod:`primordia.core.signals`),
+* Ctrl-C, SIGTERM and SIGUSR1 stop the run between two steps (:mod:`primordia.core.signals`),
   and ``summary.json`` always says why a run stopped;
 * an output that fails is disabled with a warning and the run goes on.
 

@@ -107,6 +107,33 @@ def test_sigterm_stops_between_steps_with_a_checkpoint_and_the_run_continues(sma
     assert rc.summary(out)["status"] == "completed" and rc.summary(out)["restarts"] == 1
 
 
+@pytest.mark.mpi
+def test_sigusr1_to_mpirun_stops_every_rank_between_steps_and_the_run_continues(small_config, tmp_path):
+    """mpirun forwards SIGUSR1 to the ranks at once and kills nobody (its Ctrl-C and SIGTERM reach the ranks a
+    second late and SIGKILL follows a second after): the way to stop a parallel run whose steps are long."""
+    out = tmp_path / "out"
+    process = rc.start("run", small_config(), "--set", "time.t_final=4000.0", "--set", "mesh.cells=[24,24]",
+                       "--no-progress", "--out", out, ranks=2)  # long enough never to end before the signal
+    try:
+        rc.wait_for_steps(process, out, 10)
+        process.send_signal(signal.SIGUSR1)  # to mpirun alone, as a user or a batch system would
+        status, stderr = rc.finish(process)
+    finally:
+        rc.stop(process)
+    assert status == 128 + signal.SIGUSR1, stderr[-3000:]
+    lines = rc.primordia_lines(stderr)
+    assert len(lines) == 1 and lines[0].startswith("primordia: interrupted at t = ") and "(SIGUSR1)" in lines[0], stderr
+    stopped = rc.summary(out)
+    assert stopped["status"].startswith("interrupted at t = ") and "SIGUSR1" in stopped["status"]
+    assert rc.checkpointed_step(out) == stopped["steps"] > 0
+    rc.wait_until_gone(out)
+    later = repr(stopped["time"] + 2.0)
+    again = rc.run("run", "--restart", out, "--no-progress", "--set", f"time.t_final={later}",
+                   "--set", f"output.times=[{later}]", ranks=2)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert rc.summary(out)["status"] == "completed" and rc.summary(out)["restarts"] == 1
+
+
 def test_a_second_ctrl_c_stops_at_once_and_the_summary_says_so(small_config, tmp_path):
     out = tmp_path / "out"
     process = rc.start("run", small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[24,24]",
