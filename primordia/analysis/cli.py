@@ -222,7 +222,7 @@ def _run_map(args, config, stem) -> int:
 
 def _seed_map_parameters(args, config):
     """(seed parameters, coupled?) of a map: the seed's model, coupled as the config's model is (or --coupled)."""
-    from primordia.analysis.composed import linearise_model, seed_values
+    from primordia.analysis.composed import linearise_model, seed_model_values
     from primordia.analysis.inputs import read_model, read_parameters
 
     model = read_model(config, args.overrides) if config is not None else None
@@ -232,7 +232,8 @@ def _seed_map_parameters(args, config):
     if linear.kinetics != "painter2018":
         raise ConfigError(f"stability map draws patterning spaces of the seed's model (kinetics painter2018); "
                           f"{config} uses kinetics {linear.kinetics}: primordia stability {config} analyses it")
-    return seed_values(model.parameters), linear.coupled if args.coupled is None else args.coupled
+    values, coupled = seed_model_values(linear)  # a coupling the model lacks is 0, not Table 3.1's value
+    return values, coupled if args.coupled is None else args.coupled
 
 
 def _percent(flag) -> str:

@@ -511,9 +511,7 @@ def seed_cross_check(linear: LinearisedModel, k=(0.0, 0.3, 1.0, 2.7, 8.0), phi=(
     if linear.mechanics is not None and not np.allclose((linear.mechanics.mu, linear.mechanics.lam),
                                                         lame(values), rtol=1e-14, atol=0):
         return None
-    kinds = {type(term) for term in linear.terms}
-    seed = linearise(values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,
-                                    tau=values["tau"] if ActiveStressCoupling in kinds else 0.0))
+    seed = linearise(seed_model_values(linear)[0])
     direction = np.arange(1.0, d + 1.0) / np.linalg.norm(np.arange(1.0, d + 1.0))
     k_vector = np.asarray(k, dtype=float)[:, None] * direction
     blocks = slice(None) if linear.mechanics is not None else slice(d + 1, None)
@@ -526,6 +524,20 @@ def seed_cross_check(linear: LinearisedModel, k=(0.0, 0.3, 1.0, 2.7, 8.0), phi=(
         worst = max(worst, float(np.max(np.abs(M_derived - M_seed))))
         scale = max(scale, float(np.max(np.abs(M_seed))))
     return worst / scale
+
+
+def seed_model_values(linear: LinearisedModel):
+    """(the seed's parameters of ``linear``'s model, whether its mechano-chemical loop is closed).
+
+    The seed's model (:data:`SEED_PHYSICS`) read as the composed one: xi_f = 0 where the model
+    has no volume sink and tau = 0 where it has no active stress (the loop is then open, seed
+    section 3.4), rather than Table 3.1's xi_f = 0.15 and tau = 60 for couplings it does not have.
+    """
+    kinds = {type(term) for term in linear.terms}
+    values = seed_values(linear.parameters)
+    values = values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,
+                            tau=values["tau"] if ActiveStressCoupling in kinds else 0.0)
+    return values, {VolumeSink, ActiveStressCoupling} <= kinds
 
 
 def seed_values(params: Mapping):

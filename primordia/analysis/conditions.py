@@ -393,7 +393,8 @@ def uncoupled_verdict(params, k=None) -> Verdict:
     violated = k[~routh["holds"] & (k > 0)]
     mode = fastest_growing_mode(c, k, coupled=False)
     predicted = bool(found.region)
-    band = f"k in [{violated.min():.3g}, {violated.max():.3g}]" if violated.size else "no k"
+    band = (f"k in [{violated.min():.3g}, {violated.max():.3g}] (of {k.size} sampled k)" if violated.size
+            else f"none of {k.size} sampled k")
     return Verdict(
         case="uncoupled (xi_f = 0 or tau = 0, seed section 3.4)",
         patterns=bool(mode.unstable),

@@ -341,7 +341,8 @@ class FastestMode:
     k_max: float  #: wavenumber of the largest Re phi
     growth_rate: float  #: Re phi at k_max (> 0: the steady state is unstable)
     frequency: float  #: |Im phi| of that root (0 for a stationary Turing mode)
-    band: tuple[float, float]  #: (lowest, highest) k of the sampled grid with Re phi > 0; NaN if none
+    band: tuple[float, float]  #: (lowest, highest) k with Re phi > 0: the grid's outermost unstable k, each
+    #: refined by bisection towards its stable neighbour (an end of the grid stays); NaN if none
     at_edge: bool  #: the maximum sits at an end of the k range: widen it
     kind: str = "any"  #: which roots were searched: "any", "stationary" or "oscillatory"
 
@@ -371,6 +372,19 @@ def fastest_growing_mode(params, k=None, coupled: bool = True, kind: str = "any"
     return fastest_mode_of(lambda kk: longitudinal_rates(c, kk, coupled, method="qz"), k, kind)
 
 
+def _band_edge(growth_at, unstable: float, stable: float, steps: int = 40) -> float:
+    """The edge of an unstable band between an unstable and a stable k, by bisection (relative 1e-12)."""
+    for _ in range(steps):
+        middle = 0.5 * (unstable + stable)
+        if abs(stable - unstable) <= 1e-12 * abs(middle):
+            break
+        if growth_at(middle)[0] > 0:
+            unstable = middle
+        else:
+            stable = middle
+    return float(unstable)
+
+
 def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
     """The fastest mode of a dispersion relation ``rates_at(k) -> roots (k.shape + (n,))`` over a sorted k grid.
 
@@ -395,6 +409,10 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
     leading = roots[np.argmax(of_kind)]
     rate = float(np.max(of_kind))
     frequency = float(abs(leading.imag)) if np.abs(leading.imag) > REAL_TOLERANCE * (1 + abs(leading)) else 0.0
-    unstable = k[growth > 0]
-    band = (float(unstable.min()), float(unstable.max())) if unstable.size else (np.nan, np.nan)
+    grows = growth > 0
+    band = (np.nan, np.nan)
+    if np.any(grows):  # the grid's outermost unstable k, refined towards its stable neighbour
+        first, last = int(np.argmax(grows)), int(k.size - 1 - np.argmax(grows[::-1]))
+        band = (_band_edge(growth_at, k[first], k[first - 1]) if first > 0 else float(k[first]),
+                _band_edge(growth_at, k[last], k[last + 1]) if last < k.size - 1 else float(k[last]))
     return FastestMode(k_max=k_max, growth_rate=rate, frequency=frequency, band=band, at_edge=at_edge, kind=kind)

@@ -356,25 +356,30 @@ def model_dispersion_relation(linear, k=None, d: int = 2, nk: int = 241) -> xr.D
 
 
 def _rates_dataset(roots, fastest, turing, params: Mapping, title: str, **attrs) -> xr.Dataset:
-    """The roots of a dispersion relation over k, and its fastest modes, as a Dataset."""
-    return xr.Dataset(
-        {
-            "growth_rate_real": (("k", "branch"), roots.rates.real, {"long_name": "Re phi"}),
-            "growth_rate_imag": (("k", "branch"), roots.rates.imag, {"long_name": "Im phi"}),
-            "transverse_real": (("k", "transverse_branch"), roots.transverse.real, {
-                "long_name": "Re phi of the roots of B^(d-1) = (rho phi^2 + mu k^2)^(d-1) (neutral)"}),
-            "transverse_imag": (("k", "transverse_branch"), roots.transverse.imag),
-            "max_growth_rate": ("k", max_growth_of_kind(roots.rates, "any"), {
-                "long_name": "max Re phi over the roots but the shear waves"}),
-            "turing_growth_rate": ("k", max_growth_of_kind(roots.rates, "stationary"), {
-                "long_name": "largest real root (stationary mode); -inf where none"}),
-        },
-        coords={"k": ("k", roots.k, {"units": "dimensionless"}),
-                "branch": np.arange(roots.rates.shape[-1]),
-                "transverse_branch": np.arange(roots.transverse.shape[-1])},
-        attrs={"title": title, "d": roots.d, **attrs, **_mode_attrs("fastest", fastest),
-               **_mode_attrs("turing", turing), **_attrs_of(params)},
-    )
+    """The roots of a dispersion relation over k, and its fastest modes, as a Dataset.
+
+    A model without mechanics has no shear waves: it has no ``transverse_*`` variables
+    (NetCDF3 has no zero-length dimension; a size-0 one would be written as the
+    unlimited dimension, and the file could not be read back).
+    """
+    variables = {
+        "growth_rate_real": (("k", "branch"), roots.rates.real, {"long_name": "Re phi"}),
+        "growth_rate_imag": (("k", "branch"), roots.rates.imag, {"long_name": "Im phi"}),
+        "max_growth_rate": ("k", max_growth_of_kind(roots.rates, "any"), {
+            "long_name": "max Re phi over the roots but the shear waves"}),
+        "turing_growth_rate": ("k", max_growth_of_kind(roots.rates, "stationary"), {
+            "long_name": "largest real root (stationary mode); -inf where none"}),
+    }
+    coords = {"k": ("k", roots.k, {"units": "dimensionless"}), "branch": np.arange(roots.rates.shape[-1])}
+    if roots.transverse.shape[-1]:
+        variables["transverse_real"] = (("k", "transverse_branch"), roots.transverse.real, {
+            "long_name": "Re phi of the roots of B^(d-1) = (rho phi^2 + mu k^2)^(d-1) (neutral)"})
+        variables["transverse_imag"] = (("k", "transverse_branch"), roots.transverse.imag, {
+            "long_name": "Im phi of the roots of B^(d-1) (shear waves, +- k sqrt(mu / rho))"})
+        coords["transverse_branch"] = np.arange(roots.transverse.shape[-1])
+    return xr.Dataset(variables, coords=coords,
+                      attrs={"title": title, "d": roots.d, **attrs, **_mode_attrs("fastest", fastest),
+                             **_mode_attrs("turing", turing), **_attrs_of(params)})
 
 
 def _mode_attrs(prefix: str, mode) -> dict:
@@ -410,8 +415,15 @@ def boundary_agreement(ds: xr.Dataset, numerical: str = "unstable_numerical",
 
 
 def save_dataset(ds: xr.Dataset, path) -> Path:
-    """Write ``ds`` as NetCDF (scipy engine), atomically."""
+    """Write ``ds`` as NetCDF (scipy engine), atomically.
+
+    NetCDF3 has no zero-length dimension (size 0 marks the unlimited one): a Dataset
+    with one would be written as a file no reader opens, so it is refused here.
+    """
     path = Path(path)
+    empty = sorted(str(name) for name, size in ds.sizes.items() if size == 0)
+    if empty:
+        raise ValueError(f"cannot write {path}: NetCDF3 has no zero-length dimension ({', '.join(empty)})")
     make_directory(path.parent)
     clean = ds.copy()
     for name, var in clean.variables.items():  # NetCDF3 has no +-inf-safe bool; inf is fine, bool is not

@@ -58,6 +58,46 @@ def test_a_run_configuration_is_analysed_as_it_runs(tmp_path, capsys):
     assert "coupled (seed section 3.6)" not in printed  # example 1a has no mechanics to couple
 
 
+def test_the_dispersion_file_of_a_model_without_mechanics_reads_back(tmp_path):
+    """No shear waves: no zero-length transverse_branch, which NetCDF3 would write as the unlimited
+    dimension (xarray's scipy engine then failed with "unsupported operand type(s) for *")."""
+    assert run(["stability", str(EXAMPLES / "ex01a.toml"), "--out", str(tmp_path)]) == 0
+    with xr.open_dataset(tmp_path / "dispersion.nc", engine="scipy") as ds:
+        assert "transverse_real" not in ds and "transverse_branch" not in ds.dims
+        assert ds["growth_rate_real"].shape == (ds.sizes["k"], 4)  # m, e, f, b
+        best = float(ds["k"][int(np.argmax(ds["turing_growth_rate"].values))])
+        assert ds.attrs["turing_k_max"] == pytest.approx(best, rel=0.05)
+    with pytest.raises(ValueError, match="no zero-length dimension .empty."):
+        save_dataset(xr.Dataset({"x": (("empty",), np.zeros(0))}), tmp_path / "empty.nc")
+
+
+def test_a_map_of_a_model_without_active_stress_has_no_tau(tmp_path, capsys):
+    """The FGF sink without the active stress: the loop is open (seed section 3.4).  The map of
+    such a run configuration took Table 3.1's tau = 60 for the stress the model does not have,
+    and called (m0, alpha) = (2, 4) stable where the model's own analysis has k_max = 4.494."""
+    from primordia.analysis.patterns.run import linear_model
+    from primordia.core.config import load_config
+
+    text = (EXAMPLES / "ex01b.toml").read_text().replace(
+        'physics = ["chemotaxis", "poroelasticity", "active_stress", "mechanochemical"]',
+        'physics = ["chemotaxis", "poroelasticity", "mechanochemical"]')
+    text = "\n".join(line for line in text.splitlines() if not line.startswith(("tau =", "zeta =")))
+    config = tmp_path / "no_active_stress.toml"
+    config.write_text(text)
+    table = ["--set", "parameters.m0=2", "--set", "parameters.D_m=0.01", "--set", "parameters.xi_f=0.15"]
+    assert run(["stability", str(config), *table, "--out", str(tmp_path / "dispersion")]) == 0
+    assert "fastest stationary (Turing) mode: k_max = 4.494" in capsys.readouterr().out
+    out = tmp_path / "map"
+    assert run(["stability", "map", str(config), *table, "--x", "m0:1:3:5", "--y", "alpha:2:6:5", "--nk", "32",
+                "--out", str(out)]) == 0
+    assert "uncoupled, seed's model, parameters: Table 3.1 with tau=0" in capsys.readouterr().out
+    with xr.open_dataset(out / "patterning_m0_alpha.nc", engine="scipy") as ds:
+        assert ds.attrs["parameter_tau"] == 0.0 and ds.attrs["coupled"] == 0
+        assert int(ds["unstable_numerical"].sel(m0=2.0, alpha=4.0)) == 1
+    params, coupled = linear_model(load_config(config))  # the sweep map's linear analysis
+    assert not coupled and params["tau"] == 0.0 and params["xi_f"] == 0.001
+
+
 def test_example_1b_is_the_coupled_analysis_at_its_own_tau_and_xi_f(tmp_path, capsys):
     assert run(["stability", str(EXAMPLES / "ex01b.toml"), "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out

@@ -159,6 +159,18 @@ def test_fastest_growing_mode_is_the_maximum_of_the_dispersion_curve():
     assert mode.band[0] < mode.k_max < mode.band[1]
 
 
+def test_the_unstable_band_ends_where_the_growth_rate_crosses_zero():
+    """The band was the outermost unstable k of the log-spaced grid: [0.001, 11.9] for uncoupled
+    Table 3.1, where Re phi changes sign at k = 12.40 (4% grid steps)."""
+    params = seed_parameters(xi_f=0.0)
+    mode = fastest_growing_mode(params, kind="stationary")
+    c = linearise(params)
+    below, above = max_growth_of_kind(longitudinal_rates(c, np.array([mode.band[1] * (1 - 1e-6),
+                                                                         mode.band[1] * (1 + 1e-6)])), "stationary")
+    assert below > 0 >= above
+    assert mode.band[1] == pytest.approx(12.4046, abs=1e-3)  # a dense scan of the 4 x 4 chemistry alone
+
+
 def test_table_3_1_coupled_has_only_a_weak_oscillatory_instability():
     """At Table 3.1 the active stress (s < 0 at m0 = 2) stabilises the Turing mode of the uncoupled system;
     what remains is a slow (Re phi ~ 6e-6) growth of long elastic waves, which is not a Turing pattern."""

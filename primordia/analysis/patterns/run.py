@@ -65,16 +65,21 @@ class PredictedMode(NamedTuple):
 def linear_model(config: Mapping):
     """The linear analysis's view of a configuration: (Table 3.1 parameters with its overrides, coupled?).
 
-    Coupled when ``model.physics`` has the mechano-chemical couplings; otherwise
-    the chemistry does not feel the mechanics and the uncoupled analysis applies
-    (xi_f = 0, seed section 3.4).  A ConfigError if the seed's analysis does not
-    describe the model (e.g. a plugin's kinetics with parameters of its own).
+    Coupled when ``model.physics`` has the mechano-chemical couplings, the FGF sink
+    (``mechanochemical``) and the active stress; otherwise the chemistry does not feel
+    the mechanics and the uncoupled analysis applies (xi_f = 0 without the sink, tau = 0
+    without the active stress, seed section 3.4).  A ConfigError if the seed's analysis
+    does not describe the model (e.g. a plugin's kinetics with parameters of its own).
     """
     from primordia.physics.seed_parameters import seed_parameters
 
-    coupled = "mechanochemical" in config.get("model", {}).get("physics", ["chemotaxis"])
+    physics = config.get("model", {}).get("physics", ["chemotaxis"])
     params = seed_parameters(**config.get("parameters", {}))
-    return (params if coupled else params.replace(xi_f=0.0)), coupled
+    if "active_stress" not in physics:
+        params = params.replace(tau=0.0)
+    if "mechanochemical" not in physics:
+        params = params.replace(xi_f=0.0)
+    return params, "mechanochemical" in physics and "active_stress" in physics
 
 
 def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
