@@ -80,6 +80,8 @@ class Axis:
             raise ConfigError(f"--vary {text}: LO and HI must be numbers and N an integer") from None
         if count < 1 or (count == 1 and low != high) or not (np.isfinite(low) and np.isfinite(high)):
             raise ConfigError(f"--vary {text}: need N >= 1 finite values (N = 1 only with LO = HI)")
+        if count > 1 and low == high:  # N copies of one run, all writing into one folder
+            raise ConfigError(f"--vary {text}: LO = HI repeats one value {count} times (N = 1 runs it once)")
         values = np.linspace(low, high, count)
         if _is_integer(parts[0]) and _is_integer(parts[1]) and np.allclose(values, np.round(values)):
             return cls(key, tuple(int(round(v)) for v in values))
@@ -89,6 +91,16 @@ class Axis:
     def name(self) -> str:
         """The Dataset dimension: the parameter's name for ``parameters.*``, else the whole key."""
         return self.key.removeprefix("parameters.")
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The values as run folder names write them: ``%g``, with more digits where ``%g`` would
+        give two values one name (4 and 4.0000005, 3000000 and 3000001) and so one folder."""
+        for digits in range(6, 18):
+            labels = tuple(f"{value:.{digits}g}" for value in self.values)
+            if len(set(labels)) == len(labels):
+                return labels
+        return tuple(repr(value) for value in self.values)
 
 
 def _is_integer(text: str) -> bool:
@@ -162,11 +174,12 @@ class Sweep:
 
     def points(self) -> list[Point]:
         keys, ranges = self.keys, [values for _, values in self.dimensions]
+        labels = [axis.labels for axis in self.axes] + ([tuple(str(seed) for seed in self.seeds)] if self.seeds else [])
         points = []
         for index in itertools.product(*(range(len(values)) for values in ranges)):
             values = [ranges[d][i] for d, i in enumerate(index)]
             assignments = tuple(f"{key}={value!r}" for key, value in zip(keys, values))
-            name = "_".join(f"{dim}={value:g}" for (dim, _), value in zip(self.dimensions, values))
+            name = "_".join(f"{dim}={labels[d][i]}" for d, ((dim, _), i) in enumerate(zip(self.dimensions, index)))
             overrides = tuple(self.fixed) + assignments
             digest = hashlib.sha256("\n".join((self.config_text, *overrides)).encode()).hexdigest()[:16]
             points.append(Point(index, overrides, self.out / "runs" / name, digest))

@@ -87,10 +87,20 @@ def test_a_run_past_its_timeout_is_recorded_as_failed(small_config, tmp_path):
 
 
 @pytest.mark.parametrize("text", ["parameters.alpha", "alpha=1:2:3", "parameters.alpha=1:2", "parameters.alpha=a:2:3",
-                                  "parameters.alpha=1:2:1"])
+                                  "parameters.alpha=1:2:1", "parameters.alpha=4:4:3"])
 def test_malformed_vary(text):
     with pytest.raises(ConfigError):
         Axis.parse(text)
+
+
+def test_values_that_print_alike_get_folders_of_their_own(small_config, tmp_path):
+    """%g gave 4 and 4.0000005 (and 3000000 and 3000001) one name: three runs in one folder."""
+    config = small_config(COARSE)
+    for text, names in (("parameters.alpha=4:4.000001:3", ["alpha=4", "alpha=4.0000005", "alpha=4.000001"]),
+                        ("parameters.alpha=3000000:3000002:3", ["alpha=3000000", "alpha=3000001", "alpha=3000002"]),
+                        ("parameters.alpha=2:6:3", ["alpha=2", "alpha=4", "alpha=6"])):  # as before
+        sweep = Sweep(config, (Axis.parse(text),), seeds=(1,), out=tmp_path)
+        assert [p.directory.name for p in sweep.points()] == [f"{name}_seed=1" for name in names]
 
 
 def test_integer_and_float_axes():
