@@ -198,6 +198,17 @@ class Model:
     def num_steps(self) -> int:
         return int(round((self.t_final - self.t_start) / self.dt))
 
+    def step_time(self, step: int) -> float:
+        """The time the run reaches at the end of nominal step ``step``: t_start + step dt, except that the
+        step of an output time or of t_final reaches that time as given.  3 x 0.1 is 0.30000000000000004:
+        a run with dt = 0.1 and output.times = [0.3] wrote that time in series.nc and fields.xdmf, where
+        ``sel(time=0.3)`` did not find it."""
+        key = (tuple(self.output["times"]), self.t_final, self.t_start, self.dt)
+        if getattr(self, "_step_times", (None,))[0] != key:  # found once per set of times, not at every step
+            self._step_times = (key, {int(round((t - self.t_start) / self.dt)): t
+                                      for t in (*self.output["times"], self.t_final)})
+        return self._step_times[1].get(step, self.t_start + step * self.dt)
+
     def sample_times(self, count: int = 65) -> list[float]:
         """Times at which inputs that vary in time are checked: the run's span and its output times."""
         span = np.linspace(self.t_start, self.t_final, count)

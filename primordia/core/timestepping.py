@@ -1,7 +1,8 @@
 """Adaptive time steps: a failed step is undone and retried in smaller pieces, then dt grows back.
 
 A run marches on the grid of its nominal steps, t_k = t_start + k dt (output times
-are points of this grid, so they are hit exactly).  Within a nominal step it takes
+are points of this grid, so they are hit exactly; the step of an output time or of t_final
+reaches that time as written, not its rounded t_start + k dt: ``Model.step_time``).  Within a nominal step it takes
 sub-steps of dt / 2^level.  A sub-step that fails (a Newton or Krylov solve that
 does not converge, non-finite values, a negative density where the scheme promises
 none) is undone and retried at the next level; after ``grow_after`` accepted

@@ -552,7 +552,7 @@ class Simulation:
 
     def step(self) -> None:
         """Advance every field over one step ``dt``, in sub-steps when a try fails (see module docstring)."""
-        t_begin, t_end = self.time, self.model.t_start + (self.step_index + 1) * self.dt
+        t_begin, t_end = self.time, self.model.step_time(self.step_index + 1)
         done = 0.0
         while done < 1.0:
             fraction, dt = self.controller.fraction, self.controller.step
