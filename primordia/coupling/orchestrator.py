@@ -475,7 +475,8 @@ class Simulation:
                     self.step()
                     bar.update(1)
                     bar.set_postfix_str(f"t={self.time:.2f}", refresh=False)
-                    if self.step_index % self.model.output["series_every"] == 0 or self.step_index in snapshot_steps:
+                    if (self.step_index % self.model.output["series_every"] == 0 or self.step_index in snapshot_steps
+                            or self.step_index == self.model.num_steps):  # the last state is always in the series
                         self._notify("record")
                     if self.step_index in snapshot_steps:
                         self._notify("snapshot")

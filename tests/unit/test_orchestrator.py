@@ -365,3 +365,11 @@ def test_the_time_of_the_solves_counts_on_when_solvers_are_made_anew(watching, t
     assert {clock: sim.linear_solve_seconds(clock) for clock in ("cpu", "wall")} == clocks
     # each clock its own: the wall time of the solves is there, and is not the CPU time
     assert sum(clocks["wall"].values()) > 0.0 and clocks["wall"] != clocks["cpu"]
+
+
+def test_the_series_ends_with_the_last_state_whatever_series_every_says(watching, tmp_path):
+    """t_final neither an output time nor a multiple of series_every: the series stopped at the last multiple."""
+    Simulation(model(t_final=1.0, dt=0.2, output={"times": [0.4], "series_every": 3}), backend="skfem",
+               out_dir=tmp_path).setup().run()
+    with xr.open_dataset(tmp_path / "series.nc") as series:
+        assert [int(step) for step in series["step"].values] == [0, 2, 3, 5]
