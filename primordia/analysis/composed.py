@@ -331,8 +331,10 @@ class LinearisedModel:
 
     @property
     def coupled(self) -> bool:
-        """Whether the mechano-chemical loop is closed (a volume sink; with active stress, seed section 3.6)."""
-        return any(isinstance(term, VolumeSink) for term in self.terms)
+        """Whether the mechano-chemical loop is closed: a volume sink (the chemistry feels the mechanics) and
+        an active stress (the mechanics feels the chemistry), seed section 3.6; open otherwise (section 3.4)."""
+        kinds = {type(term) for term in self.terms}
+        return {VolumeSink, ActiveStressCoupling} <= kinds
 
     def unknowns(self, d: int) -> tuple[str, ...]:
         return FourierSystem(self.species, self.mechanics is not None, np.zeros(d)).names
@@ -537,7 +539,7 @@ def seed_model_values(linear: LinearisedModel):
     values = seed_values(linear.parameters)
     values = values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,
                             tau=values["tau"] if ActiveStressCoupling in kinds else 0.0)
-    return values, {VolumeSink, ActiveStressCoupling} <= kinds
+    return values, linear.coupled
 
 
 def seed_values(params: Mapping):

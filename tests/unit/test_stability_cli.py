@@ -87,6 +87,8 @@ def test_a_map_of_a_model_without_active_stress_has_no_tau(tmp_path, capsys):
     table = ["--set", "parameters.m0=2", "--set", "parameters.D_m=0.01", "--set", "parameters.xi_f=0.15"]
     assert run(["stability", str(config), *table, "--out", str(tmp_path / "dispersion")]) == 0
     assert "fastest stationary (Turing) mode: k_max = 4.494" in capsys.readouterr().out
+    with xr.open_dataset(tmp_path / "dispersion" / "dispersion.nc", engine="scipy") as ds:
+        assert ds.attrs["coupled"] == 0  # the sink alone does not close the loop (it said 1)
     out = tmp_path / "map"
     assert run(["stability", "map", str(config), *table, "--x", "m0:1:3:5", "--y", "alpha:2:6:5", "--nk", "32",
                 "--out", str(out)]) == 0
