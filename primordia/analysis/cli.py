@@ -233,6 +233,10 @@ def _seed_map_parameters(args, config):
         raise ConfigError(f"stability map draws patterning spaces of the seed's model (kinetics painter2018); "
                           f"{config} uses kinetics {linear.kinetics}: primordia stability {config} analyses it")
     values, coupled = seed_model_values(linear)  # a coupling the model lacks is 0, not Table 3.1's value
+    if args.coupled and not coupled:  # its couplings are 0: a "coupled" map would be the uncoupled one, mislabelled
+        raise ConfigError(f"--coupled: the model of {config} has no closed mechano-chemical loop (the FGF sink "
+                          f"mechanochemical and active_stress); drop --coupled, or give no config to map the "
+                          f"seed's coupled model with Table 3.1")
     return values, coupled if args.coupled is None else args.coupled
 
 

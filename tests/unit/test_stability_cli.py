@@ -172,6 +172,9 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     (["stability", "--set", "parameters.m0=1e300"], "kinetics painter2018: its rates cannot be evaluated"),
     (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--set",
       "parameters.P_2=2000"], "kinetics painter2018: the initial state cannot be evaluated"),
+    # ex01a has no mechanics: its "coupled" map was the uncoupled one with Table 3.1's mechanics, labelled coupled
+    (["stability", "map", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--coupled",
+      "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3"], "--coupled: the model of"),
     # a grid that cannot fit had the kernel kill the process (24 GB at --y alpha:0:12:100000000)
     (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:100000000"], "use fewer points"),
     (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3", "--nk", "100000000"], "use fewer points"),
