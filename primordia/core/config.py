@@ -44,6 +44,8 @@ SECTIONS = {
     "coupling": None,  # open: scheme plus the scheme's own options
     "solver": None,  # open: PETSc options by prefix
 }
+#: The key :func:`load_config` adds: the folder of the file, which relative paths (a mesh file) start from.
+BASE_DIR = "_base_dir"
 #: Sections whose entries are themselves tables (one per physics module, one per solver prefix).
 TABLES_OF_TABLES = {"physics": "[physics.NAME]", "solver": "[solver.PREFIX]"}
 #: A configuration is a few kilobytes; anything far larger is not one (and is not read into memory).
@@ -79,16 +81,23 @@ def load_config(path: str | Path) -> dict:
         config = tomllib.loads(text.removeprefix("\ufeff"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: invalid TOML ({exc})") from None
-    config.setdefault("_base_dir", str(path.resolve().parent))
+    for section in config:  # _base_dir is primordia's own key: a file's would move its relative paths
+        if section.startswith("_"):
+            raise ConfigError(f"unknown config section [{section}] in {path} (known: {', '.join(SECTIONS)})")
+    config[BASE_DIR] = str(path.resolve().parent)
     return config
 
 
 def parse_assignment(text: str) -> tuple[list[str], Any]:
-    """``"section.key=value"`` -> (["section", "key"], value), value parsed as TOML."""
+    """``"section.key=value"`` -> (["section", "key"], value), value parsed as TOML.
+
+    The key is a TOML dotted key, so a part may be quoted (``solver."my.prefix".ksp_rtol=1e-3``);
+    a key TOML does not read (a non-ASCII bare word) is split at its dots.
+    """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
         raise ConfigError(f"--set expects section.key=value, got {text!r}")
-    keys = [part.strip() for part in key.strip().split(".")]
+    keys = _dotted_key(key)
     if len(keys) < 2 or not all(keys):
         raise ConfigError(f"--set key must name a section and a key (e.g. parameters.D_m), got {key!r}")
     try:
@@ -98,11 +107,33 @@ def parse_assignment(text: str) -> tuple[list[str], Any]:
     return keys, value
 
 
+def _dotted_key(key: str) -> list[str]:
+    """The parts of a ``--set`` key, read as TOML reads a dotted key (quotes and all)."""
+    split = [part.strip() for part in key.strip().split(".")]
+    if "\n" in key or "\r" in key:
+        return split
+    try:
+        table = tomllib.loads(f"{key.strip()} = 0")
+    except tomllib.TOMLDecodeError:
+        return split
+    keys = []
+    while isinstance(table, dict) and len(table) == 1:
+        ((name, table),) = table.items()
+        keys.append(name)
+    return keys if table == 0 else split
+
+
 def apply_overrides(config: dict, assignments: list[str]) -> dict:
-    """A copy of ``config`` with every ``section.key=value`` assignment applied."""
+    """A copy of ``config`` with every ``section.key=value`` assignment applied (a lone string is one)."""
     config = copy.deepcopy(config)
+    if isinstance(assignments, str):
+        assignments = [assignments]
     for text in assignments or ():
+        if not isinstance(text, str):
+            raise ConfigError(f"an override is a string section.key=value, got {text!r}")
         keys, value = parse_assignment(text)
+        if keys[0].startswith("_"):  # primordia's own keys (_base_dir), not the user's
+            raise ConfigError(f"--set {text}: unknown config section [{keys[0]}] (known: {', '.join(SECTIONS)})")
         table = config
         for key in keys[:-1]:
             table = table.setdefault(key, {})
@@ -115,7 +146,7 @@ def apply_overrides(config: dict, assignments: list[str]) -> dict:
 def check_structure(config: dict) -> None:
     """Reject unknown tables and keys, naming them."""
     for section, value in config.items():
-        if section.startswith("_"):
+        if section == BASE_DIR:
             continue
         if section not in SECTIONS:
             raise ConfigError(f"unknown config section [{section}] (known: {', '.join(SECTIONS)})")

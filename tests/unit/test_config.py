@@ -71,6 +71,11 @@ def _write(path: Path, data: bytes) -> Path:
     ('model.name="a=b"', ["model", "name"], "a=b"),  # only the first '=' separates
     ("physics.chemotaxis.scheme=\"fitted\"", ["physics", "chemotaxis", "scheme"], "fitted"),
     ("coupling.options={tolerance = 1e-8}", ["coupling", "options"], {"tolerance": 1e-8}),
+    ('parameters."D_m"=0.05', ["parameters", "D_m"], 0.05),  # a key is a TOML dotted key: quotes are not part of it
+    ("'solver'.chemotaxis_m.ksp_rtol=1e-3", ["solver", "chemotaxis_m", "ksp_rtol"], 1e-3),
+    ('solver."my.prefix".ksp_rtol=1e-3', ["solver", "my.prefix", "ksp_rtol"], 1e-3),  # a dot inside quotes
+    (" parameters . D_m =0.05", ["parameters", "D_m"], 0.05),
+    ("parameters.α=1", ["parameters", "α"], 1),  # no TOML bare key: split at the dots, refused by its name later
 ])
 def test_an_assignment_is_dotted_keys_and_a_toml_value(text, keys, value):
     assert config.parse_assignment(text) == (keys, value)
@@ -95,6 +100,26 @@ def test_overrides_apply_to_a_copy_and_create_tables():
                        "solver": {"chemotaxis_m": {"ksp_type": "cg"}}}
     assert original == {"time": {"dt": 0.2, "t_final": 1.0}, "mesh": {"cells": [8, 8]}}
     assert config.apply_overrides(original, []) == original
+
+
+def test_a_lone_string_is_one_override_and_a_non_string_is_one_line():
+    """Model.from_file(path, "time.dt=0.1") read the string character by character ("got 't'")."""
+    assert config.apply_overrides({"time": {"dt": 0.2}}, "time.dt=0.1") == {"time": {"dt": 0.1}}
+    assert "an override is a string section.key=value, got 3" in one_line_error(config.apply_overrides, {}, [3])
+
+
+@pytest.mark.parametrize("text", ["_base_dir.x=1", "_comment.x=1", '"_x".y=1'])
+def test_primordia_s_own_keys_cannot_be_set(text):
+    """Every top-level key starting with _ was skipped by the structure check: ignored without a word."""
+    assert "unknown config section [_" in one_line_error(config.apply_overrides, {"_base_dir": "/here"}, [text])
+
+
+@pytest.mark.parametrize("text", ['_comment = "notes"\n', '_base_dir = "/elsewhere"\n', "[_draft]\ndt = 1\n"])
+def test_a_file_s_key_starting_with_an_underscore_is_unknown(tmp_path, text):
+    """A file's _base_dir moved its relative mesh path without a word, and _comment was ignored."""
+    path = tmp_path / "underscore.toml"
+    path.write_text(text + "[time]\ndt = 0.5\n")
+    assert "unknown config section [_" in one_line_error(config.load_config, path)
 
 
 def test_an_override_through_a_value_that_is_not_a_table():
