@@ -137,7 +137,7 @@ class Model:
 
     def _output(self, table: dict) -> dict:
         """``[output]``: the schedule, and the options of the registered outputs, with their defaults."""
-        from primordia.core.outputs import declared_options
+        from primordia.core.outputs import declared_options, time_label
 
         if not isinstance(table, dict):
             raise ConfigError(f"[output] must be a table, got {table!r}")
@@ -153,10 +153,11 @@ class Model:
         times = numbers(output["times"], "output.times") if output["times"] is not None else [self.t_final]
         for t in times:
             if not self.t_start < t <= self.t_final + 1e-12:
-                raise ConfigError(f"output time {t:g} lies outside (t_start, t_final] = "
-                                  f"({self.t_start:g}, {self.t_final:g}]")
+                raise ConfigError(f"output time {time_label(t)} lies outside (t_start, t_final] = "
+                                  f"({time_label(self.t_start)}, {time_label(self.t_final)}]")
             if abs(round((t - self.t_start) / self.dt) * self.dt - (t - self.t_start)) > 1e-9 * max(1.0, t):
-                raise ConfigError(f"output time {t:g} is not a multiple of dt = {self.dt:g} after t_start")
+                raise ConfigError(f"output time {time_label(t)} is not a multiple of dt = {time_label(self.dt)} "
+                                  f"after t_start")
         output["times"] = sorted(float(t) for t in times)
         number(output["series_every"], "output.series_every", integer=True, at_least=1, hint="steps")
         return output
@@ -217,8 +218,9 @@ class Model:
     def resolved_config(self) -> dict:
         """The fully resolved configuration (defaults filled in), as written to ``config.toml``."""
         mesh = (copy.deepcopy(self._mesh_spec) if isinstance(self._mesh_spec, dict)
-                else {"type": "in-memory", "vertices": self.mesh_data.num_vertices,
-                      "cells": self.mesh_data.num_cells, "description": self.mesh_data.description})
+                else self.mesh_data.source()  # a generator's or the reader's mesh, unchanged: its table
+                or {"type": "in-memory", "vertices": self.mesh_data.num_vertices,
+                    "cells": self.mesh_data.num_cells, "description": self.mesh_data.description})
         if mesh.get("type") == "file":  # readable from wherever the resolved config is read (a restart)
             mesh["path"] = str((self.base_dir / Path(mesh["path"]).expanduser()).resolve())
         resolved = {

@@ -12,6 +12,7 @@ Generators (:func:`rectangle`, :func:`box`) and the meshio reader
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,6 +57,33 @@ class MeshData:
             name: np.ascontiguousarray(facets, dtype=np.int64).reshape(-1, self.gdim)
             for name, facets in self.boundaries.items()
         }
+
+    def remember_source(self, table: dict) -> "MeshData":
+        """Record the ``[mesh]`` table that builds this mesh (a generator's or the reader's arguments).
+
+        The resolved configuration of a run on this mesh then writes that table, and running from it
+        reproduces the run, as long as the mesh is unchanged: points, cells and boundaries changed
+        after this call (or a ``dataclasses.replace`` copy) make it an in-memory mesh again.
+        """
+        self._source = (dict(table), self._fingerprint())
+        return self
+
+    def source(self) -> dict | None:
+        """The ``[mesh]`` table that builds this very mesh, or None (see :meth:`remember_source`)."""
+        recorded = getattr(self, "_source", None)
+        if recorded is None or recorded[1] != self._fingerprint():
+            return None
+        return dict(recorded[0])
+
+    def _fingerprint(self) -> bytes:
+        digest = hashlib.blake2b(digest_size=16)
+        for array in (self.points, self.cells):
+            digest.update(repr((array.dtype.str, array.shape)).encode())
+            digest.update(np.ascontiguousarray(array).tobytes())
+        for name, facets in self.boundaries.items():
+            digest.update(repr((name, facets.shape)).encode())
+            digest.update(np.ascontiguousarray(facets, dtype=np.int64).tobytes())
+        return digest.digest()
 
     @property
     def gdim(self) -> int:

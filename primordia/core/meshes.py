@@ -91,7 +91,9 @@ def rectangle(
     else:
         triangles = _split_squares(corners, diagonal)
     description = f"rectangle {_extent_text(lower, upper)}, {nx} x {ny} squares, diagonal {diagonal}"
-    return _structured_mesh(points, triangles, lower, upper, RECTANGLE_SIDES, description)
+    return _structured_mesh(points, triangles, lower, upper, RECTANGLE_SIDES, description).remember_source(
+        {"type": "rectangle", "lower": lower.tolist(), "upper": upper.tolist(), "cells": [nx, ny],
+         "diagonal": diagonal})
 
 
 def box(
@@ -111,7 +113,8 @@ def box(
     points = _grid_points(lower, upper, counts)
     tetrahedra = _kuhn_tetrahedra(*counts)
     description = f"box {_extent_text(lower, upper)}, {' x '.join(map(str, counts))} hexahedra"
-    return _structured_mesh(points, tetrahedra, lower, upper, BOX_SIDES, description)
+    return _structured_mesh(points, tetrahedra, lower, upper, BOX_SIDES, description).remember_source(
+        {"type": "box", "lower": lower.tolist(), "upper": upper.tolist(), "cells": [int(n) for n in counts]})
 
 
 def _check_extent(lower, upper, gdim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -327,7 +330,8 @@ def read_mesh(path: str | Path) -> MeshData:
     cells = orient_cells(points, cells)
     _check_not_overlapping(cells, path)
     _check_boundary_facets(cells, boundaries, path)
-    return MeshData(points, cells, boundaries, description=f"read from {path}")
+    return MeshData(points, cells, boundaries, description=f"read from {path}").remember_source(
+        {"type": "file", "path": str(path.expanduser().resolve())})
 
 
 def _read_with_meshio(path: Path):
@@ -561,6 +565,9 @@ def mesh_from_config(table: Mapping, base_dir: str | Path = ".") -> MeshData:
     if not isinstance(table, Mapping):
         raise ConfigError(f"[mesh] must be a table, got {table!r}")
     mesh_type = table.get("type")
+    if mesh_type == "in-memory":
+        raise ConfigError("[mesh] type 'in-memory' is the description of a mesh made in Python, which a config "
+                          "cannot rebuild: give [mesh] as type = \"rectangle\", \"box\" or \"file\"")
     if not isinstance(mesh_type, str) or mesh_type not in CONFIG_KEYS:
         raise ConfigError(f"[mesh] type must be one of {', '.join(map(repr, CONFIG_KEYS))}, got {mesh_type!r}")
     _check_config_keys(table, mesh_type)

@@ -410,6 +410,8 @@ def test_config_file_path_is_relative_to_base_dir(tmp_path):
     (tmp_path / "meshes" / "square.msh").write_text(GMSH41_SQUARE)
     mesh = mesh_from_config({"type": "file", "path": "meshes/square.msh"}, base_dir=tmp_path)
     assert mesh.boundary_ids == {"left": 1, "right": 2}
+    # the table that reads this mesh again from anywhere (a run's config.toml, for a mesh read in Python)
+    assert mesh.source() == {"type": "file", "path": str((tmp_path / "meshes" / "square.msh").resolve())}
 
 
 @pytest.mark.parametrize(

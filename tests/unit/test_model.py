@@ -80,9 +80,34 @@ def test_the_resolved_config_states_every_choice():
 
 
 def test_an_in_memory_mesh_is_described_in_the_resolved_config():
-    model = small(mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(2, 2)))
+    import dataclasses
+
+    generated = rectangle((0.0, 0.0), (4.0, 4.0), cells=(2, 2))
+    mesh = dataclasses.replace(generated, points=generated.points * 2)  # no generator's mesh any more
+    model = small(mesh=mesh)
     assert model.resolved_config()["mesh"] == {"type": "in-memory", "vertices": 9, "cells": 8,
                                                "description": model.mesh_data.description}
+    generated.points[0, 0] = -0.5  # nor is one changed in place
+    assert small(mesh=generated).resolved_config()["mesh"]["type"] == "in-memory"
+    message = one_line_error(ConfigError, mesh=model.resolved_config()["mesh"])
+    assert message.startswith("[mesh] type 'in-memory' is the description of a mesh made in Python")
+
+
+@pytest.mark.parametrize("make, table", [
+    (lambda: rectangle((0, 0), (4, 4), cells=(2, 3), diagonal="left"),
+     {"type": "rectangle", "lower": [0.0, 0.0], "upper": [4.0, 4.0], "cells": [2, 3], "diagonal": "left"}),
+    (lambda: __import__("primordia.core.meshes", fromlist=["box"]).box((0, 0, 0), (1, 2, 1), cells=(1, 2, 1)),
+     {"type": "box", "lower": [0.0, 0.0, 0.0], "upper": [1.0, 2.0, 1.0], "cells": [1, 2, 1]}),
+])
+def test_a_generated_mesh_is_written_as_the_table_that_builds_it(make, table):
+    """README: running from config.toml reproduces the run; with the README's own Python example (a mesh made
+    by rectangle()) config.toml said type = "in-memory", which no config can run."""
+    model = small(mesh=make())
+    assert model.resolved_config()["mesh"] == table
+    again = Model.from_config(model.resolved_config())
+    assert again.resolved_config() == model.resolved_config()
+    for name in ("points", "cells"):
+        assert (getattr(again.mesh_data, name) == getattr(model.mesh_data, name)).all()
 
 
 def test_inputs_varying_in_time_are_checked_over_the_run_and_at_output_times():
@@ -131,6 +156,9 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"output": {"times": [0.5]}}, "output time 0.5 is not a multiple of dt = 0.2 after t_start"),
     ({"output": {"times": [1.2]}}, "output time 1.2 lies outside (t_start, t_final] = (0, 1]"),
     ({"output": {"times": [0.0]}}, "output time 0 lies outside (t_start, t_final]"),
+    # %g printed "output time 1 lies outside (0, 1]"
+    ({"output": {"times": [1.0000000001]}}, "output time 1.0000000001 lies outside (t_start, t_final] = (0, 1]"),
+    ({"output": {"times": [0.20000001]}}, "output time 0.20000001 is not a multiple of dt = 0.2"),
     ({"output": {"times": "1"}}, "output.times must be a list of numbers, got '1'"),
     ({"output": {"series_every": 0}}, ("output.series_every must be", "(steps), got 0")),
     ({"output": {"pictures": "no"}}, "output.pictures must be true or false, got 'no'"),
@@ -178,3 +206,7 @@ def test_a_config_missing_or_adding_a_table_is_refused(small_config, text, fragm
     with pytest.raises(PrimordiaError) as caught:
         Model.from_file(small_config(text))
     assert fragment in str(caught.value)
+
+
+def test_snapshot_fields_may_be_a_tuple_as_output_times_may():
+    assert small(output={"times": (0.4, 1.0), "snapshot_fields": ("f", "m")}).output["snapshot_fields"] == ["f", "m"]
