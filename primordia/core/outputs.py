@@ -21,6 +21,7 @@ run and remove one, so old and new files never mix.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import shutil
@@ -64,9 +65,9 @@ class OutputOption:
 
 def field_names(value, where: str) -> list[str]:
     """The check of an option that lists field names (their existence is the model's check)."""
-    if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
+    if not isinstance(value, (list, tuple)) or not all(isinstance(name, str) for name in value):
         raise ConfigError(f"{where} must be a list of field names, got {value!r}")
-    return value
+    return list(value)
 
 
 class Output:
@@ -203,7 +204,8 @@ class Pictures(Output):
     on the deformed configuration, magnified by ``output.displacement_scale``
     (stated on the picture).
 
-    Each snapshot time writes one PNG per snapshot field (``m_t0160.00.png``).  The grid of
+    Each snapshot time writes one PNG per snapshot field (``m_t0160.00.png``; more decimals when the
+    output times need them, :func:`picture_time`).  The grid of
     every snapshot time (``m_snapshots.png``, the seed's Figure 5.1) is drawn once, when the
     run ends (completed or stopped), with ``final_fields.png``.  Redrawn at every snapshot, as
     it was, its cost grew with the square of the number of snapshots: the pictures of example
@@ -238,13 +240,14 @@ class Pictures(Output):
 
         def pictures():
             displacement, scale = values.get(run.displacement_field), run.model.output["displacement_scale"]
+            stamp = picture_time(run.time, run.model.output["times"])
             for name in run.model.output["snapshot_fields"]:
-                label = f"{name}, t = {run.time:g}"
+                label = f"{name}, t = {time_label(run.time)}"
                 field = self._scalar(values[name])
                 self.snapshots.setdefault(name, {})[label] = field
                 if displacement is not None:
                     self.snapshot_displacements.setdefault(name, {})[label] = displacement
-                yield 1, plot_field, run.out_dir / f"{name}_t{run.time:07.2f}.png", dict(
+                yield 1, plot_field, run.out_dir / f"{name}_t{stamp}.png", dict(
                     values=field, title=label, displacement=displacement, displacement_scale=scale)
 
         _draw_shared(run, pictures)
@@ -270,11 +273,33 @@ class Pictures(Output):
             fields = {(f"|{name}|" if v.ndim == 2 else name): self._scalar(v) for name, v in values.items()}
             displacement = values.get(run.displacement_field)
             yield len(fields), plot_fields_grid, run.out_dir / "final_fields.png", dict(
-                fields=fields, title=f"all fields at t = {run.time:g} ({status})", shared_colour_scale=False,
+                fields=fields, title=f"all fields at t = {time_label(run.time)} ({status})", shared_colour_scale=False,
                 displacements=None if displacement is None else {key: displacement for key in fields},
                 displacement_scale=scale)
 
         _draw_shared(run, pictures)
+
+
+def picture_time(t: float, times: Iterable[float]) -> str:
+    """``t`` as the snapshot pictures' file names write it: ``0160.00``, with more decimals when the output
+    times need them (dt = 0.001: ``0000.001``), so that no two output times share a file."""
+    decimals = _picture_decimals(tuple(sorted({float(time) for time in (*times, t)})))
+    return f"{t:0{5 + decimals}.{decimals}f}"
+
+
+@functools.lru_cache(maxsize=8)
+def _picture_decimals(times: tuple[float, ...]) -> int:
+    """The fewest decimals (at least 2) that write every one of ``times`` exactly, else that tell them apart."""
+    exact = next((d for d in range(2, 18) if all(round(time, d) == time for time in times)), None)
+    if exact is not None:
+        return exact
+    return next((d for d in range(2, 18) if len({f"{time:.{d}f}" for time in times}) == len(times)), 17)
+
+
+def time_label(t: float) -> str:
+    """``t`` on a picture: ``%g`` when that is the time, else every digit (1.0000001 is not ``1``)."""
+    t = float(t)
+    return f"{t:g}" if float(f"{t:g}") == t else repr(t)
 
 
 def _draw_shared(run, pictures: Callable[[], Iterable[tuple]]) -> None:

@@ -374,3 +374,28 @@ def test_the_summary_says_why_the_run_stopped_before_the_last_pictures_are_drawn
         sim.run()
     assert statuses == ["interrupted at t = 0.4 (Ctrl-C)"]
     assert [output.name for output in sim.outputs][-2:] == ["pictures", "summary"], "the other moments keep their order"
+
+
+def test_output_times_that_agree_to_two_decimals_get_pictures_of_their_own(tmp_path):
+    """With dt = 0.001 the three output times were all written to m_t0000.00.png, each over the last."""
+    model = Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03}, mesh=MESH, dt=0.001, t_final=0.003,
+                  output={"times": [0.001, 0.002, 0.003], "pictures": True})
+    sim = model.run(backend="skfem", out=tmp_path)
+    pictures = {path.name for path in tmp_path.glob("m_t*.png")}
+    assert pictures == {"m_t0000.001.png", "m_t0000.002.png", "m_t0000.003.png"}
+    (output,) = [o for o in sim.outputs if o.name == "pictures"]
+    assert list(output.snapshots["m"]) == ["m, t = 0.001", "m, t = 0.002", "m, t = 0.003"]
+
+
+@pytest.mark.parametrize("t, times, stamp", [
+    (160.0, [160.0, 280.0], "0160.00"),  # the names of every run so far
+    (0.4, [0.4, 1.0], "0000.40"),
+    (0.001, [0.001, 0.002], "0000.001"),
+    (1.000001, [1.000001, 1.000002], "0001.000001"),
+    (-0.5, [-0.5, 1.0], "-000.50"),
+])
+def test_a_picture_s_time_has_the_decimals_its_output_times_need(t, times, stamp):
+    from primordia.core.outputs import picture_time, time_label
+
+    assert picture_time(t, times) == stamp
+    assert time_label(1.0) == "1" and time_label(1.0000001) == "1.0000001"  # %g would print 1
