@@ -44,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--backend", help="finite element backend (default: [model] backend, else fenicsx)")
     run.add_argument("--out", help="output directory (default: out/<config name>)")
     run.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                     help="override a config value, e.g. --set parameters.D_m=0.03 (repeatable)")
+                     help="override a config value, e.g. --set parameters.D_m=0.03 (repeatable; an inline "
+                          "table {k=v} adds to the table it names)")
     run.add_argument("--restart", metavar="OUT_DIR",
                      help="continue the run in OUT_DIR from its checkpoint, in place (--set may change "
                           "time.t_final, output, checkpoint and solver options)")

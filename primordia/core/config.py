@@ -139,8 +139,25 @@ def apply_overrides(config: dict, assignments: list[str]) -> dict:
             table = table.setdefault(key, {})
             if not isinstance(table, dict):
                 raise ConfigError(f"--set {text}: {key} is not a table")
-        table[keys[-1]] = value
+        if isinstance(value, dict) and isinstance(table.get(keys[-1]), dict):
+            _merge(table[keys[-1]], value)  # an inline table adds to the table it names
+        else:
+            table[keys[-1]] = value
     return config
+
+
+def _merge(table: dict, given: dict) -> None:
+    """``given``'s keys into ``table``, tables into tables: the keys ``given`` does not name stay.
+
+    ``--set 'physics.poroelasticity={displacement_degree=1}'`` replaced the whole table (TOML's meaning
+    of an inline table) and so dropped ex01b's four boundary conditions without a word; it now means
+    the same as ``--set physics.poroelasticity.displacement_degree=1``.  A list is replaced whole.
+    """
+    for key, value in given.items():
+        if isinstance(value, dict) and isinstance(table.get(key), dict):
+            _merge(table[key], value)
+        else:
+            table[key] = value
 
 
 def check_structure(config: dict) -> None:

@@ -176,3 +176,15 @@ def test_an_unknown_option_lists_the_known_ones():
         "kinetics k: unknown option 'a' (known: none)"
     assert "options must be a table of name = value, got [1]" in one_line_error(
         config.merge_options, "kinetics k", DEFAULTS, [1])
+
+
+def test_an_inline_table_adds_to_the_table_it_names():
+    """It replaced the whole table: ex01b's boundary conditions went without a word."""
+    original = {"physics": {"poroelasticity": {"boundary": [{"boundary": "bottom", "type": "clamped"}],
+                                               "solver": {"a": 1, "b": 2}}}}
+    changed = config.apply_overrides(original, ["physics.poroelasticity={displacement_degree=1, solver={b=3}}"])
+    assert changed["physics"]["poroelasticity"] == {"boundary": [{"boundary": "bottom", "type": "clamped"}],
+                                                    "solver": {"a": 1, "b": 3}, "displacement_degree": 1}
+    assert config.apply_overrides(original, ["physics.poroelasticity.boundary=[]"])["physics"]["poroelasticity"][
+        "boundary"] == []  # a list is replaced whole
+    assert config.apply_overrides({}, ["solver.m={ksp_type='cg'}"]) == {"solver": {"m": {"ksp_type": "cg"}}}
