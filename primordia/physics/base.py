@@ -222,11 +222,17 @@ class Physics(Configured, ABC):
         """
         if "boundary" not in self.options:
             return
+        from primordia.core.errors import ConfigError
         from primordia.physics.boundary_conditions import conditions_from_config
 
+        own = [spec.name for spec in self.fields()]
         for condition in conditions_from_config(self.settings["boundary"], mesh_data, mesh_data.gdim):
+            if condition.field not in own:
+                raise ConfigError(f"boundary condition '{condition.kind}' on '{condition.boundary}' acts on the field "
+                                  f"{condition.field}, which physics {self.name} does not solve for "
+                                  f"(it has: {', '.join(own)})")
             vertices = mesh_data.points[np.unique(mesh_data.boundaries[condition.boundary])]
-            condition.formula.check(vertices, times)
+            condition.check(vertices, times)
 
     def nonnegative_fields(self) -> tuple[str, ...]:
         """Fields this module's discretisation keeps >= 0 (read after ``setup``), e.g. a monotone scheme's density.

@@ -22,7 +22,7 @@ stress P = P_e + P_f):
                            P N_0 = value (nominal traction) at finite strain
 * ``robin``                springs: P N_0 + xi_R J F^-T u = 0 (seed (4.16a)), value = xi_R;
                            sigma n + xi_R u = 0 at small strain
-* ``fluid_flux``           (kappa/eta) grad p . n = value(x, t) (Neumann; 0 = no flux, seed (2.7b),
+* ``fluid_flux``           (kappa/eta) grad p . n = value(x, t), positive: inflow (Neumann; 0 = no flux, seed (2.7b),
                            (4.16b) on Gamma_0 with J C^-1 Grad p . N_0)
 * ``fluid_pressure``       p = value(x, t)                      (Dirichlet, seed (2.7c); p_D of (4.16b))
 
@@ -38,6 +38,7 @@ Terms that depend on the deformation read it from the run's kinematics
 
 from __future__ import annotations
 
+import ast
 from typing import ClassVar
 
 import numpy as np
@@ -84,6 +85,10 @@ class Condition:
             self.formula = Formula(value, constants, where)
         self._bcs = []
 
+    def check(self, points: np.ndarray, times) -> None:
+        """Refuse, in one line, a value that cannot be evaluated (or is out of range) at ``points`` at ``times``."""
+        self.formula.check(points, times)
+
     def terms(self, disc) -> dict[str, list]:
         """Weak-form terms added to residuals: {field name: [form, ...]}."""
         return {}
@@ -111,8 +116,14 @@ class _Dirichlet(Condition):
         return None
 
     def dirichlet(self, disc):
-        self._bcs = [disc.dirichlet_bc(self.field, self.boundary, self._values(disc.time), self._component(disc))]
-        return self._bcs
+        # One constraint per discretisation, shared by every subproblem that asks for it (the growth
+        # module's initial equilibrium and its time step; the solvers made again after a failed step), so that
+        # :meth:`update` moves the values every solve reads.  Making a new one on each call left the
+        # earlier ones, those of the time step's solver, at their first values.
+        if getattr(self, "_bcs_of", None) is not disc:
+            self._bcs = [disc.dirichlet_bc(self.field, self.boundary, self._values(disc.time), self._component(disc))]
+            self._bcs_of = disc
+        return list(self._bcs)
 
     def homogeneous(self, disc):
         return [disc.dirichlet_bc(self.field, self.boundary, 0.0, self._component(disc))]
@@ -130,6 +141,12 @@ class Clamped(_Dirichlet):
     def default_value(gdim):
         return ["0"] * gdim
 
+    def __init__(self, boundary, value=None, constants=None, gdim=2):
+        super().__init__(boundary, value, constants, gdim)
+        if value is not None and not all(_is_zero(component) for component in self.formula.components):
+            raise ConfigError(f"boundary condition 'clamped' on '{boundary}' is u = 0 and takes no value, "
+                              f"got {value!r} (type = \"displacement\" prescribes u)")
+
 
 class Displacement(_Dirichlet):
     kind, field, vector_value, holds_normal_displacement = "displacement", "u", True, True
@@ -142,6 +159,11 @@ class NormalDisplacement(_Dirichlet):
 
     def _component(self, disc):
         return _normal_axis(disc.mesh_data, self.boundary)
+
+    def check(self, points, times):
+        """Also refuse a boundary that is not flat and normal to an axis (``primordia run --dry-run`` included)."""
+        super().check(points, times)
+        _flat_axis(np.asarray(points, dtype=float), self.boundary)
 
 
 class Traction(Condition):
@@ -169,6 +191,17 @@ class Robin(Condition):
             spring = motion.volume_ratio * ufl.dot(ufl.inv(motion.deformation_gradient).T, u)
         measure = disc.ds_degree(motion.quadrature_degree, self.boundary)
         return {"u": [stiffness * ufl.inner(spring, w) * measure]}  # (4.16a)
+
+    def check(self, points, times):
+        """The springs' stiffness xi_R must be >= 0 (a negative one pushes the boundary away, unbounded)."""
+        super().check(points, times)
+        for t in times:
+            stiffness = self.formula.numpy(np.asarray(points, dtype=float).T, float(t))
+            if np.any(stiffness < 0):
+                where = np.asarray(points)[np.flatnonzero(stiffness < 0)[0]]
+                raise ConfigError(f"boundary condition 'robin' on '{self.boundary}': the stiffness "
+                                  f"{self.formula.text!r} must be >= 0, got {float(stiffness.min()):g} at "
+                                  f"x = ({', '.join(f'{c:g}' for c in where)}), t = {float(t):g}")
 
 
 class FluidFlux(Condition):
@@ -242,8 +275,27 @@ def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:
         if boundary not in mesh_data.boundaries:
             raise ConfigError(f"boundary condition '{kind}' names boundary {boundary!r}, which the mesh lacks "
                               f"(it has: {', '.join(mesh_data.boundaries) or 'none'})")
-        conditions.append(kinds[kind](boundary, table.get("value"), table.get("constants"), gdim))
+        condition = kinds[kind](boundary, table.get("value"), table.get("constants"), gdim)
+        if _is_dirichlet(condition):
+            other = next((c for c in conditions if _is_dirichlet(c) and c.boundary == boundary
+                          and c.field == condition.field), None)
+            if other is not None:
+                raise ConfigError(f"boundary {boundary!r} is given two Dirichlet conditions on {condition.field} "
+                                  f"('{other.kind}' and '{condition.kind}'): give one")
+        conditions.append(condition)
     return conditions
+
+
+def _is_dirichlet(condition: Condition) -> bool:
+    """Whether a condition prescribes (part of) its field (it makes Dirichlet constraints)."""
+    return type(condition).dirichlet is not Condition.dirichlet
+
+
+def _is_zero(formula: Formula) -> bool:
+    """Whether a formula is the constant 0 (reads neither x nor t, and is 0)."""
+    if any(isinstance(node, ast.Name) and node.id in ("x", "t") for node in ast.walk(formula.tree)):
+        return False
+    return bool(np.all(formula.numpy(np.zeros((1, 1)), 0.0) == 0.0))
 
 
 def encloses(conditions: list[Condition], mesh_data) -> bool:
@@ -259,7 +311,11 @@ def encloses(conditions: list[Condition], mesh_data) -> bool:
 
 def _normal_axis(mesh_data, boundary: str) -> int:
     """The coordinate axis normal to a flat, axis-aligned boundary (else a one-line error)."""
-    points = mesh_data.points[np.unique(mesh_data.boundaries[boundary])]
+    return _flat_axis(mesh_data.points[np.unique(mesh_data.boundaries[boundary])], boundary)
+
+
+def _flat_axis(points: np.ndarray, boundary: str) -> int:
+    """The coordinate axis normal to the flat, axis-aligned boundary through ``points`` (else a one-line error)."""
     spread = points.max(axis=0) - points.min(axis=0)
     flat = np.flatnonzero(spread <= 1e-10 * max(1.0, float(np.abs(points).max())))
     if len(flat) != 1:

@@ -24,10 +24,19 @@ class NormalPressure(Condition):
         return {"u": [pressure * ufl.inner(disc.n, disc.test("u")) * disc.ds(self.boundary)]}
 
 
+class SolidPressureLoad(Condition):
+    """A third party's kind on the solid pressure psi, a field of poroelastic_growth only."""
+
+    kind, field = "solid_pressure_load", "psi"
+
+    def terms(self, disc):
+        return {"psi": [self.formula.ufl(disc.x, disc.t) * disc.test("psi") * disc.ds(self.boundary)]}
+
+
 class _Plugin:
     @hookimpl
     def primordia_boundary_conditions(self):
-        return [NormalPressure]
+        return [NormalPressure, SolidPressureLoad]
 
 
 @pytest.fixture
@@ -61,3 +70,12 @@ def test_an_unknown_kind_names_the_registered_ones(third_party_kind):
         conditions_from_config([{"boundary": "top", "type": "pressure"}], rectangle((0, 0), (1, 1), (2, 2)), 2)
     assert "unknown boundary condition type 'pressure'" in str(failure.value)
     assert "normal_pressure" in str(failure.value) and "robin" in str(failure.value)
+
+
+def test_a_kind_on_a_field_the_physics_lacks_is_one_line_before_the_run(third_party_kind):
+    boundary = [{"boundary": "bottom", "type": "clamped"}, {"boundary": "top", "type": "solid_pressure_load", "value": "1"}]
+    with pytest.raises(ConfigError) as failure:
+        Model(physics=["poroelasticity"], parameters={"E": 100.0, "nu": 0.3}, mesh=rectangle((0, 0), (1, 1), (4, 4)),
+              dt=0.1, t_final=0.2, physics_options={"poroelasticity": {"boundary": boundary}})
+    assert str(failure.value) == ("boundary condition 'solid_pressure_load' on 'top' acts on the field psi, "
+                                  "which physics poroelasticity does not solve for (it has: u, p)")

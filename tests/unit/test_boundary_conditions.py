@@ -6,6 +6,8 @@ tests/regression/test_crossval.py.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import ufl
@@ -113,3 +115,72 @@ def test_a_tissue_held_normally_on_every_side_is_enclosed():
     held = [{"boundary": side, "type": "normal_displacement"} for side in ("left", "right", "bottom", "top")]
     assert encloses(conditions(*held), MESH)
     assert not encloses(conditions(*held[:3], {"boundary": "top", "type": "robin", "value": "1"}), MESH)
+
+
+def test_a_dirichlet_condition_asked_twice_gives_the_constraints_its_update_moves(disc):
+    # The growth module asks for its constraints for the initial equilibrium and again for the time step
+    # (and the solvers are made again after a rejected step): each call made new ones and update() moved
+    # only the last, so the time step's solver kept a time-dependent displacement at its first value.
+    (normal,) = conditions({"boundary": "left", "type": "normal_displacement", "value": "-0.5 * t"})
+    (first,) = normal.dirichlet(disc)
+    (again,) = normal.dirichlet(disc)
+    assert again is first
+    normal.update(disc, 0.4)
+    np.testing.assert_allclose(first.handle.values, -0.2)
+
+
+def test_a_time_dependent_displacement_moves_the_growing_tissue(tmp_path):
+    from primordia.core import config as config_
+    from primordia.model import Model
+
+    config = config_.load_config(Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml")
+    config["mesh"]["cells"], config["time"]["t_final"], config["output"] = [4, 4], 0.4, {"times": [0.4], "pictures": False}
+    config["physics"]["poroelastic_growth"]["boundary"][0]["value"] = "-0.5 * t"  # the left edge, u_x = -t/2
+    sim = Model.from_config(config).run(backend="skfem", out=tmp_path / "run")
+    left = sim.model.mesh_data.points[:, 0] == 0.0
+    np.testing.assert_allclose(sim.vertex_values()["u"][left, 0], -0.2, atol=1e-12)
+
+
+@pytest.mark.parametrize("tables, message", [
+    ([{"boundary": "left", "type": "clamped"}, {"boundary": "left", "type": "displacement", "value": ["1", "0"]}],
+     "boundary 'left' is given two Dirichlet conditions on u ('clamped' and 'displacement'): give one"),
+    ([{"boundary": "left", "type": "clamped"}, {"boundary": "left", "type": "normal_displacement"}],
+     "two Dirichlet conditions on u ('clamped' and 'normal_displacement')"),
+    ([{"boundary": "top", "type": "fluid_pressure", "value": "1"}, {"boundary": "top", "type": "fluid_pressure", "value": "2"}],
+     "boundary 'top' is given two Dirichlet conditions on p"),
+    ([{"boundary": "top", "type": "clamped", "value": ["1", "0"]}],
+     "boundary condition 'clamped' on 'top' is u = 0 and takes no value"),
+])
+def test_conflicting_or_contradictory_dirichlet_conditions_are_one_line(tables, message):
+    with pytest.raises(ConfigError) as failure:
+        conditions(*tables)
+    assert message in str(failure.value) and "\n" not in str(failure.value)
+
+
+def test_conditions_of_different_fields_or_boundaries_may_meet():
+    clamp, pressure, spring, zero = conditions({"boundary": "left", "type": "clamped"},
+                                               {"boundary": "left", "type": "fluid_pressure", "value": "0"},
+                                               {"boundary": "right", "type": "robin", "value": "x[1]"},
+                                               {"boundary": "bottom", "type": "clamped", "value": ["0", "0.0"]})
+    spring.check(MESH.points[np.unique(MESH.boundaries["right"])], [0.0, 1.0])
+
+
+def test_a_negative_spring_stiffness_is_one_line():
+    (spring,) = conditions({"boundary": "right", "type": "robin", "value": "1 - t"})
+    points = MESH.points[np.unique(MESH.boundaries["right"])]
+    spring.check(points, [0.0, 1.0])
+    with pytest.raises(ConfigError) as failure:
+        spring.check(points, [0.0, 2.0])
+    assert "'robin' on 'right': the stiffness '1 - t' must be >= 0, got -1 at x = (2, 0), t = 2" in str(failure.value)
+
+
+def test_a_slanted_normal_displacement_is_refused_before_the_run():
+    # It was found only when the constraint was made: `primordia run --dry-run` called the input valid.
+    from primordia.model import Model
+
+    slanted = MeshData(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([[0, 1, 2]]),
+                       {"hypotenuse": np.array([[1, 2]]), "legs": np.array([[0, 1], [0, 2]])})
+    held = [{"boundary": "legs", "type": "clamped"}, {"boundary": "hypotenuse", "type": "normal_displacement"}]
+    with pytest.raises(ConfigError, match="normal_displacement on 'hypotenuse' needs a flat boundary"):
+        Model(physics=["poroelasticity"], parameters={"E": 100.0, "nu": 0.3}, mesh=slanted, dt=0.1, t_final=0.2,
+              physics_options={"poroelasticity": {"boundary": held}})

@@ -244,6 +244,24 @@ def test_a_boundary_formula_that_cannot_be_evaluated_is_refused_when_read(capsys
     assert_one_line(status, stderr, *fragments)
 
 
+BAD_CONDITIONS = [
+    ('[{boundary="bottom", type="clamped"}, {boundary="bottom", type="displacement", value=["0.1", "0"]}]',
+     ["boundary 'bottom' is given two Dirichlet conditions on u ('clamped' and 'displacement')"]),
+    ('[{boundary="top", type="fluid_pressure", value="1"}, {boundary="top", type="fluid_pressure", value="2"}]',
+     ["boundary 'top' is given two Dirichlet conditions on p"]),
+    ('[{boundary="top", type="clamped", value=["1", "0"]}]', ["'clamped' on 'top' is u = 0 and takes no value"]),
+    ('[{boundary="bottom", type="clamped"}, {boundary="top", type="robin", value="0.1 - t"}]',
+     ["'robin' on 'top'", "must be >= 0", "t = 0.1"]),
+]
+
+
+@pytest.mark.parametrize("conditions, fragments", BAD_CONDITIONS, ids=["clamped-and-displacement", "two-pressures",
+                                                                      "clamped-with-a-value", "negative-springs"])
+def test_contradictory_conditions_are_refused_when_read(capsys, conditions, fragments):
+    status, stderr = in_process(capsys, "run", EX01B, *EX01B_COARSE, "--set", f"{BOUNDARY}={conditions}", "--dry-run")
+    assert_one_line(status, stderr, *fragments)
+
+
 def test_a_boundary_formula_through_the_real_command(primordia_cli, tmp_path):
     condition = '[{boundary="bottom", type="displacement", value=["0", "1/x[1]"]}]'
     result = primordia_cli("run", EX01B, *EX01B_COARSE, "--set", f"{BOUNDARY}={condition}", "--out",
