@@ -53,6 +53,7 @@ class _Group:
     current: Any
     previous: Any
     rate: Any | None = None
+    span: Any | None = None  # a constant: the length of the sub-step that last advanced the group (span())
 
     def index(self, field: str) -> int | None:
         return None if len(self.fields) == 1 else self.fields.index(field)
@@ -63,7 +64,7 @@ class Discretisation:
 
     What physics reads: ``mesh_data``, ``gdim``, ``dx``, ``dx_lumped``, ``ds(boundary)``, ``x``,
     ``n``, ``t`` (time at the end of the step, a UFL constant), ``dt``, ``time`` (a float),
-    ``field``, ``previous``, ``rate``, ``test``, ``trial``, ``unknown``, ``kinematics``.
+    ``field``, ``previous``, ``rate``, ``span``, ``test``, ``trial``, ``unknown``, ``kinematics``.
     What physics declares: ``provide``, ``provide_kinematics``, ``contribute``.
     """
 
@@ -149,6 +150,19 @@ class Discretisation:
         if group.rate is None:
             group.rate = self.backend.function(group.space, f"{group.name}_rate")
         return self._component(name, group.rate, "rate")
+
+    def span(self, name: str) -> Expr:
+        """The length of the sub-step that last advanced ``name``'s group, a constant.
+
+        (field - previous) / span is that field's rate over its own last sub-step, which is what a
+        module reading another module's field wants: under ``strang`` the chemistry's half step when
+        the mechanics runs over the whole dt, where (m - m^n) / dt halved dm/dt.  When both are
+        solved in one sub-step (``fixed_point``, ``monolithic``, or in turn within one step) it is dt.
+        """
+        group = self._group(name)
+        if group.span is None:
+            group.span = self.backend.constant(self.mesh, float(self.dt.value))
+        return group.span
 
     def rate_function(self, name: str) -> ufl.Coefficient:
         """The backend function holding the rate of ``name``'s group (e.g. for an initial-rate solve)."""
@@ -353,6 +367,8 @@ class Discretisation:
         for name in groups or self._groups:
             group = self._groups[name]
             self.backend.local_array(group.previous)[:] = self.backend.local_array(group.current)
+            if group.span is not None:  # this sub-step advances the group over dt
+                group.span.value = self.dt.value
 
     def update_rates(self, dt: float, groups: Sequence[str] | None = None) -> None:
         """rate <- (current - previous) / dt for every group (or the given ones) whose rate is used."""
