@@ -398,6 +398,7 @@ class Simulation:
         self._solver_dt = self.last_dt
         self._checkpoint_step = self.step_index
         self.disc.set_time(self.time, self.last_dt)
+        self.disc.restore_spans(self.last_dt)  # what a module reading another's field before it runs divides by
         self._state_version += 1
 
     def _checkpoint_order(self, key: str, function) -> tuple[np.ndarray, np.ndarray] | None:

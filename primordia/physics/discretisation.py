@@ -164,6 +164,12 @@ class Discretisation:
             group.span = self.backend.constant(self.mesh, float(self.dt.value))
         return group.span
 
+    def restore_spans(self, dt: float) -> None:
+        """After a restart: every group was last advanced by the checkpointed run's last sub-step, of ``dt``."""
+        for group in self._groups.values():
+            if group.span is not None:
+                group.span.value = dt
+
     def rate_function(self, name: str) -> ufl.Coefficient:
         """The backend function holding the rate of ``name``'s group (e.g. for an initial-rate solve)."""
         self.rate(name)
