@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core import config as config_
-from primordia.core.errors import ConfigError, PluginError, PrimordiaError
+from primordia.core.errors import ConfigError, PluginError, plugin_code
 from primordia.core.mesh_data import MeshData
 from primordia.core.parameters import Parameter, ParameterSet
 from primordia.core.plugins import lookup, registry
@@ -287,9 +287,9 @@ def _declarations(pieces) -> list[Parameter]:
                                   f"{parameter.default!r}, not a valid value of it: {error}") from None
             if parameter.name in owners and owners[parameter.name][0].default != parameter.default:
                 first, first_owner = owners[parameter.name]
-                raise PluginError(f"parameter {parameter.name} is declared by {first_owner} (default {first.default:g}) "
-                                  f"and by {owner} (default {parameter.default:g}): one model has one value per "
-                                  f"name, so one of them must rename it")
+                raise PluginError(f"parameter {parameter.name} is declared by {first_owner} (default "
+                                  f"{first.default:g}) and by {owner} (default {parameter.default:g}): one model has "
+                                  f"one value per name, so one of them must rename it")
             owners.setdefault(parameter.name, (parameter, owner))
             declarations.append(parameter)
     return declarations
@@ -298,14 +298,9 @@ def _declarations(pieces) -> list[Parameter]:
 def _construct(label: str, cls, *args, **kwargs):
     """``cls(*args, **kwargs)`` for a piece of the model; a piece whose constructor fails other than with a
     one-line error of primordia (a bug of its plugin) is one line naming it, not a traceback."""
-    try:
+    with plugin_code(f"{label} {getattr(cls, 'name', cls.__name__)} ({cls.__module__}.{cls.__qualname__}) "
+                     f"could not be set up"):
         return cls(*args, **kwargs)
-    except PrimordiaError:
-        raise
-    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
-        reason = "; ".join(line for line in f"{type(error).__name__}: {error}".splitlines() if line.strip())
-        raise PluginError(f"{label} {getattr(cls, 'name', cls.__name__)} ({cls.__module__}.{cls.__qualname__}) "
-                          f"could not be set up: {reason}") from error
 
 
 def _unique_fields(modules, kinetics) -> list[str]:

@@ -8,6 +8,8 @@ stopped by a signal raises :class:`InterruptedRun` (a ``KeyboardInterrupt``):
 it is reported as interrupted, never as a mistake in the input.
 """
 
+import contextlib
+
 
 class PrimordiaError(Exception):
     """A problem with the user's input, stated in one line."""
@@ -23,6 +25,24 @@ class MeshError(PrimordiaError):
 
 class PluginError(PrimordiaError):
     """A named backend, physics, kinetics, scheme or output is not registered."""
+
+
+def one_line(error: BaseException) -> str:
+    """An exception in one line: its type and message, a message of several lines (pluggy's) joined."""
+    lines = [line.strip() for line in f"{type(error).__name__}: {error}".splitlines() if line.strip()]
+    return "; ".join(lines) or type(error).__name__
+
+
+@contextlib.contextmanager
+def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaError,)):
+    """Run a plugin's code: an exception other than ``passes`` (a bug of the plugin) becomes one line,
+    ``PluginError("<what>: <the exception in one line>")``, its traceback kept as the cause."""
+    try:
+        yield
+    except passes:
+        raise
+    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
+        raise PluginError(f"{what}: {one_line(error)}") from error
 
 
 class SolverError(PrimordiaError):

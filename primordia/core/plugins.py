@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import pluggy
 
 from primordia.core import hookspecs
-from primordia.core.errors import PluginError
+from primordia.core.errors import PluginError, one_line
 
 hookimpl = pluggy.HookimplMarker("primordia")
 
@@ -132,7 +132,7 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
             pm.register(plugin, name=entry_point.name)
             _check_hook_names(pm, plugin, entry_point.name)
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
-            message = f"plugin '{entry_point.name}' ({origin}) failed to load and is skipped: {_reason(exc)}"
+            message = f"plugin '{entry_point.name}' ({origin}) failed to load and is skipped: {one_line(exc)}"
             pm.load_report.report(entry_point.name, message)
             continue
         pm.load_report.sources[entry_point.name] = origin
@@ -169,12 +169,6 @@ def _distribution_label(entry_point) -> str:
     return f"{dist.metadata['Name']} {dist.version}"
 
 
-def _reason(exc: BaseException) -> str:
-    """The exception in one line (a message of several lines, such as pluggy's validation errors, joined)."""
-    lines = [line.strip() for line in f"{type(exc).__name__}: {exc}".splitlines() if line.strip()]
-    return "; ".join(lines) or type(exc).__name__
-
-
 def _origin(pm, plugin_name: str) -> str:
     return pm.load_report.sources.get(plugin_name, plugin_name)
 
@@ -208,7 +202,7 @@ def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
     try:
         pieces = impl.function()
     except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
-        pm.load_report.report(plugin, f"{where} raised {_reason(exc)}; its {kind.replace('_', ' ')} are skipped")
+        pm.load_report.report(plugin, f"{where} raised {one_line(exc)}; its {kind.replace('_', ' ')} are skipped")
         return {}
     if pieces is None:
         return {}
@@ -274,7 +268,7 @@ def choose(hook_name: str, validate, pm: pluggy.PluginManager | None = None, **k
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
             if plugin in DEFAULT_PLUGINS:
                 raise
-            pm.load_report.report(plugin, f"{where} raised {_reason(exc)}; it is skipped")
+            pm.load_report.report(plugin, f"{where} raised {one_line(exc)}; it is skipped")
             continue
         if answer is None:
             continue

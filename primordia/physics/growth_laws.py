@@ -49,7 +49,7 @@ import numpy as np
 import ufl
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import ConfigError, PluginError, PrimordiaError
+from primordia.core.errors import ConfigError, PluginError, plugin_code
 from primordia.core.parameters import Parameter
 
 #: Regularisation of the square roots of growth factors (see the module docstring).
@@ -134,16 +134,12 @@ def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: 
     """``law.factors(...)``, checked: one scalar (a number or a UFL expression) per direction, ``dimension`` of
     them.  A law that breaks this, or whose code fails, is one line naming it (:class:`PluginError`)."""
     where = f"growth law {law.name}"
-    try:
-        gammas = law.factors(fields, t, X, dimension)
-    except PrimordiaError:
-        raise
-    except KeyError as error:
-        raise PluginError(f"{where}: factors read the field {error}, which is not in its requires "
-                          f"({', '.join(law.requires) or 'none'})") from error
-    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
-        reason = "; ".join(line for line in f"{type(error).__name__}: {error}".splitlines() if line.strip())
-        raise PluginError(f"{where}: factors failed: {reason}") from error
+    with plugin_code(f"{where}: factors failed"):
+        try:
+            gammas = law.factors(fields, t, X, dimension)
+        except KeyError as error:
+            raise PluginError(f"{where}: factors read the field {error}, which is not in its requires "
+                              f"({', '.join(law.requires) or 'none'})") from error
     if not isinstance(gammas, (list, tuple)) or len(gammas) != dimension:
         raise PluginError(f"{where}: factors must return {dimension} growth factors in {dimension}D "
                           f"(one per direction k_i), got "

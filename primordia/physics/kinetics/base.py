@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import PluginError
+from primordia.core.errors import PluginError, plugin_code
 from primordia.core.parameters import Parameter
 
 
@@ -190,10 +190,6 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
 
 
 def _call(kinetics: Kinetics, method: str, *args):
-    try:
+    # arithmetic that fails (ValueError: a math domain error) is blamed on the parameters, by the caller
+    with plugin_code(f"kinetics {kinetics.name}: {method} failed", passes=(PluginError, ArithmeticError, ValueError)):
         return getattr(kinetics, method)(*args)
-    except (PluginError, ArithmeticError, ValueError):  # ValueError: a math domain error, blamed on parameters
-        raise
-    except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
-        reason = "; ".join(line for line in f"{type(error).__name__}: {error}".splitlines() if line.strip())
-        raise PluginError(f"kinetics {kinetics.name}: {method} failed: {reason}") from error
