@@ -46,6 +46,7 @@ from primordia.coupling.solver_options import (
     FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
     depends_on_step, petsc_reason, read_options)
 
+
 def petsc_failure(solve: str, code: int, reason: str, prefix: str) -> SolverError:
     """One line for a solve PETSc stopped with error ``code``: which solve, PETSc's reason, where the options
     are; a usage error (:func:`~primordia.coupling.solver_options.depends_on_step`) is not retried smaller."""
@@ -667,7 +668,8 @@ class _OnOneRank:
         """(Krylov iterations, converged reason) of the owner's solve, on every rank."""
         iterations, reason, error = self._comm.bcast(self._outcome, root=self.owner)
         if error:
-            raise petsc_failure(f"{self.name}: the linear solve on rank {self.owner}", *error, self.ksp.getOptionsPrefix())
+            raise petsc_failure(f"{self.name}: the linear solve on rank {self.owner}", *error,
+                                self.ksp.getOptionsPrefix())
         return int(iterations), int(reason)
 
 

@@ -46,7 +46,7 @@ class SplittingScheme(Configured, ABC):
         self.settings: dict = merge_options(f"coupling scheme '{self.name}'", self.options, given)
         number(self.settings.get("inner_steps", 1), "coupling.inner_steps", at_least=1, integer=True)
         for module in physics:
-            module.check_scheme(self.name, self.settings.get("inner_steps", 1), physics)
+            module.check_scheme(self, physics)
 
     def field_groups(self, physics: list) -> dict[str, list]:
         """Which fields are solved together: by default, as each module groups its own."""

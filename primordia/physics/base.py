@@ -181,9 +181,10 @@ class Physics(Configured, ABC):
     def check_composition(self, modules: list["Physics"]) -> None:
         """Refuse, in one line (:class:`ConfigError`), a model this module cannot join."""
 
-    def check_scheme(self, scheme: str, inner_steps: int, modules: list["Physics"]) -> None:
+    def check_scheme(self, scheme, modules: list["Physics"]) -> None:
         """Refuse, in one line (:class:`ConfigError`), a splitting scheme this module's discretisation is
-        wrong under (``scheme``: its name; ``inner_steps``: its sub-steps per step)."""
+        wrong under (``scheme``: the :class:`~primordia.coupling.splitting.SplittingScheme`, its ``name``
+        and its ``settings`` set)."""
 
     @abstractmethod
     def fields(self) -> list[FieldSpec]:

@@ -165,7 +165,7 @@ class Chemotaxis(Physics):
             raise ConfigError(f"{where}: the initial state of {bad} is not finite with these parameters; are "
                               f"they in the model's (dimensionless) units?")
 
-    def check_scheme(self, scheme: str, inner_steps: int, modules) -> None:
+    def check_scheme(self, scheme, modules) -> None:
         """The conservative accumulation on a growing tissue is refused under ``strang``.
 
         It balances J c - J_prev c^n with J_prev the start of the mechanics' last sub-step. Strang
@@ -176,7 +176,7 @@ class Chemotaxis(Physics):
         to it with dt: 1.035 at dt = 0.2; with two inner steps 1.060 at dt = 0.2 and 1.004 at 0.05).
         """
         growing = [module.name for module in modules if module.finite_strain]
-        if self.settings["accumulation"] == "conservative" and growing and scheme == "strang":
+        if self.settings["accumulation"] == "conservative" and growing and scheme.name == "strang":
             raise ConfigError(f"physics.chemotaxis.accumulation = \"conservative\" on a growing tissue "
                               f"({', '.join(growing)}) cannot be split by the strang scheme: its two half steps "
                               f"would count each volume change twice; use fixed_point, monolithic or sequential")
