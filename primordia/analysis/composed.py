@@ -534,7 +534,11 @@ def seed_model_values(linear: LinearisedModel):
     The seed's model (:data:`SEED_PHYSICS`) read as the composed one: xi_f = 0 where the model
     has no volume sink and tau = 0 where it has no active stress (the loop is then open, seed
     section 3.4), rather than Table 3.1's xi_f = 0.15 and tau = 60 for couplings it does not have.
+    A ConfigError when the seed's model does not describe ``linear``'s: another kinetics.
     """
+    if linear.kinetics != "painter2018":
+        raise ConfigError(f"{linear.name or 'the model'} uses kinetics {linear.kinetics}: the seed's model "
+                          f"(kinetics painter2018) does not describe it")
     kinds = {type(term) for term in linear.terms}
     values = seed_values(linear.parameters)
     values = values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,

@@ -246,3 +246,19 @@ def test_public_api_names_resolve_lazily():
         assert callable(getattr(analysis, name)), name
     with pytest.raises(AttributeError):
         analysis.no_such_function  # noqa: B018
+
+
+@pytest.mark.parametrize("example, refusal", [("ex02a.toml", "grows at finite strain"),
+                                              ("schnakenberg.toml", "uses kinetics schnakenberg")])
+def test_the_sweep_map_has_no_seed_analysis_for_a_growing_tissue_or_another_kinetics(example, refusal):
+    """The sweep map's overlay is the seed's analysis read as the model that runs: none for a
+    growing tissue (seed section 6) or a plugin's kinetics, rather than Table 3.1's model."""
+    from primordia.analysis.patterns.run import linear_model
+    from primordia.core.config import load_config
+
+    with pytest.raises(ConfigError, match=refusal):
+        linear_model(load_config(EXAMPLES / example))
+    params, coupled = linear_model(load_config(EXAMPLES / "ex01b.toml"))
+    assert coupled and (params["tau"], params["xi_f"]) == (0.001, 0.001)
+    params, coupled = linear_model(load_config(EXAMPLES / "ex01a.toml"))
+    assert not coupled and (params["tau"], params["xi_f"]) == (0.0, 0.0)

@@ -63,23 +63,28 @@ class PredictedMode(NamedTuple):
 
 
 def linear_model(config: Mapping):
-    """The linear analysis's view of a configuration: (Table 3.1 parameters with its overrides, coupled?).
+    """The seed's model read as a configuration's: (Table 3.1 parameters with its values, coupled?).
 
-    Coupled when ``model.physics`` has the mechano-chemical couplings, the FGF sink
-    (``mechanochemical``) and the active stress; otherwise the chemistry does not feel
-    the mechanics and the uncoupled analysis applies (xi_f = 0 without the sink, tau = 0
-    without the active stress, seed section 3.4).  A ConfigError if the seed's analysis
-    does not describe the model (e.g. a plugin's kinetics with parameters of its own).
+    The linearisation of the model the configuration composes
+    (:func:`primordia.analysis.composed.seed_model_values`): xi_f = 0 without the FGF
+    sink, tau = 0 without the active stress, coupled with both (seed section 3.4).  A
+    ConfigError when the seed's analysis does not describe the model: a plugin's
+    kinetics, or a growing tissue (seed section 6).
     """
-    from primordia.physics.seed_parameters import seed_parameters
+    from primordia.analysis.composed import linearise_model, seed_model_values
 
-    physics = config.get("model", {}).get("physics", ["chemotaxis"])
-    params = seed_parameters(**config.get("parameters", {}))
-    if "active_stress" not in physics:
-        params = params.replace(tau=0.0)
-    if "mechanochemical" not in physics:
-        params = params.replace(xi_f=0.0)
-    return params, "mechanochemical" in physics and "active_stress" in physics
+    return seed_model_values(linearise_model(_composed_model(config)))
+
+
+def _composed_model(config: Mapping):
+    """The :class:`~primordia.model.Model` of a configuration's composition (any mesh and times will do)."""
+    from primordia.model import Model
+
+    # a run's metadata may lack a mesh or times
+    composition = {key: value for key, value in config.items() if key != "output"}
+    composition.setdefault("mesh", {"type": "rectangle", "upper": [1.0, 1.0], "cells": [1, 1]})
+    composition["time"] = {"dt": 1.0, "t_final": 1.0}
+    return Model.from_config(composition)
 
 
 def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
@@ -94,18 +99,13 @@ def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
     growing tissue's chemistry keeps its diffusivities).
     """
     from primordia.analysis.composed import linearise_model
-    from primordia.model import Model
 
     if not isinstance(config, Mapping):
         from primordia.core.config import load_config
 
         config = load_config(config)
-    # only the composition matters: a run's metadata may lack a mesh or times, and any will do
-    composition = {key: value for key, value in config.items() if key != "output"}
-    composition.setdefault("mesh", {"type": "rectangle", "upper": [1.0, 1.0], "cells": [1, 1]})
-    composition["time"] = {"dt": 1.0, "t_final": 1.0}
     try:
-        model = Model.from_config(composition)
+        model = _composed_model(config)
         growing = any(module.finite_strain for module in model.physics_objects)
         linear = linearise_model(model, chemistry_only=growing)
     except ConfigError as error:
