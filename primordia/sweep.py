@@ -80,6 +80,8 @@ class Axis:
             raise ConfigError(f"--vary {text}: LO and HI must be numbers and N an integer") from None
         if count < 1 or (count == 1 and low != high) or not (np.isfinite(low) and np.isfinite(high)):
             raise ConfigError(f"--vary {text}: need N >= 1 finite values (N = 1 only with LO = HI)")
+        if low > high:  # as stability map's axes: the sweep's coordinates and map axes increase
+            raise ConfigError(f"--vary {text}: LO must not exceed HI (the values go from LO up to HI)")
         if count > 1 and low == high:  # N copies of one run, all writing into one folder
             raise ConfigError(f"--vary {text}: LO = HI repeats one value {count} times (N = 1 runs it once)")
         values = np.linspace(low, high, count)

@@ -87,7 +87,8 @@ def test_a_run_past_its_timeout_is_recorded_as_failed(small_config, tmp_path):
 
 
 @pytest.mark.parametrize("text", ["parameters.alpha", "alpha=1:2:3", "parameters.alpha=1:2", "parameters.alpha=a:2:3",
-                                  "parameters.alpha=1:2:1", "parameters.alpha=4:4:3"])
+                                  "parameters.alpha=1:2:1", "parameters.alpha=4:4:3",
+                                  "parameters.alpha=6:2:3"])
 def test_malformed_vary(text):
     with pytest.raises(ConfigError):
         Axis.parse(text)
