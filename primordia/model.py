@@ -310,6 +310,9 @@ def _unique_fields(modules, kinetics) -> list[str]:
     for module in modules:
         for spec in module.fields():
             owner = f"physics {module.name}"
+            if not isinstance(spec.name, str) or not spec.name.isidentifier():  # a NetCDF variable, a TOML key
+                raise PluginError(f"{owner}: a field is named {spec.name!r}, not a name (letters, digits and _, "
+                                  f"as a Python identifier)")
             if module.needs_kinetics and kinetics is not None and spec.name in kinetics.species_names:
                 owner += f" (a species of kinetics {kinetics.name})"
             if spec.name in owners:

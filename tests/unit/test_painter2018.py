@@ -196,6 +196,8 @@ def test_sensitivity_is_alpha_exp_minus_gamma_m():
     ((Species("m", "cells", attractant="m"),), "climbs 'm', which is not another"),
     ((Species("m", "cells"), Species("m", "again")), "declares a species twice"),
     ((), "declares no species"),
+    ((Species("cell density", "cells"),), "a species is named 'cell density', not a name"),
+    ((Species("m.1", "cells"),), "a species is named 'm.1', not a name"),
 ])
 def test_an_inconsistent_species_declaration_is_refused(species, message):
     broken = type("Broken", (Painter2018,), {"name": "broken", "species": species})

@@ -17,6 +17,7 @@ from primordia.core.meshes import rectangle
 from primordia.core.parameters import Parameter, ParameterSet
 from primordia.core.plugins import hookimpl, lookup
 from primordia.model import Model
+from primordia.physics.base import FieldSpec, Physics
 from primordia.physics.growth_laws import GrowthLaw
 from primordia.physics.kinetics.base import Kinetics, Species
 from primordia.testing import registered
@@ -242,3 +243,40 @@ def test_a_growth_law_reading_a_field_no_module_provides_is_refused_naming_it():
                                           r"provides \(fields: p, psi, u\)"):
         Model(physics=["poroelastic_growth"], growth_law="seed2d", mesh=rectangle((0, 0), (1, 1), (2, 2)),
               dt=0.1, t_final=0.2, output={"pictures": False})
+
+
+class _Named(Physics):
+    """Owns one field, named by a subclass: nothing else."""
+
+    name = "qa_named"
+    field_name = "q"
+
+    def fields(self):
+        return [FieldSpec(self.field_name)]
+
+    def setup(self, disc):
+        pass
+
+    def initialise(self, disc):
+        pass
+
+    def subproblems(self):
+        return []
+
+
+class PhysicsPlugin:
+    def __init__(self, *physics):
+        self.physics = list(physics)
+
+    @hookimpl
+    def primordia_physics(self):
+        return self.physics
+
+
+@pytest.mark.parametrize("name", ["cell density", "m.1", ""])
+def test_a_field_named_what_no_file_or_key_can_hold_names_the_module(name):
+    """A field is a NetCDF variable, a picture's file name and a TOML key: 'cell density' was accepted."""
+    spaced = type("Spaced", (_Named,), {"name": "qa_spaced", "field_name": name})
+    with registered(PhysicsPlugin(spaced)), pytest.raises(PluginError) as error:
+        Model(physics=["qa_spaced"], mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.2, t_final=0.4)
+    assert str(error.value).startswith(f"physics qa_spaced: a field is named {name!r}, not a name")

@@ -139,9 +139,12 @@ def check_species(kinetics: Kinetics) -> None:
     if not isinstance(kinetics.species, (list, tuple)) or not all(isinstance(s, Species) for s in kinetics.species):
         raise PluginError(f"{where}: its species must be a tuple of primordia.physics.kinetics.base.Species, "
                           f"got {kinetics.species!r}")
-    bad_name = next((s.name for s in kinetics.species if not isinstance(s.name, str) or not s.name.strip()), None)
+    # a species is a field: its name is a NetCDF variable, a file name, a TOML key and a name in expressions
+    bad_name = next((s.name for s in kinetics.species if not isinstance(s.name, str) or not s.name.isidentifier()),
+                    None)
     if bad_name is not None:
-        raise PluginError(f"{where}: a species is named {bad_name!r}, not a name")
+        raise PluginError(f"{where}: a species is named {bad_name!r}, not a name (letters, digits and _, "
+                          f"as a Python identifier)")
     names = [s.name for s in kinetics.species]
     if not names:
         raise PluginError(f"{where} declares no species")
