@@ -44,6 +44,31 @@ def test_the_controller_halves_on_failure_and_grows_back_in_aligned_steps():
     assert not StepController(dt=0.2, dt_min=0.01, adaptive=False).rejected()
 
 
+def test_a_larger_step_that_fails_again_at_once_is_tried_after_twice_as_many_good_ones():
+    """A dt that stays too large cost one failed sub-step in three: halve, two good halves, fail again."""
+    controller = StepController(dt=1.0, dt_min=1.0 / 64)
+    waits = []
+    for _ in range(4):  # each grow-back fails at once
+        assert controller.rejected() and controller.level == 1
+        good = 0
+        while controller.level == 1:
+            good += 1
+            controller.accepted(1.0 if good % 2 == 0 else 0.5)
+        waits.append(good)
+    assert waits == [2, 4, 8, 16]
+    controller.accepted(1.0)  # the whole step holds this time: the wait is back to two
+    assert controller.rejected()
+    controller.accepted(0.5)
+    controller.accepted(1.0)
+    assert controller.level == 0
+    state = controller.state()
+    restored = StepController(dt=1.0, dt_min=1.0 / 64)
+    restored.restore(state)
+    assert restored.state() == state
+    restored.restore({"level": 1, "streak": 1})  # a checkpoint from before the wait doubled
+    assert (restored.wait, restored.grown) == (0, False)
+
+
 #: A third-party splitting scheme that fails whenever it is asked for a whole step 3 (t = 0.4 -> 0.6),
 #: and, asked for the first half of step 4, leaves a negative cell density behind.
 FLAKY_SCHEME = """\
@@ -89,7 +114,9 @@ def test_an_injected_failure_is_retried_smaller_and_recorded(primordia_cli, smal
         grid[3], grid[6] = 0.6, 1.2  # ...but the steps of output times reach them as given (3 x 0.2 != 0.6)
         np.testing.assert_array_equal(times, grid)
         dt = list(series["dt"].values)
-        assert dt[2] == 0.2 and dt[3] == 0.1 and dt[4] == 0.1 and dt[5] == 0.2  # halved, then grown back
+        # halved in step 3 and grown back; step 4's whole step failed at once, so the next try waits four
+        # half steps (steps 4 and 5), not two
+        assert dt[2] == 0.2 and dt[3] == dt[4] == dt[5] == 0.1 and dt[6] == 0.2
         np.testing.assert_array_equal(series["rejection_time"].values[:2], [grid[2], grid[3]])
         np.testing.assert_array_equal(series["rejection_dt"].values, [0.2, 0.2, 0.2, 0.1, 0.05])
         reasons = [str(r) for r in series["rejection_reason"].values]
