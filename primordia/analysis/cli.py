@@ -1,11 +1,12 @@
 """The ``primordia stability`` command (linear stability analysis, seed section 3).
 
     primordia stability [CONFIG.toml] [--set section.key=value ...] [--uncoupled] [--chemistry-only] [--d 2|3]
-                        [--out DIR]
+                        [--domain L1,L2[,L3]] [--out DIR]
         the analysis of the model CONFIG composes (the one `primordia run CONFIG` runs), derived from its
         own equations: homogeneous steady state, fastest-growing mode (k_max, wavelength 2 pi / k_max),
         the dispersion curves as DIR/dispersion.nc + DIR/dispersion.png; for the seed's kinetics also
         the cross-check with the seed's hand-derived matrix and the verdicts of seed sections 3.2-3.6.
+        On a box (the mesh's, or --domain) also the zero-flux cosine modes in the unstable band.
         A file without [model] (or none) is a parameter set of the seed's full model.
 
     primordia stability map [CONFIG.toml] --x NAME:LO:HI:N --y NAME:LO:HI:N [--coupled|--uncoupled]
@@ -55,6 +56,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                              "(the only analysis of a finite-strain growth model)")
     parser.add_argument("--d", type=int, choices=(2, 3), default=None,
                         help="space dimension (default: the mesh's, else 2)")
+    parser.add_argument("--domain", metavar="L1,L2[,L3]",
+                        help="the box whose zero-flux modes are listed (default: the mesh's, if it is a box)")
     parser.add_argument("--out", help=f"output directory (default {DEFAULT_OUT}/...)")
     parser.add_argument("--x", metavar="NAME:LO:HI:N", help="map: first parameter axis")
     parser.add_argument("--y", metavar="NAME:LO:HI:N", help="map: second parameter axis")
@@ -83,6 +86,8 @@ def run(args) -> int:
     if problem is not None:
         raise ConfigError(problem)
     if mapping:
+        if args.domain:
+            raise ConfigError("--domain applies to 'primordia stability' (the dispersion relation), not to map")
         return _run_map(args, config, stem)
     if args.x or args.y or args.critical or args.theta is not None or args.nk is not None:
         raise ConfigError("--x, --y, --critical, --theta and --nk apply to 'primordia stability map'")
@@ -90,17 +95,34 @@ def run(args) -> int:
 
 
 def _compose(args, config):
-    """(the model's linearisation, its parameters, the space dimension) from the command line."""
+    """(the model's linearisation, its parameters, the space dimension, its box) from the command line.
+
+    The box: the side lengths the admissible modes are those of (``--domain``, else the
+    model's mesh if it fills its bounding box), or a string saying why there are none.
+    """
     from primordia.analysis.composed import linearise_model, linearise_seed
+    from primordia.analysis.domain import box_lengths, parse_lengths
     from primordia.analysis.inputs import read_model, read_parameters
 
     model = read_model(config, args.overrides) if config is not None else None
     uncoupled = args.coupled is False
     if model is None:
         params = read_parameters(config, args.overrides)
-        return linearise_seed(params, args.chemistry_only, uncoupled), params, args.d or 2
+        d = args.d or (len(args.domain.split(",")) if args.domain else 2)
+        box = parse_lengths(args.domain, d) if args.domain else None
+        return linearise_seed(params, args.chemistry_only, uncoupled), params, d, box
     linear = linearise_model(model, args.chemistry_only, uncoupled)
-    return linear, model.parameters, args.d or model.mesh_data.points.shape[1]
+    gdim = model.mesh_data.points.shape[1]
+    d = args.d or gdim
+    if args.domain:
+        box = parse_lengths(args.domain, d)
+    elif any(module.finite_strain for module in model.physics_objects):
+        box = "the tissue grows, and its modes with it"
+    elif d != gdim:
+        box = f"the mesh is {gdim}D; --domain L1,...,L{d} gives a box"
+    else:
+        box = box_lengths(model.mesh_data) or "the mesh does not fill its bounding box; --domain gives a box"
+    return linear, model.parameters, d, box
 
 
 def _output_directory(args, *parts) -> Path:
@@ -117,11 +139,12 @@ def _describe(params, defaults: str = "Table 3.1") -> str:
 
 def _run_dispersion(args, config, stem) -> int:
     from primordia.analysis.composed import seed_cross_check
+    from primordia.analysis.domain import domain_modes, with_domain_modes
     from primordia.analysis.figures import dispersion_figure
     from primordia.analysis.patterning import model_dispersion_relation, save_dataset
 
     start = time.perf_counter()
-    linear, params, d = _compose(args, config)
+    linear, params, d, box = _compose(args, config)
     print(f"primordia stability: {linear.name or 'model'}: {linear.describe()}; d = {d}")
     defaults = "Table 3.1" if linear.kinetics == "painter2018" else f"the defaults of {linear.kinetics}"
     print(f"  parameters: {_describe(params, defaults)}")
@@ -131,7 +154,15 @@ def _run_dispersion(args, config, stem) -> int:
     held = f" ({', '.join(rest.conserved)} conserved, held at the initial value)" if rest.conserved else ""
     print(f"  homogeneous steady state: {rest}{held}")
     print(f"  fastest-growing mode: {_mode_text(linear.fastest_mode())}")
-    print(f"  fastest stationary (Turing) mode: {_mode_text(linear.fastest_mode('stationary'))}")
+    turing = linear.fastest_mode("stationary")
+    print(f"  fastest stationary (Turing) mode: {_mode_text(turing)}")
+    modes = None
+    if isinstance(box, tuple):
+        modes = domain_modes(linear.rates, box, turing.band)
+        walls = "; with mechanics, exact for slip walls only" if linear.mechanics is not None else ""
+        print(f"  {modes.describe()}{walls}")
+    elif box is not None:
+        print(f"  admissible modes: none listed ({box})")
     difference = seed_cross_check(linear, d=d)
     if difference is not None:
         print(f"  cross-check: the seed's hand-derived M(phi, k) (Definition 3.1, corrected) equals the derived one "
@@ -139,6 +170,8 @@ def _run_dispersion(args, config, stem) -> int:
         for verdict in _seed_verdicts(linear, params):
             print(f"  {verdict}")
     ds = model_dispersion_relation(linear, d=d)
+    if modes is not None:
+        ds = with_domain_modes(ds, modes)
     out = _output_directory(args, stem)
     netcdf = save_dataset(ds, out / "dispersion.nc")
     figure = out / "dispersion.png"

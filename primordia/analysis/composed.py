@@ -359,6 +359,7 @@ class LinearisedModel:
             M0, M1, M2 = made_real((M0, M1, M2), d_u)
         size = M0.shape[-1] + d_u
         roots = pencil_roots(M0.real, M1.real, self.mechanics.rho if d_u else 0.0, d_u, self._method(), size)
+        roots = roots.astype(complex, copy=False)  # real where every root is: the kinetics' rates at k = 0 may not be
         at_rest = k == 0
         if np.any(at_rest):  # every coupling carries k: the kinetics' rates, and 0 for the mechanics
             chemistry = np.linalg.eigvals(self.reaction_jacobian).astype(complex)
