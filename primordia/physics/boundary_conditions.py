@@ -104,6 +104,10 @@ class Condition:
     def update(self, disc, t: float) -> None:
         """Refresh time-dependent prescribed values (Dirichlet kinds)."""
 
+    def rates(self, disc, t: float, dt: float) -> list:
+        """Constraints on the field's rate over [t, t + dt]: the prescribed value's secant, new objects each call."""
+        return self.homogeneous(disc)
+
 
 class _Dirichlet(Condition):
     """Prescribes (part of) a field; value formulas are evaluated at the DOF points."""
@@ -132,6 +136,12 @@ class _Dirichlet(Condition):
         if self.formula.depends_on_time():
             for bc in self._bcs:
                 disc.update_dirichlet_bc(bc, self._values(t))
+
+    def rates(self, disc, t, dt):
+        if not self.formula.depends_on_time():
+            return self.homogeneous(disc)
+        secant = lambda x: (self.formula.numpy(x, t + dt) - self.formula.numpy(x, t)) / dt  # noqa: E731
+        return [disc.dirichlet_bc(self.field, self.boundary, secant, self._component(disc))]
 
 
 class Clamped(_Dirichlet):
@@ -251,6 +261,10 @@ class Conditions(list):
         """Refresh every time-dependent prescribed value for time ``t``."""
         for condition in self:
             condition.update(disc, t)
+
+    def rates(self, disc, t: float, dt: float) -> list:
+        """Every condition's constraints on the rate over [t, t + dt] (the secant of a time-dependent value)."""
+        return [bc for condition in self for bc in condition.rates(disc, t, dt)]
 
 
 def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:

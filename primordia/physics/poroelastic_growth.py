@@ -59,6 +59,7 @@ velocity (seed (4.17a)-(4.17d)).
 
 from __future__ import annotations
 
+import numpy as np
 import ufl
 
 from primordia.core.errors import ConfigError
@@ -314,7 +315,8 @@ class PoroelasticGrowth(Physics):
         linear solve for the initial rate of the (u, psi, p) group.  The growth's secant over the
         first step, not its derivative at t_0: the laws' in-plane stretches grow like sqrt(t),
         infinitely fast at t = 0 (u_t at fixed cells: the chemistry's own rate is not known yet;
-        p_t = 0 as p = 0 holds).
+        p_t = 0 as p = 0 holds).  On a boundary with a time-dependent Dirichlet value the rate is
+        that value's secant over the first step, as the growth's is.
         """
         disc = self.disc
         unknown, rate = disc.unknown("u"), disc.rate_function("u")
@@ -327,7 +329,7 @@ class PoroelasticGrowth(Physics):
         solver["petsc_options"].update(ksp_rtol=1e-10, ksp_atol=1e-14, ksp_max_it=2000)
         return Subproblem(name=f"{self.name}.initial_velocity", unknown=rate, residual=residual,
                           jacobian=ufl.derivative(residual, rate), linear=True,
-                          bcs=self.conditions.homogeneous(disc),
+                          bcs=self.conditions.rates(disc, disc.time, float(np.asarray(disc.dt.value))),
                           **solver)
 
     def before_step(self, t, dt):

@@ -184,3 +184,21 @@ def test_a_slanted_normal_displacement_is_refused_before_the_run():
     with pytest.raises(ConfigError, match="normal_displacement on 'hypotenuse' needs a flat boundary"):
         Model(physics=["poroelasticity"], parameters={"E": 100.0, "nu": 0.3}, mesh=slanted, dt=0.1, t_final=0.2,
               physics_options={"poroelasticity": {"boundary": held}})
+
+
+@pytest.mark.parametrize("backend", ["fenicsx", "skfem"])
+def test_the_growing_tissue_starts_with_its_moving_boundary_s_own_rate(backend, tmp_path):
+    """The initial velocity solve (the equilibrium following the growth over the first step) took
+    the rate 0 on every Dirichlet boundary: a boundary prescribed to move at u_x = -t/2 started at rest."""
+    from primordia.core import config as config_
+    from primordia.coupling.orchestrator import Simulation
+    from primordia.model import Model
+
+    config = config_.load_config(Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml")
+    config["mesh"]["cells"], config["time"]["t_final"], config["output"] = [4, 4], 0.4, {"times": [0.4], "pictures": False}
+    config["physics"]["poroelastic_growth"]["boundary"][0]["value"] = "-0.5 * t"  # the left edge, u_x = -t/2
+    sim = Simulation(Model.from_config(config), backend=backend, out_dir=tmp_path / "run").setup()
+    group = sim.disc.rate_function("u")
+    rate = sim.backend.vertex_values(group, sim.disc.function_of("u")[1])
+    left = sim.model.mesh_data.points[:, 0] == 0.0
+    np.testing.assert_allclose(rate[left, 0], -0.5, rtol=1e-12)
