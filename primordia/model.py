@@ -189,6 +189,10 @@ class Model:
         from primordia.core.meshes import mesh_from_config
 
         if isinstance(self._mesh_spec, MeshData):
+            if self._mesh_spec.source() is None:  # built by hand: a file or a generator's is checked already
+                from primordia.core.meshes import check_mesh
+
+                check_mesh(self._mesh_spec)
             return self._mesh_spec
         if isinstance(self._mesh_spec, dict):
             return mesh_from_config(self._mesh_spec, self.base_dir)

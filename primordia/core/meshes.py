@@ -325,11 +325,12 @@ def read_mesh(path: str | Path) -> MeshData:
     boundaries = _tagged_facets(raw, tdim)
     _check_vertex_indices(cells, boundaries, len(points), path)
     points, cells, boundaries = _drop_unused_points(points, cells, boundaries)
-    _check_coordinate_range(points, f"mesh file {path}")
-    _check_not_degenerate(points, cells, path)
+    what = f"mesh file {path}"
+    _check_coordinate_range(points, what)
+    _check_not_degenerate(points, cells, what)
     cells = orient_cells(points, cells)
-    _check_not_overlapping(cells, path)
-    _check_boundary_facets(cells, boundaries, path)
+    _check_not_overlapping(cells, what)
+    _check_boundary_facets(cells, boundaries, what)
     return MeshData(points, cells, boundaries, description=f"read from {path}").remember_source(
         {"type": "file", "path": str(path.expanduser().resolve())})
 
@@ -466,7 +467,7 @@ def _drop_unused_points(points, cells, boundaries):
     return points[used], new_index[cells], kept
 
 
-def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarray], path: Path) -> None:
+def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarray], what: str) -> None:
     """MeshError unless every named facet is an exterior facet of the cells, in one named boundary only.
 
     A boundary condition acts on exterior facets, and a facet carries one boundary tag: a
@@ -492,30 +493,42 @@ def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarra
                                    "mesh's boundary only")):
             bad = np.count_nonzero(in_cells[mine] == count)
             if bad:
-                raise MeshError(f"mesh file {path}: boundary '{name}' has {_facets_text(bad)} {problem}")
+                raise MeshError(f"{what}: boundary '{name}' has {_facets_text(bad)} {problem}")
         shared = owner[mine] >= 0
         if shared.any():
             other = names[owner[mine][shared][0]]
-            raise MeshError(f"mesh file {path}: {_facets_text(np.count_nonzero(shared))} in both boundary '{other}' "
+            raise MeshError(f"{what}: {_facets_text(np.count_nonzero(shared))} in both boundary '{other}' "
                             f"and boundary '{name}' (a facet can carry one boundary name)")
         owner[mine] = index
+
+
+def check_mesh(mesh: MeshData, what: str = "the model's MeshData") -> None:
+    """The checks :func:`read_mesh` makes of a file, for a mesh built by hand (one MeshError line).
+
+    Finite coordinates of a sensible range, no degenerate or overlapping cells, and named
+    facets that are exterior facets of the cells, each in one boundary.
+    """
+    _check_coordinate_range(mesh.points, what)
+    _check_not_degenerate(mesh.points, mesh.cells, what)
+    _check_not_overlapping(orient_cells(mesh.points, mesh.cells), what)
+    _check_boundary_facets(mesh.cells, mesh.boundaries, what)
 
 
 def _facets_text(count: int) -> str:
     return f"{count} facet" if count == 1 else f"{count} facets"
 
 
-def _check_not_degenerate(points: np.ndarray, cells: np.ndarray, path: Path) -> None:
+def _check_not_degenerate(points: np.ndarray, cells: np.ndarray, what: str) -> None:
     """MeshError if any cell has (numerically) zero volume."""
     diagonal = np.linalg.norm(points.max(axis=0) - points.min(axis=0))
     volumes = np.abs(signed_volumes(points, cells))
     degenerate = np.count_nonzero(volumes <= _DEGENERATE_VOLUME_FRACTION * diagonal ** points.shape[1])
     if degenerate:
         kind = "area" if points.shape[1] == 2 else "volume"
-        raise MeshError(f"mesh file {path} has {degenerate} degenerate (zero-{kind}) cells")
+        raise MeshError(f"{what} has {degenerate} degenerate (zero-{kind}) cells")
 
 
-def _check_not_overlapping(cells: np.ndarray, path: Path) -> None:
+def _check_not_overlapping(cells: np.ndarray, what: str) -> None:
     """MeshError if cells overlap: a facet shared by more than two cells, or two cells on the same side of one.
 
     Each facet of a positively oriented cell inherits an orientation (the boundary
@@ -543,7 +556,7 @@ def _check_not_overlapping(cells: np.ndarray, path: Path) -> None:
         cell_of = np.tile(np.arange(len(cells)), cells.shape[1])
         bad = np.concatenate([folded, crowded])
         example = np.unique(cell_of[np.isin(inverse, bad)])[:2]
-        raise MeshError(f"mesh file {path} has overlapping cells ({len(bad)} facets shared by cells on the same "
+        raise MeshError(f"{what} has overlapping cells ({len(bad)} facets shared by cells on the same "
                         f"side or by more than two cells, e.g. cells {', '.join(map(str, example))}): "
                         f"a duplicated or folded element")
 

@@ -441,3 +441,29 @@ def test_config_errors_name_the_problem(tmp_path, table, error, message):
     with pytest.raises(error, match=message) as raised:
         mesh_from_config(table, tmp_path)
     assert "\n" not in str(raised.value)
+
+
+def _two_triangles(**changes):
+    """The unit square as two triangles, boundary 'left' its left edge; ``changes`` replace any part."""
+    parts = {"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
+             "cells": np.array([[0, 1, 2], [0, 2, 3]]), "boundaries": {"left": np.array([[3, 0]])}}
+    parts.update(changes)
+    return MeshData(parts["points"], parts["cells"], parts["boundaries"])
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"boundaries": {"left": np.array([[0, 2]])}}, "boundary 'left' has 1 facet inside the domain"),
+    ({"boundaries": {"left": np.array([[3, 0]]), "west": np.array([[0, 3]])}},
+     "1 facet in both boundary 'left' and boundary 'west'"),
+    ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.0]])}, "has 1 degenerate (zero-area) cells"),
+    ({"cells": np.array([[0, 1, 2], [0, 1, 2]])}, "has overlapping cells"),
+    ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, np.nan], [0.0, 1.0]])}, "some coordinates are not finite"),
+])
+def test_a_mesh_built_by_hand_is_checked_as_a_file_is(changes, message):
+    """A MeshData given to Model was used unchecked: an interior 'left' gave the backends different answers."""
+    from primordia.model import Model
+
+    with pytest.raises(MeshError) as error:
+        Model(physics=["chemotaxis"], mesh=_two_triangles(**changes), dt=0.1, t_final=0.2)
+    assert str(error.value).startswith("the model's MeshData") and message in str(error.value)
+    Model(physics=["chemotaxis"], mesh=_two_triangles(), dt=0.1, t_final=0.2)  # the square itself is fine
