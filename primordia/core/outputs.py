@@ -26,6 +26,7 @@ import json
 import os
 import shutil
 import socket
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -481,4 +482,9 @@ def directory_problem(directory: str | Path) -> str | None:
         return f"the output directory {directory} lies inside {parent}, which is a file"
     if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
         return f"the output directory {directory} cannot be written ({parent} is not writable)"
+    if parent is not None:  # os.access says yes to root everywhere: /proc, a read-only mount
+        try:
+            os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=parent))
+        except OSError as error:
+            return f"the output directory {directory} cannot be created in {parent} ({error.strerror or error})"
     return None

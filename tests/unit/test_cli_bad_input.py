@@ -314,6 +314,12 @@ def test_an_output_directory_that_cannot_be_one(capsys, small_config, tmp_path, 
     assert_one_line(*in_process(capsys, "run", small_config(), "--out", out), *fragments)
 
 
+@pytest.mark.parametrize("out", ["/proc/primordia-out", "/sys/primordia-out"])
+def test_a_dry_run_refuses_an_output_directory_that_cannot_be_made_even_as_root(capsys, small_config, out):
+    """As root os.access says /proc is writable: --dry-run said "the input is valid" and the run then refused."""
+    assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", "--out", out), "cannot be")
+
+
 def test_an_output_file_through_the_real_command(primordia_cli, small_config, tmp_path):
     (tmp_path / "file").write_text("a file")
     assert_one_line_error(primordia_cli("run", small_config(), "--out", tmp_path / "file"), "is a file")
