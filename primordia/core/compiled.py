@@ -9,9 +9,9 @@ the edges again: 3.0-3.6 ms of a 23 ms step of example 1a at 171^2.  glibc's vec
 evaluates four at a time, within 4 ulps.
 
 The source below is compiled by the system's C compiler (``$CC``, else ``cc``; the FEniCSx
-backend's FFCx needs one too) into ``$PRIMORDIA_CACHE_DIR`` (default ``~/.cache/primordia``),
-keyed by a hash of the source and flags, written atomically, and loaded with ctypes: no build
-step at install time, no new dependency.  On x86-64 ``target_clones`` makes an AVX2 and a
+backend's FFCx needs one too) into ``$PRIMORDIA_CACHE_DIR/compiled`` (default
+``~/.cache/primordia/compiled``), keyed by a hash of the source and flags, written atomically, and
+loaded with ctypes: no build step at install time, no new dependency.  On x86-64 ``target_clones`` makes an AVX2 and a
 baseline copy of each loop, chosen when the library is loaded, so a cache shared by machines
 with different processors stays valid.  Where libmvec or ``target_clones`` is missing (another
 C library, another processor family) the loops are built without them; where no compiler

@@ -152,10 +152,13 @@ class Clamped(_Dirichlet):
         return ["0"] * gdim
 
     def __init__(self, boundary, value=None, constants=None, gdim=2):
+        refused = ConfigError(f"boundary condition 'clamped' on '{boundary}' is u = 0 and takes no value, "
+                              f"got {value!r} (type = \"displacement\" prescribes u)")
+        if value is not None and not isinstance(value, (list, tuple)):  # not "a list of formulas" for a lone value
+            raise refused
         super().__init__(boundary, value, constants, gdim)
         if value is not None and not all(_is_zero(component) for component in self.formula.components):
-            raise ConfigError(f"boundary condition 'clamped' on '{boundary}' is u = 0 and takes no value, "
-                              f"got {value!r} (type = \"displacement\" prescribes u)")
+            raise refused
 
 
 class Displacement(_Dirichlet):

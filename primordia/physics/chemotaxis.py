@@ -166,15 +166,25 @@ class Chemotaxis(Physics):
                               f"they in the model's (dimensionless) units?")
 
     def check_scheme(self, scheme, modules) -> None:
-        """The conservative accumulation on a growing tissue is refused under ``strang``.
+        """Refuse the schemes this module's discretisation is wrong under, before anything is discretised.
 
-        It balances J c - J_prev c^n with J_prev the start of the mechanics' last sub-step. Strang
+        The exponentially fitted flux acts on a species and its attractant as separate fields: a scheme
+        that solves either together with another field (``monolithic``) is refused here, so that
+        ``primordia run --dry-run`` refuses it too, not only the run's set-up.
+
+        The conservative accumulation on a growing tissue is refused under ``strang``. It balances
+        J c - J_prev c^n with J_prev the start of the mechanics' last sub-step. Strang
         solves the species twice a step, before and after the mechanics: the first half sees the last
         step's volume change and the second this step's, so each is counted twice, and int J m dX
         fell to 1/J of its start however small dt (0.562, 0.552, 0.548, 0.545 of it at dt = 0.2 to
         0.025 on example 2a at 6 x 6, where fixed_point kept it to 1.4e-8 and sequential converges
         to it with dt: 1.035 at dt = 0.2; with two inner steps 1.060 at dt = 0.2 and 1.004 at 0.05).
         """
+        if self.settings["flux_scheme"] == "exponential_fitting":
+            shared = {spec.name for specs in scheme.field_groups(modules).values() if len(specs) > 1 for spec in specs}
+            if any(species.attractant and {species.name, species.attractant} & shared for species in self.species):
+                raise ConfigError(f"flux_scheme = \"exponential_fitting\" needs the species as separate fields; "
+                                  f"with the {scheme.name} scheme use physics.chemotaxis.flux_scheme = \"galerkin\"")
         growing = [module.name for module in modules if module.finite_strain]
         if self.settings["accumulation"] == "conservative" and growing and scheme.name == "strang":
             raise ConfigError(f"physics.chemotaxis.accumulation = \"conservative\" on a growing tissue "

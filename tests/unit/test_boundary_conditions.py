@@ -150,6 +150,8 @@ def test_a_time_dependent_displacement_moves_the_growing_tissue(tmp_path):
      "boundary 'top' is given two Dirichlet conditions on p"),
     ([{"boundary": "top", "type": "clamped", "value": ["1", "0"]}],
      "boundary condition 'clamped' on 'top' is u = 0 and takes no value"),
+    ([{"boundary": "top", "type": "clamped", "value": 1}],  # was: "must be a list of formulas, one per component"
+     "boundary condition 'clamped' on 'top' is u = 0 and takes no value, got 1"),
 ])
 def test_conflicting_or_contradictory_dirichlet_conditions_are_one_line(tables, message):
     with pytest.raises(ConfigError) as failure:

@@ -76,13 +76,32 @@ def test_strang_refuses_the_conservative_accumulation_on_a_growing_tissue(tmp_pa
     model = Model.from_file(EX02A, ["mesh.cells=[4,4]", "time.t_final=0.4", "output.times=[0.4]",
                                     "output.pictures=false", 'physics.chemotaxis.accumulation="conservative"',
                                     f'coupling.scheme="{scheme}"'])
-    sim = Simulation(model, backend="skfem", out_dir=tmp_path)
-    if refused:
-        with pytest.raises(ConfigError, match=r"cannot be split by the strang scheme: its two half steps would "
-                                              r"count each volume change twice"):
-            sim.check_choices()
-    else:
-        sim.check_choices()
+    _choices_checked(Simulation(model, backend="skfem", out_dir=tmp_path),
+                     refused and r"cannot be split by the strang scheme: its two half steps would count each volume "
+                                 r"change twice")
     # the seed's material accumulation stays available under strang
     Simulation(Model.from_file(EX02A, ["mesh.cells=[4,4]", 'coupling.scheme="strang"']), backend="skfem",
                out_dir=tmp_path).check_choices()
+
+
+EX01A = EX01B.with_name("ex01a.toml")
+
+
+@pytest.mark.parametrize("flux_scheme, refused", [("exponential_fitting", True), ("galerkin", False)])
+def test_the_monolithic_scheme_refuses_the_exponentially_fitted_flux_before_the_run(tmp_path, flux_scheme, refused):
+    """The fitted flux acts on the species as separate fields; the set-up refused it in one field, but
+    ``primordia run --dry-run``, which asks for the splitting scheme only, called such a config valid."""
+    model = Model.from_file(EX01A, ["mesh.cells=[4,4]", 'coupling.scheme="monolithic"',
+                                    f'physics.chemotaxis.flux_scheme="{flux_scheme}"'])
+    _choices_checked(Simulation(model, backend="skfem", out_dir=tmp_path),
+                     refused and r'flux_scheme = "exponential_fitting" needs the species as separate fields; with '
+                                 r'the monolithic scheme use')
+
+
+def _choices_checked(sim, refusal):
+    """``sim.check_choices()`` refuses with a message matching ``refusal``, or (refusal False) accepts."""
+    if refusal:
+        with pytest.raises(ConfigError, match=refusal):
+            sim.check_choices()
+    else:
+        sim.check_choices()
