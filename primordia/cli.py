@@ -18,6 +18,7 @@ SIGUSR1 (what to send ``mpirun``) stop a run between two steps with a checkpoint
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -27,6 +28,8 @@ from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, i
 from primordia.core.signals import HANDLED, INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
+#: 128 + SIGPIPE, as a shell reports a reader that stopped reading (`primordia plugins | head`).
+EXIT_BROKEN_PIPE = 141
 
 
 class _Parser(argparse.ArgumentParser):
@@ -217,7 +220,11 @@ def main(argv: list[str] | None = None) -> int:
         try:
             parser = build_parser()
             args = parser.parse_args(argv)
+            _broken_pipes_raise()
             return args.func(args)
+        except BrokenPipeError:  # `primordia plugins | head`: the reader has all it wanted
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush at exit
+            return EXIT_BROKEN_PIPE
         except KeyboardInterrupt as interrupted:
             return _interrupted(interrupted)
         except PrimordiaError as exc:
@@ -231,6 +238,22 @@ def main(argv: list[str] | None = None) -> int:
                 return _interrupted(InterruptedRun(INTERRUPTS.received))
             _abort_other_ranks(exc)
             raise
+
+
+def _broken_pipes_raise() -> None:
+    """Python's own SIGPIPE disposition (ignored, so a write to a closed pipe raises BrokenPipeError) again.
+
+    PETSc's initialisation installs its error handler for SIGPIPE, which turned `primordia plugins | head`
+    into "PETSC ERROR: Caught signal number 13 Broken Pipe" and an MPI_ABORT. PETSc is initialised
+    here, before any output, so that its handler is in place to be replaced.
+    """
+    import signal
+
+    try:
+        from petsc4py import PETSc  # noqa: F401  (initialises PETSc, which installs its signal handlers)
+    except ImportError:
+        return
+    signal.signal(signal.SIGPIPE, signal.SIG_IGN)
 
 
 def _interrupted(interrupted: KeyboardInterrupt) -> int:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
 import tomllib
 from pathlib import Path
 
@@ -423,3 +424,16 @@ def test_a_negative_seed_through_the_real_command(primordia_cli, small_config, t
     result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
                            "--set", "physics.chemotaxis.seed=-1")
     assert_one_line_error(result, "physics.chemotaxis.seed must be an integer >= 0")
+
+
+@pytest.mark.parametrize("args", [("plugins",), ("stability", "--domain", "20,20")])
+def test_a_reader_that_stops_reading_ends_the_command_quietly(args, tmp_path):
+    """`primordia plugins | head` died in PETSc's SIGPIPE handler: "PETSC ERROR: Caught signal number 13
+    Broken Pipe" and an MPI_ABORT with exit 59. The read end is closed before the command writes."""
+    from conftest import PRIMORDIA
+
+    process = subprocess.Popen([str(PRIMORDIA), *args, *(("--out", str(tmp_path)) if args[0] == "stability" else ())],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process.stdout.close()
+    error = process.stderr.read()
+    assert process.wait(timeout=120) == 141 and error == ""
