@@ -38,7 +38,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="primordia", description=__doc__.split("\n\n")[0])
+    parser = _Parser(prog="primordia", description=__doc__.split("\n\n")[0].replace("``", ""))
     parser.add_argument("--version", action="version", version=f"primordia {_version()}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 

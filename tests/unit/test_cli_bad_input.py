@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -437,3 +438,8 @@ def test_a_reader_that_stops_reading_ends_the_command_quietly(args, tmp_path):
     process.stdout.close()
     error = process.stderr.read()
     assert process.wait(timeout=120) == 141 and error == ""
+
+
+def test_python_dash_m_primordia_is_the_command():
+    result = subprocess.run([sys.executable, "-m", "primordia", "--help"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and result.stdout.startswith("usage: primordia") and "``" not in result.stdout
