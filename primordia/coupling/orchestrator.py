@@ -67,6 +67,10 @@ class Simulation:
         self.time = model.t_start
         self.dt = model.dt
         self.last_dt = model.dt  # the last sub-step taken (dt unless steps were rejected)
+        # the nominal step under way: where it began and the part of it behind (its accepted sub-steps; a run
+        # that stops inside a step, with a failure or a second signal, keeps them, and so does its checkpoint)
+        self.step_begin = self.time
+        self.step_done = 0.0
         self.controller = StepController(model.dt, model.dt_min, adaptive=model.adaptive)
         self.iterations: dict[str, list[int]] = {}  # linear iterations per step, by subproblem
         self.newton: dict[str, list[tuple[int, int]]] = {}  # (Newton iterations, SNES reason) per step, nonlinear ones
@@ -325,6 +329,7 @@ class Simulation:
         tree = {
             "config": self.model.resolved_config(), "backend": self.backend.name, "mpi_ranks": self.comm.size,
             "run": {"step": self.step_index, "time": self.time, "last_dt": self.last_dt,
+                    "step_begin": self.step_begin, "step_done": self.step_done,
                     "controller": self.controller.state(), "iterations": self.iterations,
                     "newton": {name: [list(r) for r in record] for name, record in self.newton.items()},
                     "coupling_iterations": self.coupling_iterations, "rejections": self.rejections,
@@ -388,6 +393,7 @@ class Simulation:
             physics.restore_state(tree["physics"][self.comm.rank].get(physics.name, {}))
         run = tree["run"]
         self.step_index, self.time, self.last_dt = int(run["step"]), float(run["time"]), float(run["last_dt"])
+        self.step_begin, self.step_done = float(run.get("step_begin", self.time)), float(run.get("step_done", 0.0))
         self.controller.restore(run["controller"])
         self.iterations = {k: [int(i) for i in v] for k, v in run["iterations"].items()}
         self.newton = {k: [tuple(int(i) for i in r) for r in v] for k, v in run["newton"].items()}
@@ -553,15 +559,21 @@ class Simulation:
             pass
 
     def step(self) -> None:
-        """Advance every field over one step ``dt``, in sub-steps when a try fails (see module docstring)."""
-        t_begin, t_end = self.time, self.model.step_time(self.step_index + 1)
-        done = 0.0
-        while done < 1.0:
+        """Advance every field over one step ``dt``, in sub-steps when a try fails (see module docstring).
+
+        A step that a stopped run left part-way (``step_done`` > 0, restored from its checkpoint) goes on
+        from where it stopped, on its own grid: sub-steps of dt / 2^level from ``step_begin``.
+        """
+        if self.step_done == 0.0:
+            self.step_begin = self.time
+        t_begin, t_end = self.step_begin, self.model.step_time(self.step_index + 1)
+        while self.step_done < 1.0:
             fraction, dt = self.controller.fraction, self.controller.step
-            t_next = t_end if done + fraction == 1.0 else t_begin + (done + fraction) * (t_end - t_begin)
+            done = self.step_done + fraction
+            t_next = t_end if done == 1.0 else t_begin + done * (t_end - t_begin)
             failure = self._substep(t_next, dt)
             if failure is None:
-                done += fraction
+                self.step_done = done
                 self.controller.accepted(done)
                 continue
             event = {"time": self.time, "dt": dt, "reason": failure}
@@ -575,7 +587,7 @@ class Simulation:
                 raise SolverError(f"{where}: {failure}; retried down to dt = {dt:g}, and dt may not fall below "
                                   f"time.dt_min = {self.model.dt_min:g}")
         self.step_index += 1
-        self.time = t_end
+        self.time, self.step_done = t_end, 0.0
         self._collect_petsc_garbage()
 
     def _step_label(self, t_next: float) -> str:

@@ -310,6 +310,27 @@ def test_a_failed_step_is_retried_in_halves_and_the_grid_of_dt_is_kept(watching,
     assert json.loads((tmp_path / "summary.json").read_text())["rejected_steps"] == 1
 
 
+def test_a_run_stopped_inside_a_step_restarts_on_the_grid_of_that_step(watching, tmp_path):
+    """Step 2 fails whole, its first half goes through and its second half cannot be halved (dt_min): the run
+    stops at t = 0.3, inside step 2, and its checkpoint holds that state.  The restart (with the fault mended:
+    a changed ``[solver]`` table is the user's way) takes the second half, t = 0.3 -> 0.4 with dt = 0.1.  It
+    took halves of what was left of the step (0.3 -> 0.35) with halves of dt (0.1): the physics were at
+    t = 0.45 when the run's clock reached the end of step 2, t = 0.4."""
+    failing = model(t_final=0.6, recorder={"fail_at": 0.4}, dt_min=0.1)
+    with pytest.raises(SolverError):
+        Simulation(failing, out_dir=tmp_path).setup().run()
+    sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, dt_min=0.1), out_dir=tmp_path,
+                     existing="restart").setup()
+    assert (sim.step_index, sim.time) == (1, pytest.approx(0.3))
+    recorder = sim.model.physics_objects[0]
+    recorder.settings["fail_at"] = -1.0
+    sim.run()
+    assert (sim.status, sim.step_index, sim.time) == ("completed", 3, 0.6)
+    # each sub-step's end time and dt, as the physics see them: the second half of step 2, then step 3 whole
+    steps = [(t, dt) for name, *rest in recorder.calls if name == "before_step" for t, dt in [rest]]
+    assert steps == [(pytest.approx(0.4), 0.1), (pytest.approx(0.6), 0.2)]
+
+
 def test_without_adaptive_steps_a_failed_step_stops_the_run_naming_it(watching, tmp_path):
     sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, adaptive=False), out_dir=tmp_path).setup()
     with pytest.raises(SolverError) as caught:
