@@ -153,6 +153,7 @@ class ScalarSeriesNetcdf(Output):
 
     name = "series"
     series: ScalarSeries | None = None  # made at start or resume (on the root rank)
+    described: frozenset = frozenset()  # the variables given their attributes (long_name, units)
 
     def start(self, run):
         self.series = ScalarSeries(run.out_dir / "series.nc", min_interval=SERIES_INTERVAL) if run.is_root else None
@@ -168,7 +169,10 @@ class ScalarSeriesNetcdf(Output):
         row.update(run.step_sizes())
         row.update(run.memory_use())
         if run.is_root and (not self.series.times or run.time > self.series.times[-1]):
-            self.series.append(run.time, row)
+            events = ("rejection_time", "rejection_dt", "rejection_reason")
+            attrs = series_attributes(run, [key for key in ("time", *events, *row) if key not in self.described])
+            self.described = self.described | set(attrs)
+            self.series.append(run.time, row, attrs)
 
     def rejection(self, run, event: dict):
         """A time step was rejected (``event``: time, dt, reason)."""
@@ -186,6 +190,47 @@ class ScalarSeriesNetcdf(Output):
     def finish(self, run, status):
         if self.series is not None:  # None also when a signal stopped the run before start
             self.series.flush()
+
+
+def series_attributes(run, keys) -> dict[str, dict[str, str]]:
+    """NetCDF attributes (``long_name``, ``units``) of the series' ``keys``, as far as they are known."""
+    if not keys:
+        return {}
+    fields = {spec.name: f"|{spec.name}|" if spec.vector else spec.name
+              for module in run.model.physics_objects for spec in module.fields()}
+    diagnostics = {diagnostic.name: diagnostic for diagnostic in run.diagnostics}
+    named = {"time": ("time (dimensionless, seed section 2)", "dimensionless"),
+             "step": ("time steps taken", "1"), "dt": ("the last sub-step's length", "dimensionless"),
+             "rejections": ("rejected sub-steps so far (adaptive steps)", "1"),
+             "memory_mb": ("resident memory, summed over the ranks", "MB"),
+             "peak_memory_mb": ("peak resident memory so far, summed over the ranks", "MB"),
+             "rejection_time": ("the start of a rejected sub-step", "dimensionless"),
+             "rejection_dt": ("the length of a rejected sub-step", "dimensionless"),
+             "rejection_reason": ("why the sub-step was rejected", None)}
+    suffixes = {"_linear_iterations": "linear (Krylov) iterations in the last step of",
+                "_newton_iterations": "Newton iterations in the last step of",
+                "_snes_reason": "PETSc's SNES converged reason (> 0: converged) of the last solve of",
+                "_iterations": "outer coupling iterations in the last step of the splitting scheme"}
+    attrs = {}
+    for key in keys:
+        name, unit = named.get(key, (None, None))
+        field, _, statistic = key.rpartition("_")
+        if name is None and field in fields and statistic in ("integral", "min", "max"):
+            name = {"integral": f"integral of {fields[field]} over the reference domain",
+                    "min": f"minimum of {fields[field]} at the vertices",
+                    "max": f"maximum of {fields[field]} at the vertices"}[statistic]
+        if name is None:
+            diagnostic = diagnostics.get(key) or (diagnostics.get(field) if statistic in ("min", "max") else None)
+            if diagnostic is not None and diagnostic.description:
+                name = diagnostic.description + (f" ({statistic}imum at the vertices)" if diagnostic.kind == "extrema"
+                                                 else "")
+        if name is None:
+            suffix = next((suffix for suffix in suffixes if key.endswith(suffix)), None)
+            if suffix is not None:
+                name, unit = f"{suffixes[suffix]} {key.removesuffix(suffix)}", "1"
+        if name is not None:
+            attrs[key] = {"long_name": name, **({"units": unit} if unit else {})}
+    return attrs
 
 
 #: series.nc is rewritten at most this often (seconds) while a run goes on, and at its end: every row

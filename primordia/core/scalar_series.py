@@ -119,7 +119,7 @@ class ScalarSeries:
                 text = any(isinstance(v, str) for v in values)
                 column = (np.array(["" if v is None else str(v) for v in values], dtype=str) if text
                           else np.array([math.nan if v is None else v for v in values], dtype=np.float64))
-                variables[f"{dimension}_{key}"] = (dimension, column, {})
+                variables[f"{dimension}_{key}"] = (dimension, column, self._attrs.get(f"{dimension}_{key}", {}))
         return variables
 
     def state(self) -> dict:

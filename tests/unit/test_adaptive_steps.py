@@ -123,6 +123,8 @@ def test_an_injected_failure_is_retried_smaller_and_recorded(primordia_cli, smal
         assert "injected in step 3" in reasons[0]
         assert reasons[1].startswith("field m fell to -0.5 at t = 0.8, below 0 where the scheme of chemotaxis"), reasons
         assert series["rejections"].values[-1] == 2.0
+        unnamed = [name for name in series.variables if not series[name].attrs.get("long_name")]
+        assert not unnamed, f"series.nc variables without a long_name: {unnamed}"
     with meshio.xdmf.TimeSeriesReader(out / "fields.xdmf") as reader:
         reader.read_points_cells()
         written = [reader.read_data(k)[0] for k in range(reader.num_steps)]
@@ -150,6 +152,8 @@ def test_a_growth_run_pushed_past_its_newton_radius_takes_smaller_steps(primordi
         assert all("poroelastic_growth (fields u, psi, p): Newton did not converge" in str(reason)
                    for reason in series["rejection_reason"].values)
         assert series["dt"].values[-1] > series["dt"].values[1] > tried.min()  # grown back
+        assert [name for name in series.variables if not series[name].attrs.get("long_name")] == []
+        assert series["J_min"].attrs["long_name"] == "volume ratio det F (minimum at the vertices)"
 
 
 def test_without_adaptive_steps_a_failure_stops_the_run_at_once(primordia_cli, small_config, tmp_path):
