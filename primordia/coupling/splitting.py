@@ -22,6 +22,7 @@ approach the exact ones and the splitting error of the scheme is what remains.
 
 from __future__ import annotations
 
+import contextlib
 from abc import ABC, abstractmethod
 
 import ufl
@@ -124,7 +125,9 @@ class FixedPoint(SplittingScheme):
         if getattr(self, "_work", None) is None or set(self._work) != set(groups):
             self._work = {g: (vector.duplicate(), vector.duplicate()) for g, vector in vectors.items()}
         stats = {}
-        with sim.substep(groups, t0 + dt, dt):
+        with sim.substep(groups, t0 + dt, dt), contextlib.ExitStack() as passes:
+            for solver in sim.solvers:  # each Newton solve judged against the step's first (NewtonSolver)
+                passes.enter_context(solver.repeated_within_a_step())
             for iteration in range(1, self.settings["max_iterations"] + 1):
                 for g, vector in vectors.items():
                     vector.copy(self._work[g][0])

@@ -430,3 +430,29 @@ def test_faster_growth_starts_without_rejected_steps(tmp_path):
     series = xr.open_dataset(tmp_path / "fenicsx" / "series.nc")
     assert sim.status == "completed" and series["rejections"].values.max() == 0
     assert series["poroelastic_growth_newton_iterations"].values[1:].max() <= 8
+
+
+def test_a_later_fixed_point_pass_is_judged_against_the_step_s_first_residual(tmp_path):
+    """Within a step, a later fixed-point pass starts nearly converged, and snes_rtol of its own initial residual
+    asked for more than round-off allows (the residual carries rho / dt^2): example 2a at 6 x 6 with delta_2 = 5
+    stalled at 1.9e-6 above snes_atol = 1e-7 and stopped at dt_min.  Within ``repeated_within_a_step`` a solve
+    that starts below snes_rtol times the step's first initial residual takes no Newton step; alone it does."""
+    config = ["mesh.cells=[4,4]", "time.dt=1e-3", "time.t_final=2e-3", "output.times=[2e-3]", "output.pictures=false"]
+    sim = Simulation(Model.from_file(EXAMPLES / "ex02a.toml", config), backend="fenicsx", out_dir=tmp_path).setup()
+    solver = next(solver for solver in sim.solvers if isinstance(solver, NewtonSolver))
+    with sim.substep(sim.disc.groups(), 1e-3, 1e-3):
+        state = sim.backend.petsc_vector(solver.sub.unknown)
+
+        def nudged():  # a change far below the step's first residual, far above snes_atol
+            state.array[:] += 1e-11 * np.abs(state.array).max()
+            sim.backend.update_ghosts(solver.sub.unknown)
+
+        with solver.repeated_within_a_step():
+            assert solver.solve().newton_iterations >= 2
+            reference = solver.history[0][0]
+            nudged()
+            later = solver.solve()
+            assert later.newton_iterations == 0 and 1e-7 < solver.history[0][0] < 1e-7 * reference
+        nudged()
+        assert solver.solve().newton_iterations >= 1  # alone, snes_atol = 1e-7 decides
+        assert solver.snes.getTolerances()[1] == 1e-7  # and the pass's tolerance is not left behind
