@@ -200,7 +200,7 @@ def test_the_growing_tissue_starts_with_its_moving_boundary_s_own_rate(backend, 
     config["mesh"]["cells"], config["time"]["t_final"], config["output"] = [4, 4], 0.4, {"times": [0.4], "pictures": False}
     config["physics"]["poroelastic_growth"]["boundary"][0]["value"] = "-0.5 * t"  # the left edge, u_x = -t/2
     sim = Simulation(Model.from_config(config), backend=backend, out_dir=tmp_path / "run").setup()
-    group = sim.disc.rate_function("u")
-    rate = sim.backend.vertex_values(group, sim.disc.function_of("u")[1])
+    rates = sim.disc.rate_function("u")  # the (u, psi, p) group's rates; u is its first component
+    rate = sim.backend.vertex_values(rates, sim.disc.function_of("u")[1])
     left = sim.model.mesh_data.points[:, 0] == 0.0
     np.testing.assert_allclose(rate[left, 0], -0.5, rtol=1e-12)
