@@ -169,7 +169,8 @@ class Seed3D(GrowthLaw):
     dimensions = (3,)
     requires = ("m",)
     parameters = (
-        Parameter("delta_1", 1.0 / 52.0, "in-plane growth rate (seed eq. (4.13))", source="seed section 5.5"),
+        Parameter("delta_1", 1.0 / 52.0, "in-plane growth rate (seed eq. (4.13))", constraint="nonnegative",
+                  source="seed section 5.5"),  # gamma_1 = delta_1 t is a stretch's square: < 0 has no root
         Parameter("delta_2", 0.0, "growth rate along k_3 (seed eq. (4.13))", constraint="nonnegative",
                   source="seed section 5.5"),
         Parameter("delta_3", 1.0 / 104.0, "cell-driven growth along k_3 (seed eq. (4.13))",

@@ -41,6 +41,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import ufl
+
 
 @dataclass(frozen=True)
 class Kinematics:
@@ -80,3 +82,23 @@ class Kinematics:
 
 #: A tissue that does not move (seed example 1a): every quantity is the identity.
 MOTIONLESS = Kinematics()
+
+
+def finite_strain_kinematics(displacement, displacement_previous,
+                             quadrature_degree: int | None = None) -> Kinematics:
+    """The finite-strain row of the table above, from the displacement u on the reference configuration.
+
+    F = I + Grad u, C = F^T F, J = det F: the volume ratio J (and J at the start of the step,
+    from ``displacement_previous``), the metric J C^-1 and the volume change tr C - d of seed
+    (4.17a)-(4.17d), no advecting velocity.  Stated once, for every mechanics module that moves
+    the reference configuration (and for the tests that move it by a prescribed motion).
+    """
+    identity = ufl.Identity(len(displacement))
+    F = identity + ufl.grad(displacement)
+    F_previous = identity + ufl.grad(displacement_previous)
+    C = F.T * F
+    J = ufl.det(F)
+    return Kinematics(volume_ratio=J, volume_ratio_previous=ufl.det(F_previous),
+                      metric=J * ufl.inv(C),                       # J C^-1 (4.17a)-(4.17d)
+                      volume_change=ufl.tr(C) - len(displacement),  # tr C - d (4.17c)
+                      velocity=None, deformation_gradient=F, quadrature_degree=quadrature_degree)

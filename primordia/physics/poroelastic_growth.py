@@ -68,7 +68,7 @@ from primordia.core.validation import flag, number, numbers
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem
 from primordia.physics.boundary_conditions import conditions_from_config, encloses
 from primordia.physics.growth_laws import fluid_source
-from primordia.physics.kinematics import Kinematics
+from primordia.physics.kinematics import finite_strain_kinematics
 from primordia.physics.poroelastic_linear import inertia, stress_divergence
 from primordia.physics.seed_parameters import POROELASTICITY
 
@@ -207,12 +207,8 @@ class PoroelasticGrowth(Physics):
         self.C, self.C_previous = right_cauchy_green(self.F), right_cauchy_green(self.F_previous)
         self.J = ufl.det(self.F)
         self.ramp = disc.constant(1.0)  # growth continuation of the initial solve
-        disc.provide_kinematics(Kinematics(
-            volume_ratio=self.J, volume_ratio_previous=ufl.det(self.F_previous),
-            metric=self.J * ufl.inv(self.C),                         # J C^-1 (4.17a)-(4.17d)
-            volume_change=ufl.tr(self.C) - disc.gdim,                # tr C - d (4.17c)
-            velocity=None, deformation_gradient=self.F,
-            quadrature_degree=self.settings["quadrature_degree"]), self.name)
+        kinematics = finite_strain_kinematics(u, u_previous, self.settings["quadrature_degree"])  # (4.17a-d)
+        disc.provide_kinematics(kinematics, self.name)
 
     def growth_tensor(self, ramp=None, time=None):
         """F_g of the growth law at the current fields and time (or ``time``); I + s (F_g - I) with a ramp s."""

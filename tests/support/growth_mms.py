@@ -4,20 +4,33 @@ Two problems, each an exact solution written once in UFL (on the reference
 coordinates X) and a test-only physics module that adds the sources making it
 solve the model, registered in the plugin manager like any third-party physics:
 
-* :class:`GrowthProblem` -- seed eqs. (4.11), (4.12a)-(4.12c) for (u, psi, p),
-  quasi-static (rho = 0) with a steady exact solution and a large time step, so
-  that the spatial error is what remains.  Growth is incompatible (F_g = (1 + s(X)) I
-  with s varying in space, from a test growth law registered through the
-  ``primordia_growth_laws`` hook), so the stresses are not trivial.  u is fixed on
-  ``left`` and ``bottom`` (the exact values), the exact traction P N_0 is applied
-  on ``right`` and ``top`` (as a manufactured boundary source), p is fixed on the
-  whole boundary; psi is then unique.
+* :class:`GrowthProblem` -- seed eqs. (4.11), (4.12a)-(4.12c) for (u, psi, p).
+  Growth is incompatible and anisotropic: F_g = I + s_1 k_1 (x) k_1 + s_2 k_2 (x) k_2
+  with s_1 != s_2 varying in space and the directions k_i turned from the axes (a test
+  growth law registered through the ``primordia_growth_laws`` hook, its frame given as
+  ``directions``), so the stresses are not trivial and F_e = F F_g^-1 differs from
+  F_g^-1 F.  u is fixed on ``left`` and ``bottom`` (the exact values), the exact
+  traction P N_0 is applied on ``right`` and ``top`` (as a manufactured boundary
+  source), p is fixed on the whole boundary; psi is then unique.  Two cases:
+
+  - ``steady``: quasi-static (rho = 0), a steady exact solution and a large time step,
+    so that the spatial error is what remains; the growth does not change in time;
+  - ``transient``: p = P(X) (1 + t) and growth stretches s_i(X) (1 + r t), so the fluid
+    gains ell = ell_0 sum_i d gamma_i/dt (4.15), still quasi-static (rho = 0).  Backward
+    Euler is exact for it (the storage C_0 dp/dt of a p linear in t, with alpha_BW = 0:
+    the fluid stress and alpha_BW (tr C - d) are the steady case's), so the error is again
+    the spatial one, while the storage and the fluid source make a large part of the
+    sources.  The exact solution and the sources carry an acceleration of u as well
+    (``acceleration``, inertia), kept at 0: with rho = 1, u = U + t^2 W and dt = 1/4,
+    Newton stalled on the 32 x 32 mesh (8 x 8 and 16 x 16 converge to 1e-14).
 * :class:`ReferenceChemotaxisProblem` -- seed eqs. (4.17a)-(4.17d) multiplied by J,
   with the FGF sink xi_f J (tr C - d) and the boundary flux the exact species
   carry through the sheared boundary, on a tissue moving by a prescribed
   deformation (``prescribed_motion``, a test physics that owns u, sets it to the
-  exact motion at every step and provides the finite-strain kinematics exactly as
-  ``poroelastic_growth`` does).  The species are those of ``mms.py``.
+  exact motion at every step and provides the finite-strain kinematics through the
+  same function as ``poroelastic_growth``,
+  :func:`primordia.physics.kinematics.finite_strain_kinematics`).  The species are
+  those of ``mms.py``.
 
 The balance laws are written here again from the seed's equations, not taken
 from the code under test.
@@ -34,10 +47,11 @@ from ufl.algorithms import expand_derivatives
 
 from mms import LUMPED, SPECIES, exact_solution, quadrature_dx
 from primordia.core import ops as ops_
+from primordia.core.parameters import Parameter
 from primordia.core.plugins import get_plugin_manager, hookimpl
 from primordia.physics.base import FieldSpec, Physics
 from primordia.physics.growth_laws import GrowthLaw
-from primordia.physics.kinematics import Kinematics
+from primordia.physics.kinematics import finite_strain_kinematics
 
 MU = 4.0  # the shear modulus of the runs (the option's default, seed section 5.4)
 UFL_MATH = SimpleNamespace(sin=ufl.sin, cos=ufl.cos, exp=ufl.exp, pi=ufl.pi)
@@ -45,30 +59,63 @@ NUMPY_MATH = SimpleNamespace(sin=np.sin, cos=np.cos, exp=np.exp, pi=np.pi)
 
 
 # -- exact fields, in one place for UFL and numpy --------------------------------------------------
-def growth_stretch(X, math_):
-    """s(X): F_g = (1 + s) I, so gamma_i = s^2 for the in-plane factors (roots as printed after (4.12))."""
-    return 0.2 + 0.1 * math_.sin(math_.pi * X[0]) * math_.cos(math_.pi * X[1])
+#: The growth directions k_1, k_2: the axes turned by pi/6, so that F_g is not diagonal.
+GROWTH_DIRECTIONS = [[np.cos(np.pi / 6), np.sin(np.pi / 6)], [-np.sin(np.pi / 6), np.cos(np.pi / 6)]]
 
 
-def exact_mechanics(X, math_) -> dict:
-    """Steady u, psi, p on the unit square (moderate strains: |Grad u| < 0.4)."""
+def growth_stretches(X, t, rate, math_) -> list:
+    """s_1, s_2 of F_g = I + sum_i s_i k_i (x) k_i, so gamma_i = s_i^2 (roots as printed after (4.12))."""
     sin, cos, pi = math_.sin, math_.cos, math_.pi
-    u = [0.1 * sin(pi * X[0]) * (1.0 + X[1]), 0.08 * X[0] * X[1] * (1.0 - X[0]) + 0.05 * sin(pi * X[1])]
+    grow = 1.0 + rate * t
+    return [(0.2 + 0.1 * sin(pi * X[0]) * cos(pi * X[1])) * grow, (0.1 + 0.05 * cos(pi * X[0]) * X[1]) * grow]
+
+
+def growth_tensor(X, t, rate):
+    """F_g built from the seed's formula (after (4.12)) with the stretches and directions above."""
+    k = [ufl.as_vector(direction) for direction in GROWTH_DIRECTIONS]
+    stretches = growth_stretches(X, t, rate, UFL_MATH)
+    return ufl.Identity(2) + sum(s * ufl.outer(k_i, k_i) for s, k_i in zip(stretches, k))
+
+
+#: The two cases (module docstring): growth rate r, acceleration of u, pressure rate, and the model's values.
+CASES = {
+    "steady": {"growth_rate": 0.0, "acceleration": 0.0, "pressure_rate": 0.0,
+               "parameters": {"rho": 0.0, "kappa": 0.2, "eta": 0.5, "C_0": 0.1, "alpha_BW": 0.4, "ell_0": 0.0},
+               "dt": 1e8, "steps": 2},
+    "transient": {"growth_rate": 0.5, "acceleration": 0.0, "pressure_rate": 1.0,
+                  "parameters": {"rho": 0.0, "kappa": 0.2, "eta": 0.5, "C_0": 0.5, "alpha_BW": 0.0, "ell_0": 2.0},
+                  "dt": 0.25, "steps": 2},
+}
+
+#: u, p as formula strings of X and t (the Dirichlet data), with {a} the acceleration, {q} the pressure rate.
+DISPLACEMENT = ["0.1 * sin(pi * x[0]) * (1.0 + x[1]) + {a} * t ** 2 * 0.2 * x[1] * cos(pi * x[0])",
+                "0.08 * x[0] * x[1] * (1.0 - x[0]) + 0.05 * sin(pi * x[1])"
+                " + {a} * t ** 2 * 0.1 * sin(pi * x[0] * x[1])"]
+PRESSURE = "(0.1 + 0.3 * sin(pi * x[0] * x[1])) * (1.0 + {q} * t)"
+
+
+def exact_mechanics(X, t, case, math_) -> dict:
+    """u, psi, p on the unit square at time t (moderate strains: |Grad u| < 0.5)."""
+    sin, cos, pi = math_.sin, math_.cos, math_.pi
+    a, q = case["acceleration"], case["pressure_rate"]
+    u = [0.1 * sin(pi * X[0]) * (1.0 + X[1]) + a * t**2 * 0.2 * X[1] * cos(pi * X[0]),
+         0.08 * X[0] * X[1] * (1.0 - X[0]) + 0.05 * sin(pi * X[1]) + a * t**2 * 0.1 * sin(pi * X[0] * X[1])]
     return {"u": ufl.as_vector(u) if math_ is UFL_MATH else np.stack(np.broadcast_arrays(*u)),
             "psi": MU + 0.5 * cos(pi * X[0]) * X[1],
-            "p": 0.1 + 0.3 * sin(pi * X[0] * X[1])}
+            "p": (0.1 + 0.3 * sin(pi * X[0] * X[1])) * (1.0 + q * t)}
 
 
 class StretchLaw(GrowthLaw):
-    """A test growth law: gamma_1 = gamma_2 = s(X)^2, time-independent (no fluid source)."""
+    """A test growth law: gamma_i = s_i(X, t)^2 of :func:`growth_stretches`, on the frame given as ``directions``."""
 
     name = "test_mms_stretch"
     requires = ()
     dimensions = (2,)
+    parameters = (Parameter("mms_growth_rate", 0.0, "growth rate r of the stretches s_i (1 + r t)",
+                            constraint="nonnegative", source="test"),)
 
     def factors(self, fields, t, X, dimension):
-        s = growth_stretch(X, UFL_MATH)
-        return [s * s, s * s]
+        return [s * s for s in growth_stretches(X, t, self.params["mms_growth_rate"], UFL_MATH)]
 
 
 # -- the balance laws, written from the seed ---------------------------------------------------------
@@ -80,47 +127,67 @@ def first_piola(u, psi, p, F_g, params):
 
 
 class GrowthProblem:
-    """Sources of (4.12a)-(4.12c) (rho = 0, steady) for :func:`exact_mechanics`; boundary tractions."""
+    """Sources of (4.12a)-(4.12c) for :func:`exact_mechanics` in one of :data:`CASES`; boundary tractions."""
 
     fields = ("u", "psi", "p")
     needs_kinetics = False
     traction_boundaries = ("right", "top")
 
+    def __init__(self, case: str = "steady"):
+        self.case = CASES[case]
+
     def dirichlet(self) -> list[dict]:
-        u = ["0.1 * sin(pi * x[0]) * (1.0 + x[1])", "0.08 * x[0] * x[1] * (1.0 - x[0]) + 0.05 * sin(pi * x[1])"]
-        p = "0.1 + 0.3 * sin(pi * x[0] * x[1])"
+        values = {"a": self.case["acceleration"], "q": self.case["pressure_rate"]}
+        u = [text.format(**values) for text in DISPLACEMENT]
+        p = PRESSURE.format(**values)
         return ([{"boundary": b, "type": "displacement", "value": u} for b in ("left", "bottom")]
                 + [{"boundary": b, "type": "fluid_pressure", "value": p} for b in ("left", "right", "bottom", "top")])
 
+    def growth_law(self) -> dict:
+        return {"name": StretchLaw.name, "directions": GROWTH_DIRECTIONS}
+
+    def parameters(self) -> dict:
+        return {**self.case["parameters"], "mms_growth_rate": self.case["growth_rate"]}
+
     def contributions(self, params, disc) -> list[tuple[str, object]]:
-        X = disc.x
-        exact = exact_mechanics(X, UFL_MATH)
+        X, time = disc.x, ufl.variable(disc.t)
+        exact = exact_mechanics(X, time, self.case, UFL_MATH)
         u, psi, p = exact["u"], exact["psi"], exact["p"]
-        F_g = (1.0 + growth_stretch(X, UFL_MATH)) * ufl.Identity(2)
+        rate = self.case["growth_rate"]
+        F_g = growth_tensor(X, time, rate)
         P = first_piola(u, psi, p, F_g, params)
         F = ufl.Identity(2) + ufl.grad(u)
         J, C = ufl.det(F), F.T * F
+        gammas = [s * s for s in growth_stretches(X, time, rate, UFL_MATH)]
+        ell = params["ell_0"] * sum(ufl.diff(gamma, time) for gamma in gammas)  # (4.15), general form
+        content = params["C_0"] * p + params["alpha_BW"] * (ufl.tr(C) - 2)
         sources = {
-            "u": -ufl.div(P),                                                    # (4.12a), rho = 0
-            "psi": -(J - ufl.det(F_g)),                                          # (4.12c) as -(J - J_g)
-            "p": -ufl.div(params["kappa"] / params["eta"] * J * ufl.inv(C) * ufl.grad(p)),  # (4.12b) times J
+            "u": params["rho"] * ufl.diff(ufl.diff(u, time), time) - ufl.div(P),              # (4.12a)
+            "psi": -(J - ufl.det(F_g)),                                                    # (4.12c) as -(J - J_g)
+            "p": (J * ufl.diff(content, time)                                               # (4.12b) times J
+                  - ufl.div(params["kappa"] / params["eta"] * J * ufl.inv(C) * ufl.grad(p)) - J * ell),
         }
         dx = quadrature_dx(disc)
         terms = [(name, lambda test, s=expand_derivatives(s): -ufl.inner(s, test) * dx) for name, s in sources.items()]
         N = ufl.FacetNormal(disc.mesh.ufl_domain())
         for boundary in self.traction_boundaries:
             ds = disc.ds(boundary)(metadata={"quadrature_degree": 8})
-            terms.append(("u", lambda test, ds=ds: -ufl.inner(P * N, test) * ds))
+            traction = expand_derivatives(P * N)
+            terms.append(("u", lambda test, ds=ds, traction=traction: -ufl.inner(traction, test) * ds))
         return terms
 
     def initialise(self, disc):
+        t0, dt = disc.time, float(disc.dt.value)
         for name in self.fields:
-            disc.interpolate(name, lambda x, name=name: exact_mechanics(x, NUMPY_MATH)[name])
+            disc.interpolate(name, lambda x, name=name: exact_mechanics(x, t0, self.case, NUMPY_MATH)[name])
+        # the backward difference, with which the scheme's second difference of u is exact (u quadratic in t)
+        disc.set_rate("u", lambda x: (exact_mechanics(x, t0, self.case, NUMPY_MATH)["u"]
+                                      - exact_mechanics(x, t0 - dt, self.case, NUMPY_MATH)["u"]) / dt)
 
     def errors(self, sim) -> dict[str, float]:
         """L2 errors of u, psi, p and the H1 seminorm error of u."""
         disc = sim.disc
-        exact = exact_mechanics(disc.x, UFL_MATH)
+        exact = exact_mechanics(disc.x, disc.t, self.case, UFL_MATH)
         dx = quadrature_dx(disc)
         norm = lambda e: float(np.sqrt(sim.backend.assemble_scalar(ufl.inner(e, e) * dx)))  # noqa: E731
         errors = {name: norm(disc.field(name) - exact[name]) for name in self.fields}
@@ -148,11 +215,10 @@ class PrescribedMotion(Physics):
 
     def setup(self, disc):
         self.disc = disc
-        F, F_previous = (ufl.Identity(2) + ufl.grad(disc.field("u")), ufl.Identity(2) + ufl.grad(disc.previous("u")))
-        J = ufl.det(F)
-        disc.provide_kinematics(Kinematics(volume_ratio=J, volume_ratio_previous=ufl.det(F_previous),
-                                           metric=J * ufl.inv(F.T * F), volume_change=ufl.tr(F.T * F) - 2,
-                                           deformation_gradient=F, quadrature_degree=4), self.name)
+        # the kinematics poroelastic_growth provides, so that the sources below (written from the seed)
+        # check them too
+        kinematics = finite_strain_kinematics(disc.field("u"), disc.previous("u"), quadrature_degree=4)
+        disc.provide_kinematics(kinematics, self.name)
 
     def _set(self, t):
         self.disc.interpolate("u", lambda x: prescribed_motion(x, t, NUMPY_MATH))

@@ -3,6 +3,8 @@ source ell = ell_0 sum_i d gamma_i/dt (4.15), the regularised roots, and how a c
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import ufl
@@ -160,3 +162,9 @@ def test_a_plugin_written_for_contract_1_1_still_reads_its_options_as_opts(capsy
     assert CONTRACT_VERSION[0] == 1 and CONTRACT_VERSION >= (1, 2)
     assert law.opts is law.settings and law.opts["directions"] == [[0.0, 1.0], [-1.0, 0.0]]
     assert capsys.readouterr().err.count("renamed self.settings") == 1
+
+
+def test_a_negative_in_plane_growth_rate_of_the_3d_law_is_one_line():
+    """gamma_1 = delta_1 t is the square of a stretch: delta_1 < 0 took the root of a negative number (NaN)."""
+    with pytest.raises(ConfigError, match="parameter delta_1 must be >= 0"):
+        Model.from_file(Path(__file__).resolve().parents[2] / "examples" / "ex04_small.toml", ["parameters.delta_1=-0.1"])
