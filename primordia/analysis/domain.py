@@ -115,7 +115,8 @@ def parse_lengths(text: str, d: int) -> tuple[float, ...]:
 def with_domain_modes(ds, modes: DomainModes):
     """``ds`` (a dispersion Dataset) with the box's admissible modes: ``mode_k``, ``mode_growth_rate``, ``mode_n``."""
     best = modes.fastest
-    attrs = {"domain_lengths": np.asarray(modes.lengths), "domain_unstable_modes": int(np.count_nonzero(modes.unstable)),
+    attrs = {"domain_lengths": np.asarray(modes.lengths),
+             "domain_unstable_modes": int(np.count_nonzero(modes.unstable)),
              "domain_fastest_n": modes.indices[best], "domain_fastest_k": float(modes.k[best]),
              "domain_fastest_growth_rate": float(modes.growth[best])}
     return ds.assign(
