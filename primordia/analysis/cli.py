@@ -158,10 +158,14 @@ def _run_dispersion(args, config, stem) -> int:
     print(f"  fastest stationary (Turing) mode: {_mode_text(turing)}")
     modes = None
     if isinstance(box, tuple):
-        modes = domain_modes(linear.rates, box, turing.band)
-        walls = "; with mechanics, exact for slip walls only" if linear.mechanics is not None else ""
-        print(f"  {modes.describe()}{walls}")
-    elif box is not None:
+        try:
+            modes = domain_modes(linear.rates, box, turing.band)
+        except ConfigError as dense:  # a box far larger than the wavelengths: the continuous analysis says it all
+            box = str(dense)
+        else:
+            walls = "; with mechanics, exact for slip walls only" if linear.mechanics is not None else ""
+            print(f"  {modes.describe()}{walls}")
+    if isinstance(box, str):
         print(f"  admissible modes: none listed ({box})")
     difference = seed_cross_check(linear, d=d)
     if difference is not None:

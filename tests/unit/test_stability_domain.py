@@ -98,3 +98,11 @@ def test_a_growing_tissue_lists_no_modes_and_map_refuses_a_domain(tmp_path, caps
     assert run(["stability", "map", "--domain", "3,3", "--x", "m0:1:2:3", "--y", "alpha:1:2:3",
                 "--out", str(tmp_path / "map")]) == 2
     assert "--domain applies to 'primordia stability' (the dispersion relation), not to map" in capsys.readouterr().err
+
+
+def test_a_box_far_larger_than_the_wavelengths_lists_no_modes(tmp_path, capsys):
+    """3000 x 3000 holds millions of modes in the band: they are dense, and the analysis goes on without them."""
+    assert run(["stability", str(EXAMPLES / "ex01a.toml"), "--domain", "3000,3000", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "admissible modes: none listed (the 3000 x 3000 box admits more than 2000000 modes" in printed
+    assert "fastest stationary (Turing) mode: k_max = 2.784" in printed
