@@ -196,8 +196,7 @@ def series_attributes(run, keys) -> dict[str, dict[str, str]]:
     """NetCDF attributes (``long_name``, ``units``) of the series' ``keys``, as far as they are known."""
     if not keys:
         return {}
-    fields = {spec.name: f"|{spec.name}|" if spec.vector else spec.name
-              for module in run.model.physics_objects for spec in module.fields()}
+    fields = {name: f"|{name}|" if spec.vector else name for name, spec in run.field_specs().items()}
     diagnostics = {diagnostic.name: diagnostic for diagnostic in run.diagnostics}
     named = {"time": ("time (dimensionless, seed section 2)", "dimensionless"),
              "step": ("time steps taken", "1"), "dt": ("the last sub-step's length", "dimensionless"),

@@ -763,6 +763,10 @@ class Simulation:
         return self._wall_before + clock.perf_counter() - self.wall_start
 
     # -- what outputs read ------------------------------------------------------------------
+    def field_specs(self) -> dict:
+        """Every field's :class:`~primordia.physics.base.FieldSpec` (its meaning, scalar or vector), by name."""
+        return {spec.name: spec for module in self.model.physics_objects for spec in module.fields()}
+
     @property
     def displacement_field(self) -> str | None:
         """The field the physics declares the tissue's displacement (pictures deform by it), or None."""

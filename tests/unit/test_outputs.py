@@ -25,6 +25,7 @@ from primordia.core.outputs import (
 from primordia.core.plugins import hookimpl
 from primordia.core.validation import flag, number
 from primordia.model import Model
+from primordia.physics.base import FieldSpec
 from primordia.testing import registered
 
 MESH = rectangle((0, 0), (4, 4), (4, 4))
@@ -139,12 +140,16 @@ class StandInRun:
         self.out_dir, self.mesh_data, self.is_root, self.comm = out_dir, MESH, True, self.OneRank()
         self.time, self.step_index = 0.0, 0
         self.outputs: list = []  # the outputs the run calls, in order (the summary looks for the series)
+        self.diagnostics: list = []  # the physics' Diagnostics (their descriptions name series variables)
 
     def advance(self, dt: float = 0.2) -> None:
         self.time, self.step_index = round(self.time + dt, 12), self.step_index + 1
 
     def vertex_values(self):
         return {"m": np.full(MESH.num_vertices, self.time)}
+
+    def field_specs(self):
+        return {"m": FieldSpec("m")}
 
     def field_statistics(self):
         return {"m": {"integral": 16 * self.time, "min": self.time, "max": self.time}}
