@@ -55,6 +55,10 @@ def petsc_failure(solve: str, code: int, reason: str, prefix: str) -> SolverErro
                        depends_on_step=depends_on_step(code))
 
 
+#: A solve repeated within a step (a fixed-point pass after the first) stops at this fraction of the step's
+#: first initial residual: about 5e4 machine epsilons, sixty times the floor at which Newton stalled.
+ROUND_OFF_FLOOR = 1e-11
+
 #: Defaults of every nonlinear solve (seed section 5.1), below the physics' own and the user's.
 NEWTON_DEFAULTS = {
     "snes_type": "newtonls",
@@ -797,14 +801,15 @@ class NewtonSolver(_Solver):
 
     @contextmanager
     def repeated_within_a_step(self):
-        """Solves repeated within one step (the fixed-point passes) are judged against the step's first.
+        """Solves repeated within one step (the fixed-point passes) need not go below the step's round-off.
 
-        A later pass starts nearly converged, so ``snes_rtol`` of its own initial residual asks for more
-        than round-off allows: the momentum residual carries rho / dt^2 and the storage 1 / dt, so its
-        floor rises as an adaptive step halves dt, and Newton stalled at 1.9e-6 above the 1e-7 it was
-        asked for, from a first pass that had begun at 1.09e7 (example 2a at 6 x 6, delta_2 = 5: the run
-        stopped at dt_min).  Each later solve now stops at ``snes_atol`` or ``snes_rtol`` times the step's
-        first initial residual, the accuracy the first pass was solved to.
+        A later pass starts nearly converged, and ``snes_atol`` may lie below what round-off leaves of
+        the step's residual: the momentum residual carries rho / dt^2 and the storage 1 / dt, so its
+        floor rises as an adaptive step halves dt, and Newton stalled at 1.9e-6 (1.7e-13 of the first
+        pass's initial 1.09e7) above the 1e-7 it was asked for (example 2a at 6 x 6, delta_2 = 5: the
+        run stopped at dt_min).  A later solve also stops at :data:`ROUND_OFF_FLOOR` times the step's
+        first initial residual.  A floor of ``snes_rtol`` times it instead let later passes stop as soon
+        as the first did, and runs on 2 ranks then differed by 2e-8 from launch to launch.
         """
         self._repeated, self._step_reference = True, None
         try:
@@ -913,8 +918,8 @@ class NewtonSolver(_Solver):
         """SNES solve; its time outside the residual and tangent callbacks is linear algebra."""
         rtol, atol, stol, max_it = self.snes.getTolerances()
         self.snes.setConvergenceHistory(length=max_it + 1, reset=True)
-        if self._step_reference is not None:  # a later pass of the step: the first one's accuracy (see above)
-            self.snes.setTolerances(atol=max(atol, rtol * self._step_reference))
+        if self._step_reference is not None:  # a later pass of the step: not below its round-off (see above)
+            self.snes.setTolerances(atol=max(atol, ROUND_OFF_FLOOR * self._step_reference))
         self._assembly_seconds, start = no_time(), clock_now()
         try:
             self.snes.solve(None, self._x)
