@@ -119,7 +119,7 @@ def _compose(args, config):
     elif any(module.finite_strain for module in model.physics_objects):
         box = "the tissue grows, and its modes with it"
     elif d != gdim:
-        box = f"the mesh is {gdim}D; --domain L1,...,L{d} gives a box"
+        box = f"the mesh is {gdim}D; --domain {','.join(f'L{i}' for i in range(1, d + 1))} gives a box"
     else:
         box = box_lengths(model.mesh_data) or "the mesh does not fill its bounding box; --domain gives a box"
     return linear, model.parameters, d, box

@@ -259,6 +259,7 @@ def _structured_mesh(points, cells, lower, upper, sides: Mapping[str, tuple[int,
     if not np.all(volumes > 0) or not np.all(np.isfinite(volumes)):
         raise MeshError(f"mesh {description}: cells so small or so large that their volumes are "
                         f"{'0' if not np.all(volumes > 0) else 'not finite'}; use fewer cells or rescale the domain")
+    _check_not_degenerate(points, cells, f"mesh {description}")  # a side too thin for the others, as for a file
     cells = orient_cells(points, cells)
     facets = exterior_facets(cells)
     extent = np.max(upper - lower)

@@ -8,6 +8,7 @@ Serial: draw on one MPI rank.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +76,7 @@ def plot_fields_grid(
     their x label saying "displacement x<scale>".  ``ncols`` defaults to all
     panels in one row.  A 3D mesh gets two rows of panels: its top face seen
     from above, and the vertical slice through the middle of its y extent
-    (the seed's Figure 5.5 shows both).
+    (the seed's Figure 5.5 shows both), cut through the cells whatever the mesh.
     """
     from matplotlib.figure import Figure
 
@@ -122,10 +123,27 @@ def plot_fields_grid(
 
 
 class _View:
-    """A drawn 2D surface of a mesh: its vertices, triangles (in local indices) and plane axes."""
+    """A drawn 2D surface of a mesh: its points, triangles (in the points' indices) and plane axes.
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, axes: tuple[int, int], label: str):
-        self.vertices, self.triangles, self.axes, self.label = vertices, triangles, axes, label
+    Each point of the view is a weighted sum of mesh vertices (``weights``, sparse, one row per
+    point): a vertex itself on a face of the mesh, a point of an edge on a cut through the cells.
+    """
+
+    def __init__(self, weights, triangles: np.ndarray, axes: tuple[int, int], label: str):
+        self.weights, self.triangles, self.axes, self.label = weights, triangles, axes, label
+
+    @classmethod
+    def of_vertices(cls, vertices: np.ndarray, num_vertices: int, triangles, axes, label) -> "_View":
+        """The view whose points are the mesh vertices ``vertices``."""
+        from scipy.sparse import csr_matrix
+
+        ones = np.ones(len(vertices))
+        weights = csr_matrix((ones, (np.arange(len(vertices)), vertices)), shape=(len(vertices), num_vertices))
+        return cls(weights, triangles, axes, label)
+
+    def at_points(self, vertex_values: np.ndarray) -> np.ndarray:
+        """Vertex values (one per mesh vertex, or rows of them) at the view's points: linear along edges."""
+        return np.asarray(self.weights @ vertex_values)
 
     @property
     def axis_names(self) -> tuple[str, str]:
@@ -133,40 +151,77 @@ class _View:
 
     def aspect(self, mesh: MeshData) -> float:
         """Height over width of the undeformed view."""
-        extent = np.ptp(mesh.points[self.vertices][:, self.axes], axis=0)
+        extent = np.ptp(self.at_points(mesh.points[:, self.axes]), axis=0)
         return float(extent[1] / extent[0]) if extent[0] > 0 else 1.0
 
 
 def _plot_surface(mesh: MeshData) -> _View:
     """The whole mesh (2D), or the top face z = z_max of a 3D mesh seen from above."""
     if mesh.gdim == 2:
-        return _View(np.arange(mesh.num_vertices), mesh.cells, (0, 1), "")
+        return _View.of_vertices(np.arange(mesh.num_vertices), mesh.num_vertices, mesh.cells, (0, 1), "")
     facets = exterior_facets(mesh.cells)
     z = mesh.points[:, 2]
     tolerance = 1e-10 * np.ptp(mesh.points, axis=0).max()
     top = facets[np.all(np.abs(z[facets] - z.max()) <= tolerance, axis=1)]
     vertices, local = np.unique(top, return_inverse=True)
-    return _View(vertices, local.reshape(top.shape), (0, 1), f"top, z = {z.max():g}")
+    return _View.of_vertices(vertices, mesh.num_vertices, local.reshape(top.shape), (0, 1), f"top, z = {z.max():g}")
 
 
 def _slice_surface(mesh: MeshData) -> _View:
-    """The faces of a 3D mesh lying in the vertex plane y = const nearest the middle, seen along y.
+    """The cut of a 3D mesh by the vertex plane y = const nearest the middle of its y extent, seen along y.
 
-    Structured boxes (and any mesh with a plane of faces there) are cut exactly; the
-    plane is the one holding most vertices among those nearest the middle.
+    Every tetrahedron the plane crosses is cut into a triangle or a quadrilateral (two
+    triangles) whose corners are vertices on the plane or points of edges crossing it, where
+    fields are interpolated linearly (exact for P1).  A structured box is cut along its faces;
+    an unstructured mesh, whose faces seldom lie in one plane, through its cells (drawing only
+    the faces in the plane showed scattered triangles of it).
     """
     y = mesh.points[:, 1]
     tolerance = 1e-10 * np.ptp(mesh.points, axis=0).max()
-    levels = np.unique(np.round(y / max(tolerance, 1e-300)) * tolerance)
     middle = 0.5 * (y.min() + y.max())
-    level = levels[np.argmin(np.abs(levels - middle))]
-    on_plane = np.abs(y - level) <= 10 * tolerance
-    faces = np.sort(mesh.cells[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), axis=1)
-    faces = np.unique(faces[np.all(on_plane[faces], axis=1)], axis=0)
-    if len(faces) == 0:
-        raise PrimordiaError(f"cannot draw a slice of the mesh: no cell faces lie in the plane y = {level:g}")
-    vertices, local = np.unique(faces, return_inverse=True)
-    return _View(vertices, local.reshape(faces.shape), (0, 2), f"slice y = {level:g}")
+    level = float(y[np.argmin(np.abs(y - middle))])
+    side = y - level
+    side[np.abs(side) <= 10 * tolerance] = 0.0
+    ends, triangles = _plane_cut(mesh.points[:, [0, 2]], mesh.cells, side)
+    if len(triangles) == 0:
+        raise PrimordiaError(f"cannot draw a slice of the mesh: no cell is cut by the plane y = {level:g}")
+    from scipy.sparse import csr_matrix
+
+    a, b = ends.T
+    share = np.divide(side[a], side[a] - side[b], out=np.zeros(len(ends)), where=a != b)  # point (1 - t) x_a + t x_b
+    rows = np.repeat(np.arange(len(ends)), 2)
+    weights = csr_matrix((np.column_stack([1.0 - share, share]).ravel(), (rows, ends.ravel())),
+                         shape=(len(ends), mesh.num_vertices))  # a vertex on the plane: 1 + 0, summed
+    return _View(weights, triangles, (0, 2), f"slice y = {level:g}")
+
+
+def _plane_cut(plane_xy: np.ndarray, cells: np.ndarray, side: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cut of tetrahedra by the plane side = 0: (its points as the two ends (a, b) of the edge they lie
+    on, a == b for a vertex on the plane; its triangles in the points' indices, each once).
+
+    ``side`` is the signed distance of each vertex from the plane (exactly 0 on it), ``plane_xy`` the
+    vertices' coordinates in the plane, which order a quadrilateral's corners around its centre.
+    """
+    lowest, highest = side[cells].min(axis=1), side[cells].max(axis=1)
+    crossed = cells[(lowest <= 0) & (highest >= 0) & (np.count_nonzero(side[cells] == 0, axis=1) < 4)]
+    index: dict[tuple[int, int], int] = {}
+    triangles = set()
+    for cell in crossed:
+        corners = [(int(v), int(v)) for v in cell if side[v] == 0]
+        corners += [(int(min(a, b)), int(max(a, b))) for a, b in combinations(cell, 2) if side[a] * side[b] < 0]
+        if len(corners) < 3:
+            continue  # the plane touches the cell at a vertex or along an edge
+        ids = [index.setdefault(corner, len(index)) for corner in corners]
+        if len(ids) == 4:  # a quadrilateral: its corners in turn around the centre, then two triangles
+            share = [0.0 if a == b else side[a] / (side[a] - side[b]) for a, b in corners]
+            xy = np.array([(1 - t) * plane_xy[a] + t * plane_xy[b] for (a, b), t in zip(corners, share)])
+            turn = np.argsort(np.arctan2(*(xy - xy.mean(axis=0)).T[::-1]))
+            ids = [ids[i] for i in turn]
+            triangles.update({tuple(sorted(ids[:3])), tuple(sorted([ids[0], ids[2], ids[3]]))})
+        else:
+            triangles.add(tuple(sorted(ids)))
+    ends = np.array(sorted(index, key=index.get), dtype=np.int64).reshape(-1, 2)
+    return ends, np.array(sorted(triangles), dtype=np.int64).reshape(-1, 3)
 
 
 def _panel_data(mesh: MeshData, view: _View, key, values, displacement, scale):
@@ -187,8 +242,8 @@ def _panel_data(mesh: MeshData, view: _View, key, values, displacement, scale):
                 f"({mesh.num_vertices}, {mesh.gdim}), got {displacement.shape}"
             )
         xy = xy + scale * displacement[:, view.axes]
-    xy = xy[view.vertices]
-    return Triangulation(xy[:, 0], xy[:, 1], view.triangles), values[view.vertices]
+    xy = view.at_points(xy)
+    return Triangulation(xy[:, 0], xy[:, 1], view.triangles), view.at_points(values)
 
 
 def _draw_outline(ax, mesh: MeshData, view: _View) -> None:
@@ -198,7 +253,7 @@ def _draw_outline(ax, mesh: MeshData, view: _View) -> None:
     edges = np.sort(view.triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
     unique, counts = np.unique(edges, axis=0, return_counts=True)
     boundary = unique[counts == 1]
-    xy = mesh.points[view.vertices][:, view.axes]
+    xy = view.at_points(mesh.points[:, view.axes])
     ax.add_collection(LineCollection(xy[boundary], colors="0.45", linewidths=0.8, linestyles="--"))
     ax.autoscale_view()
 

@@ -150,8 +150,11 @@ MONOLITHIC_DEFAULTS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_or
 
 
 def _monolithic_defaults(subproblems) -> dict:
-    """:data:`MONOLITHIC_DEFAULTS`, with MUMPS when a module's own system needs it (a saddle point)."""
-    if any(sub.petsc_options.get("pc_factor_mat_solver_type") == "mumps" for sub in subproblems):
+    """:data:`MONOLITHIC_DEFAULTS`, with MUMPS when a module's own system needs it (a saddle point): its
+    factorisation is MUMPS, or it is split by field (the growth's Schur split, whose u | (psi, p) blocks
+    meet a zero pivot in PETSc's unpivoted LU)."""
+    if any(sub.petsc_options.get("pc_factor_mat_solver_type") == "mumps"
+           or sub.petsc_options.get("pc_type") == "fieldsplit" for sub in subproblems):
         return {**MONOLITHIC_DEFAULTS, "pc_factor_mat_solver_type": "mumps"}
     return dict(MONOLITHIC_DEFAULTS)
 

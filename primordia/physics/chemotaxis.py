@@ -151,6 +151,10 @@ class Chemotaxis(Physics):
         evaluated with (a Hill exponent P_2 = 2000 overflows K_2^P_2) are one line naming the kinetics, not a
         traceback at set-up (or a state of NaNs every step would be rejected for)."""
         super().check_inputs(mesh_data, times)
+        wavenumber, gdim = self.settings["wavenumber"], mesh_data.points.shape[1]
+        if self.settings["perturbation_shape"] == "cosine" and len(wavenumber) > gdim:
+            raise ConfigError(f"physics.{self.name}.wavenumber has {len(wavenumber)} components (one per axis), "
+                              f"the mesh is {gdim}D: k_{gdim + 1} would be ignored")
         where = f"kinetics {self.kinetics.name}"
         try:
             with np.errstate(all="ignore"):

@@ -81,8 +81,7 @@ class GrowthLaw(Configured, ABC):
         self.settings: dict[str, Any] = merge_options(f"growth law {self.name}", self.options, given)
         directions = self.settings["directions"]
         if directions is not None:  # validate now, one line; the mesh's dimension is checked by frame()
-            size = len(directions) if isinstance(directions, (list, tuple)) else 0
-            self.frame(size if size in (2, 3) else 3)
+            self.frame(_dimension_meant(directions))
 
     @abstractmethod
     def factors(self, fields: Mapping[str, Any], t, X, dimension: int) -> list:
@@ -128,6 +127,16 @@ class GrowthLaw(Configured, ABC):
                               self.directions_at(X, dimension)):
             tensor = tensor + stretch * ufl.outer(k, k)  # F_g, after (4.12c)
         return tensor
+
+
+def _dimension_meant(directions) -> int:
+    """The dimension a ``directions`` list is written for: the length of its vectors (3 when unclear), so that
+    [[1, 0, 0], [0, 1, 0]] is told it needs 3 vectors of 3 numbers, not 2 of 2."""
+    if isinstance(directions, (list, tuple)) and directions:
+        first = directions[0]
+        size = len(first) if isinstance(first, (list, tuple)) else len(directions)
+        return size if size in (2, 3) else 3
+    return 3
 
 
 def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: int) -> list:

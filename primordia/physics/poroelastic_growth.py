@@ -187,6 +187,8 @@ class PoroelasticGrowth(Physics):
         """Also the growth law against the mesh's dimension, so that ``--dry-run`` refuses what the set-up would."""
         super().check_inputs(mesh_data, times)
         self.growth_law.check_dimension(mesh_data.gdim)
+        if self.growth_law.settings.get("directions") is not None:  # d vectors of d numbers, d the mesh's
+            self.growth_law.frame(mesh_data.gdim)
 
     def fields(self):
         return [FieldSpec("u", degree=2, vector=True, group=GROUP, displacement=True,

@@ -339,6 +339,20 @@ def test_sizes_that_cannot_run_are_refused_before_allocating(capsys, small_confi
     assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", *arguments), *fragments)
 
 
+@pytest.mark.parametrize("assignments, fragments", [
+    (['physics.chemotaxis.perturbation_shape="cosine"', "physics.chemotaxis.wavenumber=[1.0, 2.0, 3.0]"],
+     ["physics.chemotaxis.wavenumber has 3 components", "the mesh is 2D"]),
+    (['mesh.type="box"', "mesh.upper=[4.0, 4.0, 1e-12]", "mesh.cells=[4, 4, 2]"],
+     ["mesh box [0, 4] x [0, 4] x [0, 1e-12]", "192 degenerate (zero-volume) cells"]),
+], ids=["3d-wavenumber-on-a-2d-mesh", "slab-1e-12-thick"])
+def test_a_dry_run_refuses_what_the_mesh_s_dimension_or_shape_makes_meaningless(capsys, small_config, assignments,
+                                                                                fragments):
+    """Both were called valid: k_3 was dropped without a word, and the slab's run failed at its first step
+    (the linear solver's set-up, after halving dt down to dt_min)."""
+    arguments = [a for assignment in assignments for a in ("--set", assignment)]
+    assert_one_line(*in_process(capsys, "run", small_config(), "--dry-run", *arguments), *fragments)
+
+
 def test_a_mesh_too_big_through_the_real_command(primordia_cli, small_config):
     result = primordia_cli("run", small_config(), "--set", "mesh.cells=[100000,100000]", timeout=60)
     assert_one_line_error(result, "needs at least", "memory")

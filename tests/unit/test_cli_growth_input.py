@@ -35,3 +35,20 @@ COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "ou
 def test_a_bad_growth_config_is_one_line(primordia_cli, tmp_path, overrides, fragments):
     result = primordia_cli("run", EX02A, *COARSE, *overrides, "--out", tmp_path / "out")
     assert_one_line_error(result, *fragments)
+
+
+EX04_SMALL = Path(__file__).resolve().parents[2] / "examples" / "ex04_small.toml"
+
+
+@pytest.mark.parametrize("directions", ["[[1.0, 0.0], [0.0, 1.0]]", "[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]"],
+                         ids=["2d-frame", "two-3d-vectors"])
+def test_a_dry_run_refuses_directions_of_the_wrong_dimension_on_a_3d_slab(capsys, directions):
+    """2D directions on example 4's box: --dry-run called the input valid, the run's set-up refused them;
+    two 3D vectors were told they needed "2 vectors of 2 numbers (in 2D)"."""
+    from primordia.cli import main
+
+    status = main(["run", str(EX04_SMALL), "--set", "mesh.cells=[2,2,1]",
+                   "--set", f"growth_law.directions={directions}", "--dry-run"])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 2 and len(lines) == 1, lines
+    assert "growth_law.directions must be 3 vectors of 3 numbers" in lines[0] and "in 3D" in lines[0], lines[0]

@@ -239,6 +239,16 @@ def test_box_rejects_upper_below_lower():
         box((0, 0, 1), (1, 1, 0), (1, 1, 1))
 
 
+@pytest.mark.parametrize("make", [lambda: box((0, 0, 0), (4, 4, 1e-12), (4, 4, 2)),
+                                  lambda: rectangle((0, 0), (4, 1e-14), (4, 4))], ids=["box", "rectangle"])
+def test_a_generated_mesh_too_thin_for_its_width_is_refused_as_a_file_is(make):
+    # a 1e-12 thick slab passed, and its run failed at the first step after retrying down to dt_min
+    with pytest.raises(MeshError, match="degenerate") as error:
+        make()
+    assert "\n" not in str(error.value)
+    assert box((0, 0, 0), (4, 4, 1e-6), (4, 4, 2)).num_cells == 192  # thin, but a mesh
+
+
 # ---------------------------------------------------------------------------
 # read_mesh
 # ---------------------------------------------------------------------------

@@ -70,3 +70,31 @@ def test_plot_field_errors(tmp_path, square, kwargs, message):
         arguments["path"] = tmp_path / kwargs["path"]
     with pytest.raises(PrimordiaError, match=message):
         plot_field(**arguments)
+
+
+def _view_area(view, mesh) -> float:
+    xy = view.at_points(mesh.points[:, view.axes])
+    corners = xy[view.triangles]
+    edges = corners[:, 1:] - corners[:, :1]
+    return float(0.5 * np.abs(edges[:, 0, 0] * edges[:, 1, 1] - edges[:, 0, 1] * edges[:, 1, 0]).sum())
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.15], ids=["structured-box", "interior-vertices-moved"])
+def test_the_slice_of_a_3d_mesh_is_the_whole_cross_section_with_fields_linear_on_it(shift):
+    """A mesh whose faces do not lie in the middle plane (any unstructured one) was drawn as the few faces
+    that did: two scattered triangles of the 4 x 1 cross-section, white elsewhere."""
+    from primordia.core.mesh_data import MeshData
+    from primordia.core.pictures import _slice_surface
+
+    slab = box((0, 0, 0), (4, 4, 1), (4, 4, 2))
+    points = slab.points.copy()
+    interior = np.all((points > 1e-9) & (points < np.array([4, 4, 1]) - 1e-9), axis=1)
+    points[interior, 1] += shift * np.random.default_rng(0).uniform(-1, 1, np.count_nonzero(interior))
+    mesh = MeshData(points, slab.cells, slab.boundaries)
+    view = _slice_surface(mesh)
+    assert view.label == "slice y = 2"
+    assert _view_area(view, mesh) == pytest.approx(4.0, rel=1e-12)
+    cut = view.at_points(mesh.points)
+    np.testing.assert_allclose(cut[:, 1], 2.0, atol=1e-12)  # every drawn point lies in the plane
+    linear = mesh.points @ np.array([1.0, 3.0, 2.0])
+    np.testing.assert_allclose(view.at_points(linear), cut @ np.array([1.0, 3.0, 2.0]), atol=1e-12)

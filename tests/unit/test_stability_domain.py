@@ -106,3 +106,22 @@ def test_a_box_far_larger_than_the_wavelengths_lists_no_modes(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "admissible modes: none listed (the 3000 x 3000 box admits more than 2000000 modes" in printed
     assert "fastest stationary (Turing) mode: k_max = 2.784" in printed
+
+
+def test_a_3d_box_lists_its_modes_in_three_indices_and_a_2d_analysis_of_it_names_the_lengths(tmp_path, capsys):
+    """Example 1a's chemistry on a 4 x 4 x 1 box: by hand, k = pi |(n_1/4, n_2/4, n_3)|; the 72 n != 0 with
+    k <= 5.44 all grow (n_3 = 1 from (0, 0, 1), k = pi), the fastest is (2, 3, 0), k = pi sqrt(13) / 4."""
+    text = (EXAMPLES / "ex01a.toml").read_text()
+    config = tmp_path / "slab.toml"
+    config.write_text(text[:text.index("[mesh]")] + '[mesh]\ntype = "box"\nupper = [4.0, 4.0, 1.0]\n'
+                      "cells = [2, 2, 1]\n\n" + text[text.index("[time]"):])
+    assert run(["stability", str(config), "--out", str(tmp_path / "d3")]) == 0
+    printed = capsys.readouterr().out
+    assert "on the 4 x 4 x 1 box (zero-flux cosine modes) the fastest is n = (2, 3, 0), (3, 2, 0): k = 2.832" in printed
+    assert "72 admissible modes grow" in printed
+    with xr.open_dataset(tmp_path / "d3" / "dispersion.nc", engine="scipy") as ds:
+        n = ds["mode_n"].values
+        np.testing.assert_allclose(ds["mode_k"], np.pi * np.linalg.norm(n / [4.0, 4.0, 1.0], axis=1), rtol=1e-14)
+        assert sorted(set(n[:, 2])) == [0, 1]
+    assert run(["stability", str(config), "--d", "2", "--out", str(tmp_path / "d2")]) == 0
+    assert "admissible modes: none listed (the mesh is 3D; --domain L1,L2 gives a box)" in capsys.readouterr().out
