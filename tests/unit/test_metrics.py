@@ -241,3 +241,24 @@ def test_a_run_without_its_config_predicts_nothing(tmp_path):
     ds = analyse_run(tmp_path, species=["m"], pictures=False)
     assert np.isnan(float(ds["predicted_wavelength"])) and np.isnan(float(ds["predicted_wavenumber"]))
     assert "no config.toml" in ds.attrs["linear_analysis"]
+
+
+def test_a_slab_is_measured_on_its_top_face(tmp_path):
+    """A tetrahedral slab (example 4's shape) was refused; its top face z = 1, where the pictures show the
+    pattern, is measured: spots at spacing a on the reference face, s a on the face moved by u = (s - 1) (x, y, 0)."""
+    from primordia.core.meshes import box
+
+    slab = box((0.0, 0.0, 0.0), (SIDE, SIDE, 1.0), cells=(80, 80, 1))
+    stretch, spacing = 1.2, 3.0
+    width = spacing / 6
+    spots = gaussian_spots(slab.points[:, :2], hexagonal_lattice(spacing, 3 * width), width)
+    displacement = np.column_stack([(stretch - 1.0) * slab.points[:, :2], 0.1 * slab.points[:, 2]])
+    series = XdmfSeries(tmp_path, slab)
+    series.write(20.0, {"m": spots * (1.0 + 0.2 * slab.points[:, 2]), "u": displacement})
+    write_toml(tmp_path / "config.toml", {"model": {"physics": ["chemotaxis"]}, "parameters": {"m0": 0.75, "D_m": 0.03}})
+    ds = analyse_run(tmp_path, pictures=False)
+    assert ds.attrs["surface"] == "the top face z = 1"
+    m = ds.sel(species="m", time=20.0)
+    assert float(m["spacing_mean"].sel(configuration="reference")) == pytest.approx(spacing, rel=0.01)
+    assert float(m["spacing_mean"].sel(configuration="current")) == pytest.approx(stretch * spacing, rel=0.01)
+    assert pattern_kind(ds, species="m", time=20.0, configuration="reference").item() == "spots"

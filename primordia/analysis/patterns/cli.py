@@ -33,7 +33,8 @@ def run(args) -> int:
     start = time.perf_counter()
     ds = analyse_run(args.run_dir, species=args.species, pictures=not args.no_pictures)
     predicted = ds["predicted_wavelength"].item()
-    print(f"primordia analyse: {args.run_dir} (run {ds.attrs['run_status']}); linear analysis, "
+    surface = "" if ds.attrs["surface"] == "the mesh" else f", measured on {ds.attrs['surface']}"
+    print(f"primordia analyse: {args.run_dir} (run {ds.attrs['run_status']}{surface}); linear analysis, "
           f"{ds.attrs['linear_analysis']}: k_max = {ds['predicted_wavenumber'].item():.4g}, "
           f"wavelength {predicted:.4g}, growth rate {ds['predicted_growth_rate'].item():.3g}")
     for t in ds["time"].values:

@@ -123,12 +123,13 @@ class RunFields:
     """The vertex fields of a run directory at its output times."""
 
     directory: Path
-    points: np.ndarray  #: (n_vertices, 2), reference configuration
+    points: np.ndarray  #: (n_vertices, 2), reference configuration (of a slab, its top face's)
     triangles: np.ndarray  #: (n_cells, 3)
     times: tuple[float, ...]
     snapshots: tuple[dict[str, np.ndarray], ...]  #: per time, field name -> vertex values
     config: dict  #: the resolved config.toml (empty if absent)
     status: str  #: summary.json's status, or "unknown"
+    surface: str = "the mesh"  #: what is measured: the 2D mesh, or a slab's top face
 
     @property
     def scalar_fields(self) -> list[str]:
@@ -158,14 +159,22 @@ def read_run(directory: str | Path) -> RunFields:
     try:  # a damaged run directory (a truncated fields.xdmf, fields_h5/ gone) is named, not a traceback
         reader = meshio.xdmf.TimeSeriesReader(str(xdmf))
         points, blocks = reader.read_points_cells()
+        points = np.asarray(points)
         triangles = [block.data for block in blocks if block.type == "triangle"]
-        if not triangles:
-            raise ConfigError(f"{xdmf}: pattern metrics need a triangle mesh (2D); found {[b.type for b in blocks]}")
+        tetrahedra = [block.data for block in blocks if block.type == "tetra"]
+        triangles_given = bool(triangles)
+        if triangles:
+            vertices, triangles = slice(None), triangles[0]
+        elif tetrahedra:  # a slab (example 4): its top face, where the pictures show the pattern
+            vertices, triangles = top_face(points, tetrahedra[0])
+        else:
+            raise ConfigError(f"{xdmf}: pattern metrics need a triangle or tetrahedron mesh; found "
+                              f"{[b.type for b in blocks]}")
         times, snapshots = [], []
         for index in range(reader.num_steps):
             t, fields, _ = reader.read_data(index)
             times.append(float(t))
-            snapshots.append({name: np.asarray(values) for name, values in fields.items()})
+            snapshots.append({name: np.asarray(values)[vertices] for name, values in fields.items()})
     except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, SyntaxError) as error:
         raise ConfigError(f"{xdmf} (or the HDF5 files it names) cannot be read: {_reason(error)}") from None
     if not snapshots:
@@ -180,8 +189,28 @@ def read_run(directory: str | Path) -> RunFields:
         status = str(summary.get("status", "unknown"))
     except (OSError, ValueError, AttributeError):
         status = "unknown"  # only the run's status is read from it, for the report
-    return RunFields(directory, np.asarray(points)[:, :2], triangles[0], tuple(times), tuple(snapshots),
-                     config, status)
+    surface = f"the top face z = {points[:, 2].max():g}" if not triangles_given else "the mesh"
+    return RunFields(directory, points[vertices][:, :2], triangles, tuple(times), tuple(snapshots), config, status,
+                     surface)
+
+
+def top_face(points: np.ndarray, tetrahedra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The face z = z_max of a tetrahedral slab, seen from above: (its vertices, its triangles numbered in them).
+
+    The metrics then read x and y, and the current configuration X + u moves the face by u's (x, y).
+    """
+    from primordia.core.meshes import exterior_facets
+
+    z = points[:, 2]
+    on_top = z >= z.max() - 1e-9 * max(float(np.ptp(points, axis=0).max()), 1.0)
+    facets = exterior_facets(np.asarray(tetrahedra))
+    facets = facets[on_top[facets].all(axis=1)]
+    if not len(facets):
+        raise ConfigError("the tetrahedral mesh has no face at its largest z to measure patterns on")
+    vertices = np.unique(facets)
+    numbering = np.full(len(points), -1)
+    numbering[vertices] = np.arange(len(vertices))
+    return vertices, numbering[facets]
 
 
 def _reason(error: BaseException) -> str:
@@ -269,6 +298,7 @@ def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predict
     ds["predicted_wavelength"] = ((), predicted.wavelength, {"long_name": "linear analysis: 2 pi / k_max"})
     ds["predicted_growth_rate"] = ((), predicted.rate, {"long_name": "linear analysis: Re phi at k_max"})
     ds.attrs.update({"title": f"primordia pattern metrics of {run.directory}", "run_status": run.status,
+                     "surface": run.surface,
                      "linear_analysis": predicted.note,
                      "method": "primordia.analysis.patterns.metrics (module docstring)"})
     return ds
