@@ -120,6 +120,10 @@ class Model:
         declarations = _declarations(pieces)
         if not isinstance(overrides, dict):
             raise ConfigError("[parameters] must be a table of name = value")
+        declared = {parameter.name for parameter in declarations}
+        for name in overrides:
+            if name not in declared:
+                _refuse_a_parameter_of_another_piece(name, [owner for owner, _ in pieces])
         return ParameterSet(declarations, overrides)
 
     def _physics_options(self, table: dict) -> dict:
@@ -271,6 +275,21 @@ class Model:
         """
         return [key for key in _differences(self.resolved_config(), resolved)
                 if not any(key == a or key.startswith(a + ".") for a in allowed) and _has(resolved, key)]
+
+
+def _refuse_a_parameter_of_another_piece(name: str, used: list[str]) -> None:
+    """One line when the unknown parameter ``name`` is one of a registered piece this model does not use (say,
+    example 4's delta_1 after its growth law was switched to seed2d); nothing otherwise (the caller's
+    "unknown parameter" line, with its suggestions, follows)."""
+    from primordia.core.plugins import registry
+
+    labels = {"physics": "physics", "kinetics": "kinetics", "growth_laws": "growth law"}
+    owners = [f"{label} {piece_name}" for kind, label in labels.items()
+              for piece_name, (piece, _) in registry(kind).items()
+              if any(getattr(parameter, "name", None) == name for parameter in getattr(piece, "parameters", ()))]
+    if owners:
+        raise ConfigError(f"parameter '{name}' belongs to {' and '.join(owners)}, which this model does not use "
+                          f"(it uses {', '.join(used)}): remove it from [parameters], or use that piece")
 
 
 def _declarations(pieces) -> list[Parameter]:

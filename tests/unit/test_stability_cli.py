@@ -166,7 +166,7 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     (["stability", "map", "--x", "m0:0.1:4:5"], "stability map needs --x"),
     (["stability", "map", "--x", "tau:0:1:5", "--y", "m0:1:2:5", "--uncoupled"], "--uncoupled sets xi_f = 0"),
     (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--set", "parameters.tau=1"],
-     "unknown parameter 'tau'"),  # example 1a has no active stress
+     "parameter 'tau' belongs to physics active_stress, which this model does not use"),  # 1a has no active stress
     # a steep Hill switch or an absurd density overflowed Python's floats: a traceback
     (["stability", "--set", "parameters.P_2=2000"], "kinetics painter2018: its rates cannot be evaluated"),
     (["stability", "--set", "parameters.m0=1e300"], "kinetics painter2018: its rates cannot be evaluated"),
