@@ -2,7 +2,11 @@ r"""Isotropic active stress driven by the cell density (seed eq. (2.5)).
 
     sigma_act = (lambda + 2 mu / 3) tau m / (1 + zeta m^2) I
 
-tau > 0 dilates the tissue where cells gather, tau < 0 contracts it.  The
+With the stress of (2.2) positive in tension, tau > 0 is a tension that the
+skeleton balances by contracting where cells gather, tau < 0 dilates it
+(tests/unit/test_active_stress.py).  The seed's sentence after (2.5) says the
+opposite (tau > 0 "a local dilation"); (2.1b) and (2.5) as printed, which this
+module implements, give a contraction.  The
 module owns no field: it adds sigma_act : grad w to the momentum balance of
 the poroelasticity module, reading m from the chemotaxis module (the current
 value: with sequential splitting, the one just computed in this step).

@@ -108,6 +108,12 @@ class Condition:
         """Constraints on the field's rate over [t, t + dt]: the prescribed value's secant, new objects each call."""
         return self.homogeneous(disc)
 
+    def restraint(self, motions: np.ndarray, points: np.ndarray, times) -> np.ndarray:
+        """How the condition holds the rigid-body motions of the displacement: one row per constraint it puts on
+        ``motions`` (modes x boundary vertices x components, the motions at the boundary's ``points``), a rigid
+        motion the rows map to zero being one the condition lets through.  None by default (a traction)."""
+        return np.zeros((0, motions.shape[0]))
+
 
 class _Dirichlet(Condition):
     """Prescribes (part of) a field; value formulas are evaluated at the DOF points."""
@@ -136,6 +142,18 @@ class _Dirichlet(Condition):
         if self.formula.depends_on_time():
             for bc in self._bcs:
                 disc.update_dirichlet_bc(bc, self._values(t))
+
+    def restraint(self, motions, points, times):
+        """The prescribed components of u at every vertex of the boundary (none for another field)."""
+        if self.field != "u":
+            return super().restraint(motions, points, times)
+        axis = self._axis(points)
+        held = motions if axis is None else motions[:, :, axis:axis + 1]
+        return held.reshape(motions.shape[0], -1).T
+
+    def _axis(self, points: np.ndarray) -> int | None:
+        """The component of u the condition fixes on the boundary through ``points`` (None: all of them)."""
+        return None
 
     def rates(self, disc, t, dt):
         if not self.formula.depends_on_time():
@@ -173,6 +191,9 @@ class NormalDisplacement(_Dirichlet):
     def _component(self, disc):
         return _normal_axis(disc.mesh_data, self.boundary)
 
+    def _axis(self, points):
+        return _flat_axis(np.asarray(points, dtype=float), self.boundary)
+
     def check(self, points, times):
         """Also refuse a boundary that is not flat and normal to an axis (``primordia run --dry-run`` included)."""
         super().check(points, times)
@@ -204,6 +225,12 @@ class Robin(Condition):
             spring = motion.volume_ratio * ufl.dot(ufl.inv(motion.deformation_gradient).T, u)
         measure = disc.ds_degree(motion.quadrature_degree, self.boundary)
         return {"u": [stiffness * ufl.inner(spring, w) * measure]}  # (4.16a)
+
+    def restraint(self, motions, points, times):
+        """Every component of u at the vertices where the springs are stiff (xi_R > 0) at all ``times``."""
+        stiff = np.all([self.formula.numpy(np.asarray(points, dtype=float).T, float(t)) > 0 for t in times], axis=0)
+        stiff = np.broadcast_to(stiff, (len(points),))
+        return motions[:, stiff, :].reshape(motions.shape[0], -1).T
 
     def check(self, points, times):
         """The springs' stiffness xi_R must be >= 0 (a negative one pushes the boundary away, unbounded)."""
@@ -324,6 +351,29 @@ def encloses(conditions: list[Condition], mesh_data) -> bool:
         return False
     facets = {tuple(sorted(f)) for name in held for f in mesh_data.boundaries[name]}
     return len(facets) >= len(exterior_facets(mesh_data.cells))
+
+
+def free_rigid_motions(conditions: list[Condition], mesh_data, times) -> int:
+    """How many independent rigid-body motions of the mesh (d translations, d(d-1)/2 rotations) no condition holds.
+
+    Each condition contributes its own rows (:meth:`Condition.restraint`); without inertia the momentum balance
+    determines u only up to the motions left free.
+    """
+    points = np.asarray(mesh_data.points, dtype=float)
+    centred = (points - points.mean(axis=0)) / max(float(np.ptp(points, axis=0).max()), 1e-300)
+    gdim = points.shape[1]
+    motions = [np.broadcast_to(np.eye(gdim)[axis], centred.shape) for axis in range(gdim)]
+    for i, j in ((0, 1), (1, 2), (0, 2))[:gdim * (gdim - 1) // 2]:
+        rotation = np.zeros_like(centred)
+        rotation[:, i], rotation[:, j] = -centred[:, j], centred[:, i]
+        motions.append(rotation)
+    motions = np.array(motions)
+    rows = [np.zeros((0, len(motions)))]
+    for condition in conditions:
+        vertices = np.unique(mesh_data.boundaries[condition.boundary])
+        rows.append(condition.restraint(motions[:, vertices, :], points[vertices], times))
+    held = np.vstack(rows)
+    return len(motions) - (np.linalg.matrix_rank(held) if len(held) else 0)
 
 
 def _normal_axis(mesh_data, boundary: str) -> int:

@@ -18,7 +18,7 @@ from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import rectangle
 from primordia.physics.discretisation import Discretisation
 from primordia.physics.base import FieldSpec
-from primordia.physics.boundary_conditions import conditions_from_config, encloses
+from primordia.physics.boundary_conditions import conditions_from_config, encloses, free_rigid_motions
 from primordia.physics.kinematics import Kinematics
 
 MESH = rectangle((0, 0), (2, 1), (4, 2))
@@ -115,6 +115,43 @@ def test_a_tissue_held_normally_on_every_side_is_enclosed():
     held = [{"boundary": side, "type": "normal_displacement"} for side in ("left", "right", "bottom", "top")]
     assert encloses(conditions(*held), MESH)
     assert not encloses(conditions(*held[:3], {"boundary": "top", "type": "robin", "value": "1"}), MESH)
+
+
+@pytest.mark.parametrize("tables, free", [
+    ([], 3),
+    ([{"boundary": "top", "type": "traction", "value": ["0", "1"]},
+      {"boundary": "top", "type": "fluid_pressure", "value": "0"}], 3),         # p holds no motion of u
+    ([{"boundary": "bottom", "type": "normal_displacement"}], 1),                # slides along x
+    ([{"boundary": "bottom", "type": "normal_displacement"},
+      {"boundary": "top", "type": "normal_displacement"}], 1),                   # parallel rollers: still slides
+    ([{"boundary": "bottom", "type": "normal_displacement"},
+      {"boundary": "left", "type": "normal_displacement"}], 0),
+    ([{"boundary": "left", "type": "clamped"}], 0),
+    ([{"boundary": "right", "type": "displacement", "value": ["t", "0"]}], 0),
+    ([{"boundary": "right", "type": "robin", "value": "x[1]"}], 0),             # stiff except at one vertex
+    ([{"boundary": "right", "type": "robin", "value": "0"}], 3),
+])
+def test_the_rigid_motions_the_conditions_leave_free_are_counted(tables, free):
+    assert free_rigid_motions(conditions(*tables), MESH, [0.0, 1.0]) == free
+
+
+@pytest.mark.parametrize("rho, refused", [(0.0, True), (1.0, False)])
+def test_a_tissue_without_inertia_and_free_to_move_rigidly_is_refused(rho, refused):
+    # With rho = 0 and traction on every side, (2.1c) fixes u up to a rigid motion: the singular system was
+    # solved anyway, the two backends returning different rigid motions (top u_y -1.6e-3 and -3.2e-3 in a
+    # 6 x 6 example 1b with tau = 1e-3 at t = 2).
+    from primordia.model import Model
+
+    free = [{"boundary": side, "type": "traction", "value": ["0", "0"]} for side in ("left", "right", "bottom")]
+    model = lambda: Model(physics=["poroelasticity"], parameters={"rho": rho}, mesh=MESH, dt=0.1,  # noqa: E731
+                          t_final=0.2, physics_options={"poroelasticity": {"boundary": free}})
+    if not refused:
+        model()
+        return
+    with pytest.raises(ConfigError) as failure:
+        model()
+    assert "rho = 0 and the boundary conditions leave 3 rigid-body motion(s) of u free" in str(failure.value)
+    assert "\n" not in str(failure.value)
 
 
 def test_a_dirichlet_condition_asked_twice_gives_the_constraints_its_update_moves(disc):
