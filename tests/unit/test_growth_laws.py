@@ -143,9 +143,10 @@ def test_active_stress_refuses_to_join_finite_strain_growth():
 
 
 def test_the_growth_law_parameters_join_the_models_parameters():
+    held = {"poroelastic_growth": {"boundary": [{"boundary": "left", "type": "clamped"}]}}
     model = Model(physics=["chemotaxis", "poroelastic_growth"], growth_law="seed2d",
                   parameters={"delta_2": 0.2, "ell_0": 0.0}, mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1,
-                  t_final=0.2)
+                  t_final=0.2, physics_options=held)
     assert model.parameters["delta_2"] == 0.2 and model.parameters["delta_3"] == 0.045
     assert model.resolved_config()["growth_law"] == {"name": "seed2d"}
     with pytest.raises(ConfigError, match="parameter delta_3 must be >= 0"):
