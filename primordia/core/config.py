@@ -139,10 +139,7 @@ def apply_overrides(config: dict, assignments: list[str]) -> dict:
             table = table.setdefault(key, {})
             if not isinstance(table, dict):
                 raise ConfigError(f"--set {text}: {key} is not a table")
-        if isinstance(value, dict) and isinstance(table.get(keys[-1]), dict):
-            _merge(table[keys[-1]], value)  # an inline table adds to the table it names
-        else:
-            table[keys[-1]] = value
+        _merge(table, {keys[-1]: value})  # an inline table adds to the table it names
     return config
 
 

@@ -46,6 +46,7 @@ from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
     FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
     depends_on_step, petsc_reason, read_options)
+from primordia.physics.kinematics import rigid_motions
 
 
 def petsc_failure(solve: str, code: int, reason: str, prefix: str) -> SolverError:
@@ -184,10 +185,8 @@ def rigid_body_modes(backend, unknown, index: int, index_set) -> PETSc.NullSpace
     """
     scratch = backend.function(unknown.ufl_function_space(), "rigid_body_mode")
     dimension = sub_elements(unknown.ufl_function_space().ufl_element())[index].value_shape()[0]
-    axes = np.eye(dimension)
-    motions = [lambda x, a=a: np.outer(a, np.ones(x.shape[1])) for a in axes]
-    for i, j in ((0, 1), (1, 2), (2, 0))[: 1 if dimension == 2 else 3]:
-        motions.append(lambda x, i=i, j=j: _rotation(x, i, j, dimension))
+    modes = 3 if dimension == 2 else 6
+    motions = [lambda x, k=k: rigid_motions(x[:dimension].T)[k].T for k in range(modes)]
     vectors = []
     for motion in motions:
         backend.local_array(scratch)[:] = 0.0
@@ -201,13 +200,6 @@ def rigid_body_modes(backend, unknown, index: int, index_set) -> PETSc.NullSpace
         vector.scale(1.0 / vector.norm())
         vectors.append(vector)
     return PETSc.NullSpace().create(vectors=vectors, comm=vectors[0].getComm())
-
-
-def _rotation(x: np.ndarray, i: int, j: int, dimension: int) -> np.ndarray:
-    """The rotation in the (x_i, x_j) plane: component i is -x_j, component j is x_i."""
-    values = np.zeros((dimension, x.shape[1]))
-    values[i], values[j] = -x[j], x[i]
-    return values
 
 
 def _weakly(method):

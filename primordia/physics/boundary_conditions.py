@@ -359,15 +359,11 @@ def free_rigid_motions(conditions: list[Condition], mesh_data, times) -> int:
     Each condition contributes its own rows (:meth:`Condition.restraint`); without inertia the momentum balance
     determines u only up to the motions left free.
     """
+    from primordia.physics.kinematics import rigid_motions
+
     points = np.asarray(mesh_data.points, dtype=float)
-    centred = (points - points.mean(axis=0)) / max(float(np.ptp(points, axis=0).max()), 1e-300)
-    gdim = points.shape[1]
-    motions = [np.broadcast_to(np.eye(gdim)[axis], centred.shape) for axis in range(gdim)]
-    for i, j in ((0, 1), (1, 2), (0, 2))[:gdim * (gdim - 1) // 2]:
-        rotation = np.zeros_like(centred)
-        rotation[:, i], rotation[:, j] = -centred[:, j], centred[:, i]
-        motions.append(rotation)
-    motions = np.array(motions)
+    # about the centre, on a unit scale: the rank of the rows below does not depend on where the mesh lies
+    motions = rigid_motions((points - points.mean(axis=0)) / max(float(np.ptp(points, axis=0).max()), 1e-300))
     rows = [np.zeros((0, len(motions)))]
     for condition in conditions:
         vertices = np.unique(mesh_data.boundaries[condition.boundary])

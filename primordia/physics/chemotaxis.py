@@ -209,12 +209,7 @@ class Chemotaxis(Physics):
         return self.kinetics.sensitivity(species.name, density, ops)
 
     def setup(self, disc):
-        self.disc = disc
-        if self.settings["flux_scheme"] == "exponential_fitting":
-            for species in self.species:
-                if species.attractant and not (disc.is_alone(species.name) and disc.is_alone(species.attractant)):
-                    raise ConfigError("flux_scheme = \"exponential_fitting\" needs the species as separate fields; "
-                                      "with a monolithic scheme use physics.chemotaxis.flux_scheme = \"galerkin\"")
+        self.disc = disc  # the fitted flux's separate fields are checked when the scheme is made (check_scheme)
 
     def initialise(self, disc):
         """The kinetics' initial state (seed eq. (2.6)), the perturbed species perturbed at the vertices."""

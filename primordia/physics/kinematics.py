@@ -41,6 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import ufl
 
 
@@ -102,3 +103,15 @@ def finite_strain_kinematics(displacement, displacement_previous,
                       metric=J * ufl.inv(C),                       # J C^-1 (4.17a)-(4.17d)
                       volume_change=ufl.tr(C) - len(displacement),  # tr C - d (4.17c)
                       velocity=None, deformation_gradient=F, quadrature_degree=quadrature_degree)
+
+
+def rigid_motions(points: np.ndarray) -> np.ndarray:
+    """The rigid-body motions of a body at ``points`` (n, d): d translations along the axes and the
+    rotations in the (x_0, x_1), (x_1, x_2), (x_2, x_0) planes (one in 2D), shape (modes, n, d)."""
+    n, d = points.shape
+    motions = [np.broadcast_to(np.eye(d)[axis], (n, d)) for axis in range(d)]
+    for i, j in ((0, 1), (1, 2), (2, 0))[: 1 if d == 2 else 3]:
+        rotation = np.zeros((n, d))
+        rotation[:, i], rotation[:, j] = -points[:, j], points[:, i]
+        motions.append(rotation)
+    return np.array(motions)
