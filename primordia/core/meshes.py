@@ -291,6 +291,16 @@ def orient_cells(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return cells
 
 
+def top_face(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The face z = z_max of a tetrahedral mesh, seen from above: (its vertices, its triangles numbered in them)."""
+    facets = exterior_facets(cells)
+    z = points[:, 2]
+    tolerance = 1e-10 * np.ptp(points, axis=0).max()
+    top = facets[np.all(np.abs(z[facets] - z.max()) <= tolerance, axis=1)]
+    vertices, local = np.unique(top, return_inverse=True)
+    return vertices, local.reshape(top.shape)
+
+
 def exterior_facets(cells: np.ndarray) -> np.ndarray:
     """Facets (vertex-index rows) that belong to exactly one cell, i.e. the mesh boundary."""
     n_vertices = cells.shape[1]

@@ -16,7 +16,7 @@ import numpy as np
 from primordia.core.atomic_files import atomic_path, writable_target
 from primordia.core.errors import PrimordiaError
 from primordia.core.mesh_data import MeshData
-from primordia.core.meshes import exterior_facets
+from primordia.core.meshes import top_face
 
 
 def plot_field(
@@ -159,12 +159,8 @@ def _plot_surface(mesh: MeshData) -> _View:
     """The whole mesh (2D), or the top face z = z_max of a 3D mesh seen from above."""
     if mesh.gdim == 2:
         return _View.of_vertices(np.arange(mesh.num_vertices), mesh.num_vertices, mesh.cells, (0, 1), "")
-    facets = exterior_facets(mesh.cells)
-    z = mesh.points[:, 2]
-    tolerance = 1e-10 * np.ptp(mesh.points, axis=0).max()
-    top = facets[np.all(np.abs(z[facets] - z.max()) <= tolerance, axis=1)]
-    vertices, local = np.unique(top, return_inverse=True)
-    return _View.of_vertices(vertices, mesh.num_vertices, local.reshape(top.shape), (0, 1), f"top, z = {z.max():g}")
+    vertices, triangles = top_face(mesh.points, mesh.cells)
+    return _View.of_vertices(vertices, mesh.num_vertices, triangles, (0, 1), f"top, z = {mesh.points[:, 2].max():g}")
 
 
 def _slice_surface(mesh: MeshData) -> _View:

@@ -85,6 +85,16 @@ class Kinematics:
 MOTIONLESS = Kinematics()
 
 
+def deformation_gradient(u):
+    """F = I + Grad u (seed section 4)."""
+    return ufl.Identity(len(u)) + ufl.grad(u)
+
+
+def right_cauchy_green(F):
+    """C = F^T F."""
+    return F.T * F
+
+
 def finite_strain_kinematics(displacement, displacement_previous,
                              quadrature_degree: int | None = None) -> Kinematics:
     """The finite-strain row of the table above, from the displacement u on the reference configuration.
@@ -94,12 +104,10 @@ def finite_strain_kinematics(displacement, displacement_previous,
     (4.17a)-(4.17d), no advecting velocity.  Stated once, for every mechanics module that moves
     the reference configuration (and for the tests that move it by a prescribed motion).
     """
-    identity = ufl.Identity(len(displacement))
-    F = identity + ufl.grad(displacement)
-    F_previous = identity + ufl.grad(displacement_previous)
-    C = F.T * F
+    F = deformation_gradient(displacement)
+    C = right_cauchy_green(F)
     J = ufl.det(F)
-    return Kinematics(volume_ratio=J, volume_ratio_previous=ufl.det(F_previous),
+    return Kinematics(volume_ratio=J, volume_ratio_previous=ufl.det(deformation_gradient(displacement_previous)),
                       metric=J * ufl.inv(C),                       # J C^-1 (4.17a)-(4.17d)
                       volume_change=ufl.tr(C) - len(displacement),  # tr C - d (4.17c)
                       velocity=None, deformation_gradient=F, quadrature_degree=quadrature_degree)

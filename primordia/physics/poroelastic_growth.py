@@ -68,7 +68,7 @@ from primordia.core.validation import flag, number, numbers
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem
 from primordia.physics.boundary_conditions import conditions_from_config, encloses, free_rigid_motions
 from primordia.physics.growth_laws import fluid_source
-from primordia.physics.kinematics import finite_strain_kinematics
+from primordia.physics.kinematics import deformation_gradient, finite_strain_kinematics, right_cauchy_green
 from primordia.physics.poroelastic_linear import inertia, stress_divergence
 from primordia.physics.seed_parameters import POROELASTICITY
 
@@ -76,16 +76,6 @@ GROUP = "poroelastic_growth"
 
 
 # -- kinematics and stresses of seed section 4 -----------------------------------------------
-def deformation_gradient(u):
-    """F = I + Grad u (seed section 4)."""
-    return ufl.Identity(len(u)) + ufl.grad(u)
-
-
-def right_cauchy_green(F):
-    """C = F^T F."""
-    return F.T * F
-
-
 def elastic_stress(F, F_g, psi, mu):
     """P_e = J (mu B_e - psi I) F^-T, B_e = F_e F_e^T, F_e = F F_g^-1 (seed eqs. (4.5), (4.11))."""
     F_e = F * ufl.inv(F_g)
@@ -216,12 +206,11 @@ class PoroelasticGrowth(Physics):
         self.conditions = conditions_from_config(self.settings["boundary"], disc.mesh_data, disc.gdim)
         self.velocity = disc.rate("u")
         u, u_previous = disc.field("u"), disc.previous("u")
-        self.F, self.F_previous = deformation_gradient(u), deformation_gradient(u_previous)
-        self.C, self.C_previous = right_cauchy_green(self.F), right_cauchy_green(self.F_previous)
-        self.J = ufl.det(self.F)
-        self.ramp = disc.constant(1.0)  # growth continuation of the initial solve
         kinematics = finite_strain_kinematics(u, u_previous, self.settings["quadrature_degree"])  # (4.17a-d)
         disc.provide_kinematics(kinematics, self.name)
+        self.F, self.J = kinematics.deformation_gradient, kinematics.volume_ratio  # the same F, J as the chemistry's
+        self.C, self.C_previous = right_cauchy_green(self.F), right_cauchy_green(deformation_gradient(u_previous))
+        self.ramp = disc.constant(1.0)  # growth continuation of the initial solve
 
     def growth_tensor(self, ramp=None, time=None):
         """F_g of the growth law at the current fields and time (or ``time``); I + s (F_g - I) with a ramp s."""

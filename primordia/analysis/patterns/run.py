@@ -166,7 +166,11 @@ def read_run(directory: str | Path) -> RunFields:
         if triangles:
             vertices, triangles = slice(None), triangles[0]
         elif tetrahedra:  # a slab (example 4): its top face, where the pictures show the pattern
-            vertices, triangles = top_face(points, tetrahedra[0])
+            from primordia.core.meshes import top_face
+
+            vertices, triangles = top_face(points, np.asarray(tetrahedra[0]))
+            if not len(triangles):
+                raise ConfigError(f"{xdmf}: the tetrahedral mesh has no face at its largest z to measure patterns on")
         else:
             raise ConfigError(f"{xdmf}: pattern metrics need a triangle or tetrahedron mesh; found "
                               f"{[b.type for b in blocks]}")
@@ -192,25 +196,6 @@ def read_run(directory: str | Path) -> RunFields:
     surface = f"the top face z = {points[:, 2].max():g}" if not triangles_given else "the mesh"
     return RunFields(directory, points[vertices][:, :2], triangles, tuple(times), tuple(snapshots), config, status,
                      surface)
-
-
-def top_face(points: np.ndarray, tetrahedra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The face z = z_max of a tetrahedral slab, seen from above: (its vertices, its triangles numbered in them).
-
-    The metrics then read x and y, and the current configuration X + u moves the face by u's (x, y).
-    """
-    from primordia.core.meshes import exterior_facets
-
-    z = points[:, 2]
-    on_top = z >= z.max() - 1e-9 * max(float(np.ptp(points, axis=0).max()), 1.0)
-    facets = exterior_facets(np.asarray(tetrahedra))
-    facets = facets[on_top[facets].all(axis=1)]
-    if not len(facets):
-        raise ConfigError("the tetrahedral mesh has no face at its largest z to measure patterns on")
-    vertices = np.unique(facets)
-    numbering = np.full(len(points), -1)
-    numbering[vertices] = np.arange(len(vertices))
-    return vertices, numbering[facets]
 
 
 def _reason(error: BaseException) -> str:
