@@ -42,22 +42,11 @@ from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
 from primordia.coupling.solvers import SubproblemSolver, accumulate, independent_batches, solve_in_turn
+from primordia.coupling.splitting import grouped_direct
 from primordia.physics.discretisation import Discretisation
 
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
 NEGATIVE_TOLERANCE = 1e-8
-
-#: The solver of a module's initial solve grouped with other fields: a pivoting factorisation, as the
-#: monolithic scheme's own solve of a saddle point (the growth system's zero psi block).
-GROUPED_DIRECT = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
-
-
-def _for_the_group(options: dict) -> dict:
-    """A module's solver defaults for its subproblem widened to a group of fields: a fieldsplit's splits name
-    the module's fields alone (the seed's Schur split of growth: u | (psi, p), the default in 3D), not the
-    group's, and were refused as a bad ``[solver.*]`` table the user never wrote; a direct solve instead."""
-    return dict(GROUPED_DIRECT) if options.get("pc_type") == "fieldsplit" else options
-
 
 class Simulation:
     """One run of a :class:`~primordia.model.Model` on one backend.
@@ -219,8 +208,12 @@ class Simulation:
         else:  # an initial rate: the others' rates stay 0
             held = {name: disc.rate(name) for name in others}
         residual = subproblem.residual + sum(ufl.inner(held[name], disc.test(name)) * disc.dx for name in others)
+        # The module's own solver, unless it splits by field: its splits name its fields alone, not the group's.
+        options = subproblem.petsc_options
+        if options.get("pc_type") == "fieldsplit":
+            options = grouped_direct([options])
         return dataclasses.replace(subproblem, residual=residual, jacobian=ufl.derivative(residual, subproblem.unknown),
-                                   petsc_options=_for_the_group(subproblem.petsc_options))
+                                   petsc_options=options)
 
     def _solve_initial(self, subproblem) -> None:
         """One solve completing the initial state, in continuation stages when the subproblem asks for them."""

@@ -44,7 +44,7 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    FRESH, GATHER, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
+    FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
     depends_on_step, petsc_reason, read_options)
 from primordia.physics.kinematics import rigid_motions
 
@@ -344,10 +344,16 @@ class _Solver:
             return False
         warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=4)
         operators = ksp.getOperators()
-        PETSc.Options()[self.sub.prefix + "pc_factor_mat_solver_type"] = "mumps"
-        _WRITTEN.setdefault(self.sub.prefix, set()).add(self.sub.prefix + "pc_factor_mat_solver_type")
+        database = PETSc.Options()
+        database[self.sub.prefix + PACKAGE] = "mumps"
+        _WRITTEN.setdefault(self.sub.prefix, set()).add(self.sub.prefix + PACKAGE)
+        own_ordering = ORDERING not in self._user_keys  # a default ordering: MUMPS's own is better (combine)
+        if own_ordering:
+            database.delValue(self.sub.prefix + ORDERING)
         ksp.reset()
         ksp.setFromOptions()
+        if own_ordering:  # the PC keeps the ordering it read before the reset
+            ksp.getPC().setFactorOrdering("external")
         ksp.setOperators(*operators)
         return True
 

@@ -23,6 +23,7 @@ approach the exact ones and the splitting error of the scheme is what remains.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Iterable, Mapping
 from abc import ABC, abstractmethod
 
 import ufl
@@ -147,15 +148,20 @@ class FixedPoint(SplittingScheme):
 #: LU and a nested-dissection ordering (MUMPS on more than one rank, and whenever the unpivoted LU meets a
 #: zero pivot, as in a saddle point).  ``pc_type = "fieldsplit"`` splits it by field (the fields' names).
 MONOLITHIC_DEFAULTS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd"}
+#: The direct solve of a grouped system that needs pivoting: MUMPS, with its own ordering (not PETSc's nd,
+#: see :func:`~primordia.coupling.solver_options.combine`).
+PIVOTING_DIRECT = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
 
 
-def _monolithic_defaults(subproblems) -> dict:
-    """:data:`MONOLITHIC_DEFAULTS`, with MUMPS when a module's own system needs it (a saddle point): its
-    factorisation is MUMPS, or it is split by field (the growth's Schur split, whose u | (psi, p) blocks
-    meet a zero pivot in PETSc's unpivoted LU)."""
-    if any(sub.petsc_options.get("pc_factor_mat_solver_type") == "mumps"
-           or sub.petsc_options.get("pc_type") == "fieldsplit" for sub in subproblems):
-        return {**MONOLITHIC_DEFAULTS, "pc_factor_mat_solver_type": "mumps"}
+def grouped_direct(module_options: Iterable[Mapping]) -> dict:
+    """The direct solve of a system grouping several modules' fields (the monolithic scheme's Newton system, a
+    module's initial solve within it), given the modules' own solver options: :data:`PIVOTING_DIRECT` when a
+    module's own system needs pivoting (its factorisation is MUMPS, or it is split by field: the growth's Schur
+    split u | (psi, p), whose blocks meet a zero pivot in PETSc's unpivoted LU, and whose splits name that
+    module's fields, not the group's), else :data:`MONOLITHIC_DEFAULTS`."""
+    if any(options.get("pc_factor_mat_solver_type") == "mumps" or options.get("pc_type") == "fieldsplit"
+           for options in module_options):
+        return dict(PIVOTING_DIRECT)
     return dict(MONOLITHIC_DEFAULTS)
 
 
@@ -179,7 +185,7 @@ class Monolithic(SplittingScheme):
         stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]
         combined = Subproblem(
             name="monolithic", unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
-            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False, petsc_options=_monolithic_defaults(subproblems),
+            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False, petsc_options=grouped_direct(sub.petsc_options for sub in subproblems),
             fields=sim.disc.unknown_fields(sim.disc.field_names()[0]),
             rigid_body=next((sub.rigid_body for sub in subproblems if sub.rigid_body), None),
             preconditioner=sum(stabilisations[1:], stabilisations[0]) if stabilisations else None)

@@ -39,6 +39,20 @@ def test_a_zero_pivot_in_unpivoted_lu_falls_back_to_mumps():
     assert np.isfinite(backend.local_array(state)).all() and np.abs(backend.local_array(state)).max() > 0
 
 
+def test_the_fallback_to_mumps_drops_a_default_ordering_for_its_own():
+    """Handed PETSc's nested dissection, MUMPS factorises in that order (ICNTL(7) = 1) with many times the fill
+    of its own analysis; the PC keeps the ordering it read, so the fallback sets MUMPS's own again."""
+    backend = FenicsxBackend()
+    state, problem = _stokes(backend)
+    problem.petsc_options["pc_factor_mat_ordering_type"] = "nd"
+    solver = SubproblemSolver(backend, problem)
+    with pytest.warns(UserWarning, match="switching to MUMPS"):
+        solver.solve()
+    factor = solver.ksp.getPC().getFactorMatrix()
+    assert factor.getType() == "mumps" and factor.getMumpsIcntl(7) != 1
+    assert solver.ksp.getConvergedReason() > 0
+
+
 def test_a_petsc_error_in_an_iterative_solve_is_one_solver_error_not_swallowed():
     from primordia.core.errors import SolverError
 
