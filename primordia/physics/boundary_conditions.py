@@ -372,6 +372,22 @@ def free_rigid_motions(conditions: list[Condition], mesh_data, times) -> int:
     return len(motions) - (np.linalg.matrix_rank(held) if len(held) else 0)
 
 
+def refuse_free_rigid_motions(where: str, boundary: list, mesh_data, times, static: list[str], balance: str,
+                              remedy: str = "") -> None:
+    """One line when the conditions of table ``boundary`` leave a rigid-body motion of u free while the balance
+    is static for the reasons ``static`` (``"rho = 0"``, ...): the momentum balance ``balance`` (a seed
+    equation) then fixes u only up to that motion, a singular matrix.  ``remedy`` adds a way out other than
+    holding u on a boundary."""
+    if not static:
+        return
+    free = free_rigid_motions(conditions_from_config(boundary, mesh_data, mesh_data.gdim), mesh_data, times)
+    if free:
+        raise ConfigError(f"{where}: the boundary conditions leave {free} rigid-body motion(s) of u free and "
+                          f"{' and '.join(static)}, so the {balance} has no unique solution; hold u on a boundary "
+                          f"(clamped, displacement, robin springs, or normal_displacement on enough boundaries)"
+                          f"{remedy}")
+
+
 def _normal_axis(mesh_data, boundary: str) -> int:
     """The coordinate axis normal to a flat, axis-aligned boundary (else a one-line error)."""
     return _flat_axis(mesh_data.points[np.unique(mesh_data.boundaries[boundary])], boundary)

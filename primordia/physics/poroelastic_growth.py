@@ -66,7 +66,7 @@ from primordia.core.errors import ConfigError
 from primordia.core.parameters import Parameter
 from primordia.core.validation import flag, number, numbers
 from primordia.physics.base import Diagnostic, FieldSpec, Physics, Subproblem
-from primordia.physics.boundary_conditions import conditions_from_config, encloses, free_rigid_motions
+from primordia.physics.boundary_conditions import conditions_from_config, encloses, refuse_free_rigid_motions
 from primordia.physics.growth_laws import fluid_source
 from primordia.physics.kinematics import deformation_gradient, finite_strain_kinematics, right_cauchy_green
 from primordia.physics.poroelastic_linear import inertia, stress_divergence
@@ -182,14 +182,8 @@ class PoroelasticGrowth(Physics):
         static = [why for why, holds in (("rho = 0", self.params["rho"] == 0),
                                          ("the initial equilibrium is static", self.settings["initial_equilibrium"]))
                   if holds]
-        if static:  # a static balance fixes u only up to the rigid motions no condition holds
-            free = free_rigid_motions(conditions_from_config(self.settings["boundary"], mesh_data, mesh_data.gdim),
-                                      mesh_data, times)
-            if free:
-                raise ConfigError(f"physics.{self.name}: the boundary conditions leave {free} rigid-body motion(s) of u "
-                                  f"free and {' and '.join(static)}, so the momentum balance (seed (4.12a)) has no "
-                                  f"unique solution; hold u on a boundary (clamped, displacement, robin springs, or "
-                                  f"normal_displacement on enough boundaries)")
+        refuse_free_rigid_motions(f"physics.{self.name}", self.settings["boundary"], mesh_data, times, static,
+                                  "momentum balance (seed (4.12a))")
 
     def fields(self):
         return [FieldSpec("u", degree=2, vector=True, group=GROUP, displacement=True,

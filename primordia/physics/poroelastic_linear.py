@@ -33,7 +33,7 @@ from primordia.core.errors import ConfigError
 from primordia.core.expressions import Formula
 from primordia.core.validation import number
 from primordia.physics.base import GATHERED_RANKS, FieldSpec, Physics, Subproblem, jacobian_is_constant
-from primordia.physics.boundary_conditions import conditions_from_config, free_rigid_motions
+from primordia.physics.boundary_conditions import conditions_from_config, refuse_free_rigid_motions
 from primordia.physics.kinematics import Kinematics
 from primordia.physics.seed_parameters import POROELASTICITY, lame
 
@@ -104,15 +104,9 @@ class LinearPoroelasticity(Physics):
         """Also refuse rho = 0 when the displacement conditions let a rigid-body motion through: without the
         inertia of (2.1c) the momentum balance then fixes u only up to that motion (a singular matrix)."""
         super().check_inputs(mesh_data, times)
-        if self.params["rho"] > 0:
-            return
-        conditions = conditions_from_config(self.settings["boundary"], mesh_data, mesh_data.gdim)
-        free = free_rigid_motions(conditions, mesh_data, times)
-        if free:
-            raise ConfigError(f"physics.poroelasticity: rho = 0 and the boundary conditions leave {free} rigid-body "
-                              f"motion(s) of u free, so the quasi-static momentum balance (seed (2.1c)) has no unique "
-                              f"solution; hold u on a boundary (clamped, displacement, robin, or normal_displacement "
-                              f"on enough boundaries) or give rho > 0")
+        refuse_free_rigid_motions(f"physics.{self.name}", self.settings["boundary"], mesh_data, times,
+                                  ["rho = 0"] if self.params["rho"] == 0 else [],
+                                  "quasi-static momentum balance (seed (2.1c))", remedy=" or give rho > 0")
 
     def lame(self) -> tuple[float, float]:
         """(mu, lambda): given directly, or from E and nu."""
