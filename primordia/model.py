@@ -26,7 +26,7 @@ from primordia.core.errors import ConfigError, PluginError, plugin_code
 from primordia.core.mesh_data import MeshData
 from primordia.core.parameters import Parameter, ParameterSet
 from primordia.core.plugins import lookup, registry
-from primordia.core.validation import flag, number, numbers
+from primordia.core.validation import field_name, flag, number, numbers
 
 #: The keys of ``[output]`` that say when the run writes (read by the run itself); every other key
 #: is an option one registered output declares (:attr:`primordia.core.outputs.Output.options`).
@@ -333,9 +333,7 @@ def _unique_fields(modules, kinetics) -> list[str]:
     for module in modules:
         for spec in module.fields():
             owner = f"physics {module.name}"
-            if not isinstance(spec.name, str) or not spec.name.isidentifier():  # a NetCDF variable, a TOML key
-                raise PluginError(f"{owner}: a field is named {spec.name!r}, not a name (letters, digits and _, "
-                                  f"as a Python identifier)")
+            field_name(spec.name, owner)
             if module.needs_kinetics and kinetics is not None and spec.name in kinetics.species_names:
                 owner += f" (a species of kinetics {kinetics.name})"
             if spec.name in owners:

@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError
 
-__all__ = ["number", "flag", "numbers", "is_number", "is_integer"]
+__all__ = ["number", "flag", "numbers", "is_number", "is_integer", "field_name"]
 
 
 def is_number(value: Any) -> bool:
@@ -31,6 +31,15 @@ def is_number(value: Any) -> bool:
 def is_integer(value: Any) -> bool:
     """An int (numpy's too), not a bool."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def field_name(name: Any, owner: str, what: str = "a field") -> None:
+    """A field's name (a species' too) is an identifier: it becomes a NetCDF variable, a file name, a TOML key
+    and a name in expressions.  Else one :class:`~primordia.core.errors.PluginError` naming ``owner``, the
+    plugin that declared it."""
+    if not isinstance(name, str) or not name.isidentifier():
+        raise PluginError(f"{owner}: {what} is named {name!r}, not a name (letters, digits and _, "
+                          f"as a Python identifier)")
 
 
 def number(value: Any, where: str, *, above: float | None = None, at_least: float | None = None,

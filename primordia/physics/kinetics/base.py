@@ -39,6 +39,7 @@ from typing import Any, ClassVar
 from primordia.core.config import Configured, merge_options
 from primordia.core.errors import PluginError, plugin_code
 from primordia.core.parameters import Parameter
+from primordia.core.validation import field_name
 
 
 @dataclass(frozen=True)
@@ -139,12 +140,8 @@ def check_species(kinetics: Kinetics) -> None:
     if not isinstance(kinetics.species, (list, tuple)) or not all(isinstance(s, Species) for s in kinetics.species):
         raise PluginError(f"{where}: its species must be a tuple of primordia.physics.kinetics.base.Species, "
                           f"got {kinetics.species!r}")
-    # a species is a field: its name is a NetCDF variable, a file name, a TOML key and a name in expressions
-    bad_name = next((s.name for s in kinetics.species if not isinstance(s.name, str) or not s.name.isidentifier()),
-                    None)
-    if bad_name is not None:
-        raise PluginError(f"{where}: a species is named {bad_name!r}, not a name (letters, digits and _, "
-                          f"as a Python identifier)")
+    for species in kinetics.species:  # a species is a field
+        field_name(species.name, where, "a species")
     names = [s.name for s in kinetics.species]
     if not names:
         raise PluginError(f"{where} declares no species")
