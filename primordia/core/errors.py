@@ -27,9 +27,11 @@ class PluginError(PrimordiaError):
     """A named backend, physics, kinetics, scheme or output is not registered."""
 
 
-def one_line(error: BaseException) -> str:
-    """An exception in one line: its type and message, a message of several lines (pluggy's) joined."""
-    lines = [line.strip() for line in f"{type(error).__name__}: {error}".splitlines() if line.strip()]
+def one_line(error: BaseException, named: bool = True) -> str:
+    """An exception in one line: its type (unless ``named`` is false) and message, a message of several lines
+    (pluggy's) joined; the type alone when there is no message."""
+    text = f"{type(error).__name__}: {error}" if named else str(error)
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
     return "; ".join(lines) or type(error).__name__
 
 

@@ -30,7 +30,7 @@ from primordia.analysis.patterns.metrics import (
     PatternMetrics,
     pattern_metrics,
 )
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, one_line
 
 METRICS_FILE = "metrics.nc"
 
@@ -180,14 +180,14 @@ def read_run(directory: str | Path) -> RunFields:
             times.append(float(t))
             snapshots.append({name: np.asarray(values)[vertices] for name, values in fields.items()})
     except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, SyntaxError) as error:
-        raise ConfigError(f"{xdmf} (or the HDF5 files it names) cannot be read: {_reason(error)}") from None
+        raise ConfigError(f"{xdmf} (or the HDF5 files it names) cannot be read: {one_line(error, named=False)}") from None
     if not snapshots:
         raise ConfigError(f"{xdmf}: no output time written")
     config_path, summary_path = directory / "config.toml", directory / "summary.json"
     try:
         config = tomllib.loads(config_path.read_text()) if config_path.is_file() else {}
     except (OSError, ValueError) as error:
-        raise ConfigError(f"{config_path} cannot be read: {_reason(error)}") from None
+        raise ConfigError(f"{config_path} cannot be read: {one_line(error, named=False)}") from None
     try:
         summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
         status = str(summary.get("status", "unknown"))
@@ -196,12 +196,6 @@ def read_run(directory: str | Path) -> RunFields:
     surface = f"the top face z = {points[:, 2].max():g}" if not triangles_given else "the mesh"
     return RunFields(directory, points[vertices][:, :2], triangles, tuple(times), tuple(snapshots), config, status,
                      surface)
-
-
-def _reason(error: BaseException) -> str:
-    """The first line of an exception's message, or its type when it has none."""
-    text = (str(error).splitlines() or [""])[0].strip()
-    return text or type(error).__name__
 
 
 @dataclass(frozen=True)
