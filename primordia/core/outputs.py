@@ -192,27 +192,25 @@ class ScalarSeriesNetcdf(Output):
             self.series.flush()
 
 
+#: (long_name, units) of the series' time and of the rejected sub-steps' variables (along ``rejection``).
+SERIES_OWN = {"time": ("time (dimensionless, seed section 2)", "dimensionless"),
+              "step": ("time steps taken", "1"),
+              "rejection_time": ("the start of a rejected sub-step", "dimensionless"),
+              "rejection_dt": ("the length of a rejected sub-step", "dimensionless"),
+              "rejection_reason": ("why the sub-step was rejected", None)}
+
+
 def series_attributes(run, keys) -> dict[str, dict[str, str]]:
-    """NetCDF attributes (``long_name``, ``units``) of the series' ``keys``, as far as they are known."""
+    """NetCDF attributes (``long_name``, ``units``) of the series' ``keys``: each described by what produced it
+    (the fields' statistics, the modules' diagnostics, the run's counts, sizes and memory)."""
     if not keys:
         return {}
     fields = {name: f"|{name}|" if spec.vector else name for name, spec in run.field_specs().items()}
     diagnostics = {diagnostic.name: diagnostic for diagnostic in run.diagnostics}
-    named = {"time": ("time (dimensionless, seed section 2)", "dimensionless"),
-             "step": ("time steps taken", "1"), "dt": ("the last sub-step's length", "dimensionless"),
-             "rejections": ("rejected sub-steps so far (adaptive steps)", "1"),
-             "memory_mb": ("resident memory, summed over the ranks", "MB"),
-             "peak_memory_mb": ("peak resident memory so far, summed over the ranks", "MB"),
-             "rejection_time": ("the start of a rejected sub-step", "dimensionless"),
-             "rejection_dt": ("the length of a rejected sub-step", "dimensionless"),
-             "rejection_reason": ("why the sub-step was rejected", None)}
-    suffixes = {"_linear_iterations": "linear (Krylov) iterations in the last step of",
-                "_newton_iterations": "Newton iterations in the last step of",
-                "_snes_reason": "PETSc's SNES converged reason (> 0: converged) of the last solve of",
-                "_iterations": "outer coupling iterations in the last step of the splitting scheme"}
+    described = {**SERIES_OWN, **run.series_descriptions()}
     attrs = {}
     for key in keys:
-        name, unit = named.get(key, (None, None))
+        name, unit = described.get(key, (None, None))
         field, _, statistic = key.rpartition("_")
         if name is None and field in fields and statistic in ("integral", "min", "max"):
             name = {"integral": f"integral of {fields[field]} over the reference domain",
@@ -223,10 +221,6 @@ def series_attributes(run, keys) -> dict[str, dict[str, str]]:
             if diagnostic is not None and diagnostic.description:
                 name = diagnostic.description + (f" ({statistic}imum at the vertices)" if diagnostic.kind == "extrema"
                                                  else "")
-        if name is None:
-            suffix = next((suffix for suffix in suffixes if key.endswith(suffix)), None)
-            if suffix is not None:
-                name, unit = f"{suffixes[suffix]} {key.removesuffix(suffix)}", "1"
         if name is not None:
             attrs[key] = {"long_name": name, **({"units": unit} if unit else {})}
     return attrs

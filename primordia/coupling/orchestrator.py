@@ -48,6 +48,14 @@ from primordia.physics.discretisation import Discretisation
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
 NEGATIVE_TOLERANCE = 1e-8
 
+#: (long_name, units) of :meth:`Simulation.step_sizes`' keys.
+STEP_SIZES = {"dt": ("the last sub-step's length", "dimensionless"),
+              "rejections": ("rejected sub-steps so far (adaptive steps)", "1")}
+#: (long_name, units) of :meth:`Simulation.memory_use`'s keys.
+MEMORY_USE = {"memory_mb": ("resident memory, summed over the ranks", "MB"),
+              "peak_memory_mb": ("peak resident memory so far, summed over the ranks", "MB")}
+
+
 class Simulation:
     """One run of a :class:`~primordia.model.Model` on one backend.
 
@@ -813,12 +821,30 @@ class Simulation:
         counts.update({f"{scheme}_iterations": float(its[-1]) for scheme, its in self.coupling_iterations.items()})
         return counts
 
+    def series_descriptions(self) -> dict[str, tuple[str, str]]:
+        """(long_name, units) of each key :meth:`iteration_counts`, :meth:`step_sizes` and :meth:`memory_use`
+        record."""
+        described = {**STEP_SIZES, **MEMORY_USE}
+        for name in self.iterations:
+            key = name.replace('.', '_')
+            described[f"{key}_linear_iterations"] = (f"linear (Krylov) iterations in the last step of {key}", "1")
+        for name in self.newton:
+            key = name.replace('.', '_')
+            described[f"{key}_newton_iterations"] = (f"Newton iterations in the last step of {key}", "1")
+            described[f"{key}_snes_reason"] = (f"PETSc's SNES converged reason (> 0: converged) of the last solve "
+                                               f"of {key}", "1")
+        for scheme in self.coupling_iterations:
+            described[f"{scheme}_iterations"] = (f"outer coupling iterations in the last step of the splitting "
+                                                 f"scheme {scheme}", "1")
+        return described
+
     def step_sizes(self) -> dict[str, float]:
-        """The last sub-step's dt and the number of rejected sub-steps so far."""
+        """The last sub-step's dt and the number of rejected sub-steps so far (:data:`STEP_SIZES` says what)."""
         return {"dt": self.last_dt, "rejections": float(len(self.rejections))}
 
     def memory_use(self) -> dict[str, float]:
-        """Resident memory now and its peak so far (since this process started), in MB summed over the ranks.
+        """Resident memory now and its peak so far (since this process started), in MB summed over the ranks
+        (:data:`MEMORY_USE` says what).
 
         Recorded in the series, a run that leaks shows it long before the kernel kills it.
         """

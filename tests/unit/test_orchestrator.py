@@ -143,6 +143,10 @@ def test_steps_and_time_are_counted_on_the_grid_of_dt(completed):
     counts = completed.iteration_counts()
     assert {"chemotaxis_m_linear_iterations", "chemotaxis_f_linear_iterations"} <= set(counts)
     assert all(len(its) == 5 for its in completed.iterations.values())  # one record per step and subproblem
+    described = completed.series_descriptions()  # what series.nc's long_name and units read
+    assert set(counts) | set(completed.step_sizes()) | set(completed.memory_use()) == set(described)
+    assert described["chemotaxis_m_linear_iterations"] == (
+        "linear (Krylov) iterations in the last step of chemotaxis_m", "1")
 
 
 def test_output_times_and_t_final_are_reached_as_given_where_k_dt_is_off_by_round_off(watching, tmp_path):
