@@ -152,11 +152,13 @@ def _checkpointed_config(out: Path) -> dict:
 def _report_dry_run(model, out: Path) -> int:
     from primordia.core.outputs import directory_problem, existing_run
     from primordia.coupling.orchestrator import Simulation
+    from primordia.coupling.solver_options import check_table_values
 
     problem = directory_problem(out)
     if problem is not None:
         raise ConfigError(problem)
     Simulation(model, backend=model.backend, out_dir=out).check_choices()  # the backend and splitting scheme
+    check_table_values(model.solver)
     found = existing_run(out)
     if is_root_process():
         print(f"primordia: the input is valid: {model.mesh_data.num_cells} cells, {model.num_steps} steps of "

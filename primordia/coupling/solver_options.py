@@ -394,6 +394,18 @@ def check_used(prefix: str, keys: Iterable[str], where: str, comm=None, root: in
                           f"or not read by the chosen solver")
 
 
+def check_table_values(tables: Mapping[str, Any]) -> None:
+    """What can be told of the ``[solver.*]`` tables before the model is discretised (``--dry-run``): each is a
+    table of options whose KSP, PC and factor types exist here and whose tolerances and counts are in range.
+    Not whether a table names a subproblem of the run (:func:`check_tables`, once the subproblems exist), nor
+    whether PETSc reads each option (:func:`check_used`, after the first solve)."""
+    for name, table in tables.items():
+        where = f"solver.{name}"
+        options = flatten(table, where)
+        check_types(options, where)
+        check_values(options, where)
+
+
 def check_tables(tables: Mapping[str, Any], prefixes: Iterable[str]) -> None:
     """Every ``[solver.NAME]`` table names a subproblem of the run, or one line naming it and the known ones."""
     known = sorted({prefix.rstrip("_") for prefix in prefixes})

@@ -425,8 +425,11 @@ def test_a_blow_up_names_the_time(primordia_cli, small_config, tmp_path):
     (["--set", "physics.chemotaxis.seed=-1"], ["physics.chemotaxis.seed must be an integer >= 0", "-1"]),
     (["--set", "parameters.P_2=2000"], ["kinetics painter2018: the initial state cannot be evaluated", "overflows"]),
     (["--set", "parameters.m0=1e300"], ["kinetics painter2018: the initial state cannot be evaluated"]),
+    (["--set", 'solver.chemotaxis_m.ksp_type="gmress"'], ["solver.chemotaxis_m: unknown KSP type 'gmress'", "gmres"]),
+    (["--set", "solver.chemotaxis_m.sub.pc_type=ilu", "--set", "solver.chemotaxis_m.ksp_rtol=-1"],
+     ["solver.chemotaxis_m.ksp_rtol must be a number in [0, 1), got -1"]),
 ], ids=["unknown-backend", "unknown-backend-in-config", "unknown-scheme", "scheme-option", "negative-seed",
-        "steep-hill-switch", "absurd-density"])
+        "steep-hill-switch", "absurd-density", "unknown-ksp", "negative-tolerance"])
 def test_a_dry_run_refuses_what_the_run_would_refuse(capsys, small_config, tmp_path, arguments, fragments):
     """``--dry-run`` said "the input is valid ... on deal.ii" where the run stops at once, and took a
     negative seed that numpy refuses with a traceback in the run."""
