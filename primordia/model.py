@@ -83,8 +83,11 @@ class Model:
         self.checkpoint = _checkpoint(checkpoint)
         self._instantiate_physics()  # validates kinetics and physics options now
         self.mesh_data = self._mesh()
+        from primordia.physics.base import module_code
+
         for module in self.physics_objects:  # what only the mesh and the time span show: boundary formulas
-            module.check_inputs(self.mesh_data, self.sample_times())
+            with module_code(module, "check_inputs"):
+                module.check_inputs(self.mesh_data, self.sample_times())
 
     # -- construction from a config --------------------------------------------------------
     @classmethod
@@ -178,8 +181,13 @@ class Model:
         self.physics_objects = [_construct("physics", cls, self.parameters, kinetics=self.kinetics_object,
                                            growth_law=self.growth_law_object, **self.physics_options[cls.name])
                                 for cls in self.physics_classes]
+        from primordia.physics.base import fields_of, module_code
+
+        for module in self.physics_objects:  # what the others' checks read: one line if a module's is no list
+            fields_of(module)
         for module in self.physics_objects:
-            module.check_composition(self.physics_objects)
+            with module_code(module, "check_composition"):
+                module.check_composition(self.physics_objects)
         fields = _unique_fields(self.physics_objects, self.kinetics_object)
         for key in self._field_options:  # output options that name fields (OutputOption.names_fields)
             if self.output[key] is None:
@@ -303,6 +311,10 @@ def _declarations(pieces) -> list[Parameter]:
             raise PluginError(f"{owner}: its parameters must be a tuple of primordia.core.parameters.Parameter, "
                               f"got {declared!r}")
         for parameter in declared:
+            if not isinstance(parameter.description, str) or not parameter.description.strip():
+                raise PluginError(f"{owner} declares parameter {parameter.name} without a description: every message "
+                                  f"about it quotes what it is (say its unit there too, e.g. \"decay rate of h "
+                                  f"(1/time)\")")
             try:
                 parameter.check(parameter.default)
             except ConfigError as error:
@@ -322,7 +334,7 @@ def _construct(label: str, cls, *args, **kwargs):
     """``cls(*args, **kwargs)`` for a piece of the model; a piece whose constructor fails other than with a
     one-line error of primordia (a bug of its plugin) is one line naming it, not a traceback."""
     with plugin_code(f"{label} {getattr(cls, 'name', cls.__name__)} ({cls.__module__}.{cls.__qualname__}) "
-                     f"could not be set up"):
+                     f"could not be set up", source=cls):
         return cls(*args, **kwargs)
 
 

@@ -9,6 +9,9 @@ it is reported as interrupted, never as a mistake in the input.
 """
 
 import contextlib
+import os
+import sys
+import traceback
 
 
 class PrimordiaError(Exception):
@@ -36,15 +39,32 @@ def one_line(error: BaseException, named: bool = True) -> str:
 
 
 @contextlib.contextmanager
-def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaError,)):
+def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaError,), source: type | None = None):
     """Run a plugin's code: an exception other than ``passes`` (a bug of the plugin) becomes one line,
-    ``PluginError("<what>: <the exception in one line>")``, its traceback kept as the cause."""
+    ``PluginError("<what>: <the exception in one line>")``, its traceback kept as the cause.
+
+    ``source``: the plugin's class; the line then ends with the last place in the plugin's own
+    files the exception passed through (``(at FILE:LINE)``), which the one line would otherwise hide.
+    """
     try:
         yield
     except passes:
         raise
     except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
-        raise PluginError(f"{what}: {one_line(error)}") from error
+        raise PluginError(f"{what}: {one_line(error)}{_place_in(error, source)}") from error
+
+
+def _place_in(error: BaseException, source: type | None) -> str:
+    """`` (at FILE:LINE)``: the innermost frame of ``error``'s traceback in the files of ``source``'s top-level
+    package (or module), or "" when it passed through none of them."""
+    top = sys.modules.get(getattr(source, "__module__", "").partition(".")[0])
+    file = getattr(top, "__file__", None)
+    if not file:
+        return ""
+    root = os.path.dirname(file) if os.path.basename(file) == "__init__.py" else file
+    places = [(frame.f_code.co_filename, line) for frame, line in traceback.walk_tb(error.__traceback__)
+              if frame.f_code.co_filename == root or frame.f_code.co_filename.startswith(root + os.sep)]
+    return f" (at {places[-1][0]}:{places[-1][1]})" if places else ""
 
 
 class SolverError(PrimordiaError):

@@ -43,6 +43,7 @@ from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
 from primordia.coupling.solvers import SubproblemSolver, accumulate, independent_batches, solve_in_turn
 from primordia.coupling.splitting import grouped_direct
+from primordia.physics.base import module_code, subproblems_of
 from primordia.physics.discretisation import Discretisation
 
 #: How far below zero a field promised non-negative may fall (round-off of the solves) before the step is rejected.
@@ -187,14 +188,16 @@ class Simulation:
         for physics in ordered:
             for name in physics.requires:
                 self.disc.field(name)  # names a missing provider before any assembly
-            physics.setup(self.disc)
+            with module_code(physics, "setup"):
+                physics.setup(self.disc)
 
     def _initialise_fields(self):
         for physics in self.model.physics_objects:
-            physics.initialise(self.disc)
+            with module_code(physics, "initialise"):
+                physics.initialise(self.disc)
         self.disc.store_previous()
         for physics in self.model.physics_objects:
-            for subproblem in physics.initial_subproblems():
+            for subproblem in subproblems_of(physics, initial=True):
                 self._solve_initial(self._holding_the_others(subproblem, physics))
         self.disc.store_previous()
 
@@ -254,9 +257,13 @@ class Simulation:
         self._integral_weights = {name: self._basis_integrals(name) for name in self.disc.field_names()}
         self._integrals = {name: self._integrand(self.disc.field(name)) * self.disc.dx
                            for name, weights in self._integral_weights.items() if weights is None}
-        self.diagnostics = [d for physics in self.model.physics_objects for d in physics.diagnostics()]
-        self._nonnegative = [(name, physics.name) for physics in self.model.physics_objects
-                             for name in physics.nonnegative_fields() if self.disc.is_alone(name)]
+        self.diagnostics, self._nonnegative = [], []
+        for physics in self.model.physics_objects:
+            with module_code(physics, "diagnostics"):
+                self.diagnostics += physics.diagnostics()
+            with module_code(physics, "nonnegative_fields"):
+                self._nonnegative += [(name, physics.name) for name in physics.nonnegative_fields()
+                                      if self.disc.is_alone(name)]
         self._fields_of = {solver.sub.name: self.disc.group_fields(self.disc.group_of_function(solver.sub.unknown))
                            for solver in self.solvers}
         # the old solvers' PETSc objects (a factorisation) go now, before the new ones make theirs, once
@@ -719,7 +726,8 @@ class Simulation:
         """
         self.disc.set_time(t, dt)
         for physics in self.model.physics_objects:
-            physics.before_step(t, dt)
+            with module_code(physics, "before_step"):
+                physics.before_step(t, dt)
         self.disc.store_previous(groups)
         yield
         self.disc.update_rates(dt, groups)

@@ -34,7 +34,7 @@ from primordia.core.plugins import hookimpl
 from primordia.core.validation import number
 from primordia.coupling.solver_options import check_tables
 from primordia.coupling.solvers import accumulate, solve_in_turn
-from primordia.physics.base import Subproblem
+from primordia.physics.base import Subproblem, module_code, subproblems_of
 
 
 class SplittingScheme(Configured, ABC):
@@ -48,7 +48,8 @@ class SplittingScheme(Configured, ABC):
         self.settings: dict = merge_options(f"coupling scheme '{self.name}'", self.options, given)
         number(self.settings.get("inner_steps", 1), "coupling.inner_steps", at_least=1, integer=True)
         for module in physics:
-            module.check_scheme(self, physics)
+            with module_code(module, "check_scheme"):
+                module.check_scheme(self, physics)
 
     def field_groups(self, physics: list) -> dict[str, list]:
         """Which fields are solved together: by default, as each module groups its own."""
@@ -60,14 +61,14 @@ class SplittingScheme(Configured, ABC):
 
     def build(self, sim) -> None:
         """Create the solvers, one per subproblem, grouped in sub-flows (one per module)."""
-        self.flows = [[sim.solver_for(sub) for sub in module.subproblems()] for module in self.physics]
+        self.flows = [[sim.solver_for(sub) for sub in subproblems_of(module)] for module in self.physics]
         self.flows = [flow for flow in self.flows if flow]
         sim.solvers = [solver for flow in self.flows for solver in flow]
         self.check_solver_tables(sim)
 
     def check_solver_tables(self, sim) -> None:
         """Every ``[solver.NAME]`` table of the config names a subproblem of this run (or one line, exit 2)."""
-        initial = [sub.prefix for module in self.physics for sub in module.initial_subproblems()]
+        initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
         check_tables(sim.model.solver, [solver.sub.prefix for solver in sim.solvers] + initial)
 
     @abstractmethod
@@ -175,7 +176,7 @@ class Monolithic(SplittingScheme):
         return {"monolithic": [spec for module in physics for spec in module.fields()]}
 
     def build(self, sim):
-        subproblems = [sub for module in self.physics for sub in module.subproblems()]
+        subproblems = [sub for module in self.physics for sub in subproblems_of(module)]
         for sub in subproblems:
             if sub.operator is not None:
                 raise ConfigError(f"the monolithic scheme cannot include {sub.name}: its algebraic operator "

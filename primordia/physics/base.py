@@ -22,6 +22,7 @@ the promise has failed and is retried with a smaller time step.
 
 from __future__ import annotations
 
+import contextlib
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ import ufl
 from ufl.algorithms import expand_derivatives
 
 from primordia.core.config import Configured, merge_options
+from primordia.core.errors import PluginError, plugin_code
 from primordia.core.parameters import Parameter
 
 if TYPE_CHECKING:
@@ -273,6 +275,49 @@ class Coupling(Physics):
 
     def subproblems(self) -> list[Subproblem]:
         return []
+
+
+@contextlib.contextmanager
+def module_code(module: Physics, method: str):
+    """Run ``method`` of a physics module: a third party's bug in it (any exception but primordia's own
+    one-line errors) is one line naming the module, the method and where in the plugin's files it
+    happened (:func:`~primordia.core.errors.plugin_code`), not a traceback.  primordia's own modules
+    are left alone: their bugs are primordia's and keep their tracebacks."""
+    cls = type(module)
+    if cls.__module__.startswith("primordia."):
+        yield
+        return
+    with plugin_code(f"physics {module.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", source=cls):
+        yield
+
+
+def fields_of(module: Physics) -> list[FieldSpec]:
+    """``module.fields()``, refused in one line naming the module unless it is a list of :class:`FieldSpec`."""
+    with module_code(module, "fields"):
+        specs = module.fields()
+    if not isinstance(specs, (list, tuple)) or not all(isinstance(spec, FieldSpec) for spec in specs):
+        raise PluginError(f"physics {module.name}: fields() must return a list of primordia.physics.base.FieldSpec, "
+                          f"got {specs!r}")
+    return list(specs)
+
+
+def subproblems_of(module: Physics, initial: bool = False) -> list[Subproblem]:
+    """``module.subproblems()`` (``initial``: ``initial_subproblems()``), refused in one line naming the module
+    unless it is a list of :class:`Subproblem` whose residual and Jacobian are UFL forms."""
+    method = "initial_subproblems" if initial else "subproblems"
+    with module_code(module, method):
+        subproblems = getattr(module, method)()
+    if not isinstance(subproblems, (list, tuple)) or not all(isinstance(sub, Subproblem) for sub in subproblems):
+        raise PluginError(f"physics {module.name}: {method}() must return a list of "
+                          f"primordia.physics.base.Subproblem, got {subproblems!r}")
+    for sub in subproblems:
+        for what in ("residual", "jacobian"):
+            if not isinstance(getattr(sub, what), ufl.Form):
+                raise PluginError(f"physics {module.name}: subproblem {sub.name}'s {what} must be a UFL form "
+                                  f"(a sum of integrals; the jacobian ufl.derivative(residual, unknown)), got "
+                                  f"{getattr(sub, what)!r}")
+    return list(subproblems)
+
 
 def jacobian_is_constant(jacobian: ufl.Form, disc: Discretisation) -> bool:
     """True when a Jacobian reads no field and not the time: assembled and factorised once."""

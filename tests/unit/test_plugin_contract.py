@@ -10,6 +10,8 @@ A hook named like no hook is a broken plugin, not a silently unused one.
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from primordia.core.errors import ConfigError, PluginError
@@ -280,3 +282,92 @@ def test_a_field_named_what_no_file_or_key_can_hold_names_the_module(name):
     with registered(PhysicsPlugin(spaced)), pytest.raises(PluginError) as error:
         Model(physics=["qa_spaced"], mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.2, t_final=0.4)
     assert str(error.value).startswith(f"physics qa_spaced: a field is named {name!r}, not a name")
+
+
+class _Scalar(Physics):
+    """A passive scalar s: ds/dt = lap s, zero flux; the physics modules below break it one way each."""
+
+    name = "qa_scalar"
+
+    def fields(self):
+        return [FieldSpec("s")]
+
+    def setup(self, disc):
+        self.disc = disc
+
+    def initialise(self, disc):
+        disc.interpolate("s", 1.0)
+
+    def subproblems(self):
+        import ufl
+
+        from primordia.physics.base import Subproblem
+
+        disc = self.disc
+        s, v = disc.field("s"), disc.test("s")
+        residual = (s - disc.previous("s")) / disc.dt * v * disc.dx + ufl.inner(ufl.grad(s), ufl.grad(v)) * disc.dx
+        return [Subproblem(name="qa_scalar.s", unknown=disc.unknown("s"), residual=residual,
+                           jacobian=ufl.derivative(residual, disc.unknown("s")))]
+
+
+def _set_up(physics_class, tmp_path):
+    from primordia.coupling.orchestrator import Simulation
+
+    with registered(PhysicsPlugin(physics_class)):
+        model = Model(physics=[physics_class.name], mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2,
+                      output={"pictures": False})
+        return Simulation(model, backend="skfem", out_dir=tmp_path / "out").setup()
+
+
+@pytest.mark.parametrize("fields", ["s", ["s"], None])
+def test_a_physics_module_whose_fields_are_no_list_of_field_specs_is_one_line_when_composed(fields):
+    """Composed (so by --dry-run too): it was an AttributeError traceback ('str' object has no attribute 'name')."""
+    broken = type("Broken", (_Scalar,), {"name": "qa_fields", "fields": lambda self: fields})
+    with registered(PhysicsPlugin(broken)), pytest.raises(PluginError) as error:
+        Model(physics=["qa_fields"], mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2)
+    assert str(error.value) == (f"physics qa_fields: fields() must return a list of primordia.physics.base.FieldSpec, "
+                                f"got {fields!r}")
+
+
+def test_a_physics_module_whose_setup_raises_is_one_line_naming_it_and_where(tmp_path):
+    """A plugin's bug in setup (initialise, subproblems...) was a bare traceback and exit status 1."""
+    def setup(self, disc):
+        disc.no_such_method()
+
+    broken = type("Broken", (_Scalar,), {"name": "qa_setup", "setup": setup, "__module__": __name__})
+    with pytest.raises(PluginError) as error:
+        _set_up(broken, tmp_path)
+    message = str(error.value)
+    assert message.startswith(f"physics qa_setup ({__name__}.Broken): setup failed: AttributeError: "
+                              f"'Discretisation' object has no attribute 'no_such_method' (at {__file__}:"), message
+    assert "\n" not in message and isinstance(error.value.__cause__, AttributeError)  # the traceback stays the cause
+
+
+@pytest.mark.parametrize("subproblems, fragment", [
+    (lambda self: _Scalar.subproblems(self)[0], "subproblems() must return a list of "
+                                                 "primordia.physics.base.Subproblem, got Subproblem("),
+    (lambda self: [dataclasses.replace(_Scalar.subproblems(self)[0], residual=1.0)],
+     "subproblem qa_scalar.s's residual must be a UFL form"),
+    (lambda self: [dataclasses.replace(_Scalar.subproblems(self)[0], jacobian=None)],
+     "subproblem qa_scalar.s's jacobian must be a UFL form"),
+])
+def test_a_physics_module_whose_subproblems_are_malformed_is_one_line_naming_it(subproblems, fragment, tmp_path):
+    """Was a TypeError or AttributeError traceback from deep in the solver layer."""
+    broken = type("Broken", (_Scalar,), {"name": "qa_subproblems", "subproblems": subproblems})
+    with pytest.raises(PluginError) as error:
+        _set_up(broken, tmp_path)
+    assert str(error.value).startswith("physics qa_subproblems: ") and fragment in str(error.value), str(error.value)
+
+
+def test_the_well_behaved_scalar_sets_up(tmp_path):
+    assert _set_up(_Scalar, tmp_path).disc.field_names() == ["s"]
+
+
+@pytest.mark.parametrize("description", ["", "   "])
+def test_a_parameter_without_a_description_names_the_piece(description):
+    """Every message about a parameter quotes its description: "parameter D_h must be > 0 (), got -1"."""
+    undescribed = type("Undescribed", (_Scalar,), {"name": "qa_undescribed",
+                                                   "parameters": (Parameter("D_s", 1.0, description),)})
+    with registered(PhysicsPlugin(undescribed)), pytest.raises(PluginError) as error:
+        Model(physics=["qa_undescribed"], mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2)
+    assert str(error.value).startswith("physics qa_undescribed declares parameter D_s without a description")

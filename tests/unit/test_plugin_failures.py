@@ -160,3 +160,34 @@ def test_plugins_asks_the_backend_choosers_and_lists_a_broken_one(primordia_cli,
         "the backend, asking chooser [primordia-chooser 0.1], then primordia.core.selection [primordia (built-in)]")
     assert table["choosers"]["primordia_select_splitting_scheme"] == (
         "the splitting scheme, asking primordia.core.selection [primordia (built-in)]")
+
+
+BUGGY_PHYSICS = """\
+from primordia.core.plugins import hookimpl
+from primordia.physics.base import Coupling
+
+
+class Buggy(Coupling):
+    name = "buggy"
+
+    def setup(self, disc):
+        disc.contribute("m", lambda v: disc.no_such_method() * v * disc.dx, by=self.name)
+
+
+@hookimpl
+def primordia_physics():
+    return [Buggy]
+"""
+
+
+def test_a_bug_in_a_contributed_term_is_one_line_naming_it_and_exit_status_2(primordia_cli, small_config,
+                                                                               plugin_distribution, tmp_path):
+    """A third party's bug in a term it adds to a built-in's balance law was a 20-line traceback and exit status 1
+    (the term is called by chemotaxis, primordia's own module, when it builds its forms)."""
+    env = plugin_distribution("primordia-buggy", "0.1", {"buggy": BUGGY_PHYSICS}, {"buggy": "buggy"})
+    ran = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                        "--set", 'model.physics=["chemotaxis", "buggy"]', env=env)
+    assert ran.returncode == 2 and "Traceback" not in ran.stderr, ran.stderr
+    assert ran.stderr.splitlines() == [
+        f"primordia: error: the term buggy adds to the balance law of 'm' failed: AttributeError: 'Discretisation' "
+        f"object has no attribute 'no_such_method' (at {tmp_path / 'site-packages' / 'buggy.py'}:9)"], ran.stderr
