@@ -8,9 +8,12 @@
 ...               dt=0.2, t_final=20.0, output={"times": [10, 20], "snapshot_fields": ["m"]})
 >>> result = model.run(backend="fenicsx", out="out/quick")     # doctest: +SKIP
 
-:class:`Model` validates everything it is given before any assembly: unknown
-physics, kinetics, parameters, options, backend or splitting scheme, wrong
-signs and impossible meshes are reported in one line naming the culprit.
+:class:`Model` validates what it is given before any assembly: unknown
+physics, kinetics, parameters or options, wrong signs and impossible meshes are
+reported in one line naming the culprit.  The backend and the splitting scheme are
+chosen by hooks a plugin may answer, for a run: they are checked when the run is
+set up, or at once, with nothing run, by
+``Simulation(model, backend=model.backend).check_choices()`` (what ``--dry-run`` does).
 """
 
 from __future__ import annotations
@@ -88,6 +91,18 @@ class Model:
         for module in self.physics_objects:  # what only the mesh and the time span show: boundary formulas
             with module_code(module, "check_inputs"):
                 module.check_inputs(self.mesh_data, self.sample_times())
+
+    def __repr__(self) -> str:
+        """What the model is, in one line: its composition, mesh and time span (not the default object repr)."""
+        pieces = [f"name={self.name!r}"] if self.name else []
+        pieces.append(f"physics={[module.name for module in self.physics_objects]}")
+        if self.kinetics_object is not None:
+            pieces.append(f"kinetics={self.kinetics_object.name!r}")
+        if self.growth_law_object is not None:
+            pieces.append(f"growth_law={self.growth_law_object.name!r}")
+        pieces += [f"mesh={self.mesh_data!r}", f"dt={self.dt:g}", f"t={self.t_start:g}..{self.t_final:g}",
+                   f"coupling={self.coupling!r}", f"backend={self.backend!r}"]
+        return f"Model({', '.join(pieces)})"
 
     # -- construction from a config --------------------------------------------------------
     @classmethod

@@ -58,6 +58,13 @@ class MeshData:
             for name, facets in self.boundaries.items()
         }
 
+    def __repr__(self) -> str:
+        """Sizes and boundary names, not every coordinate (the dataclass repr printed the arrays)."""
+        described = f", description={self.description!r}" if self.description else ""
+        cells = "triangles" if self.gdim == 2 else "tetrahedra"
+        return (f"MeshData({self.gdim}D, {len(self.points)} vertices, {len(self.cells)} {cells}, "
+                f"boundaries={sorted(self.boundaries)}{described})")
+
     def remember_source(self, table: dict) -> "MeshData":
         """Record the ``[mesh]`` table that builds this mesh (a generator's or the reader's arguments).
 

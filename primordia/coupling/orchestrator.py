@@ -102,6 +102,12 @@ class Simulation:
         self._first_step = 0  # the step this process started from (a restart's checkpoint)
         self._wall_after_first: float | None = None  # when this process's first step (and its outputs) ended
 
+    def __repr__(self) -> str:
+        """Where the run is: its model, backend, status, time and step, and its output folder."""
+        name = repr(self.model.name) if self.model.name else "an unnamed model"
+        return (f"Simulation({name} on {self.backend_name}, {self.status}, "
+                f"t = {self.time:g} after {self.step_index} steps, out_dir={str(self.out_dir)!r})")
+
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> "Simulation":
         self._choose_backend()

@@ -210,3 +210,18 @@ def test_a_config_missing_or_adding_a_table_is_refused(small_config, text, fragm
 
 def test_snapshot_fields_may_be_a_tuple_as_output_times_may():
     assert small(output={"times": (0.4, 1.0), "snapshot_fields": ("f", "m")}).output["snapshot_fields"] == ["f", "m"]
+
+
+def test_a_model_its_mesh_and_its_simulation_say_what_they_are_in_one_line(tmp_path):
+    """The default reprs said nothing (``<primordia.model.Model object at 0x...>``), and MeshData's printed every
+    coordinate and cell of the mesh."""
+    from primordia.coupling.orchestrator import Simulation
+
+    mesh = rectangle((0, 0), (20, 20), cells=(16, 16))
+    assert repr(mesh) == ("MeshData(2D, 289 vertices, 512 triangles, boundaries=['bottom', 'left', 'right', 'top'], "
+                          "description='rectangle [0, 20] x [0, 20], 16 x 16 squares, diagonal right')")
+    model = Model(physics=["chemotaxis"], mesh=mesh, dt=0.2, t_final=2.0, name="quick")
+    assert repr(model) == (f"Model(name='quick', physics=['chemotaxis'], kinetics='painter2018', mesh={mesh!r}, "
+                           f"dt=0.2, t=0..2, coupling='sequential', backend='fenicsx')")
+    sim = Simulation(model, backend="skfem", out_dir=tmp_path)
+    assert repr(sim) == f"Simulation('quick' on skfem, setting up, t = 0 after 0 steps, out_dir='{tmp_path}')"
