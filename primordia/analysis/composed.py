@@ -464,7 +464,8 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
                 f"section 6); --chemistry-only analyses the chemistry alone")
         if module.name not in CHEMISTRY | MECHANICS | COUPLINGS:
             raise ConfigError(f"physics {module.name} has no Fourier symbol in primordia.analysis.composed: "
-                              f"the analysis would not be the model that runs")
+                              f"the analysis would not be the model that runs; --chemistry-only "
+                              f"(chemistry_only=True) analyses the chemistry alone")
     homogeneous = kinetics.homogeneous()
     rest = homogeneous_steady_state(homogeneous)
     _, jacobian = reaction_jacobian(homogeneous, rest.values)

@@ -245,8 +245,11 @@ def test_an_unknown_physics_module_is_refused(monkeypatch):
     linear_model = model()
     stranger = type("Stranger", (), {"name": "stranger", "finite_strain": False})()
     monkeypatch.setattr(linear_model, "physics_objects", linear_model.physics_objects + [stranger])
-    with pytest.raises(ConfigError, match="physics stranger has no Fourier symbol"):
+    with pytest.raises(ConfigError, match="physics stranger has no Fourier symbol") as error:
         linearise_model(linear_model)
+    # a third party's physics module (a passive morphogen, say) cannot be analysed: the line says what can
+    assert str(error.value).endswith("; --chemistry-only (chemistry_only=True) analyses the chemistry alone")
+    assert "stranger left out" in linearise_model(linear_model, chemistry_only=True).notes[0]
 
 
 def test_couplings_without_mechanics_are_refused():
