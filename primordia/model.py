@@ -285,6 +285,8 @@ class Model:
         """
         from primordia.coupling.orchestrator import Simulation
 
+        if restart and overwrite:
+            raise ConfigError("restart=True continues the run in out, overwrite=True replaces it: choose one")
         existing = "restart" if restart else "overwrite" if overwrite else "refuse"
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
         sim.setup()

@@ -161,7 +161,8 @@ class Simulation:
                 problem = f"{self.out_dir} holds {found}; stop it first"
             elif found and self.existing == "refuse":
                 problem = (f"{self.out_dir} already holds {found}; use --overwrite to replace it, or "
-                           f"--restart {self.out_dir} to continue it")
+                           f"--restart {self.out_dir} to continue it (from Python: Model.run(..., overwrite=True) "
+                           f"or restart=True)")
             elif self.existing == "restart" and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file():
                 problem = (f"{self.out_dir} holds no checkpoint to restart from"
                            + (f" ({found})" if found else "")

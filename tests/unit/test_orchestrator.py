@@ -258,6 +258,13 @@ def test_a_directory_holding_a_run_is_refused_unless_told(watching, completed):
         Simulation(model(), out_dir=completed.out_dir, existing="refuse").setup()
     assert "already holds" in one_line(caught)
     assert "use --overwrite to replace it, or --restart" in str(caught.value)
+    assert "from Python: Model.run(..., overwrite=True) or restart=True" in str(caught.value)
+
+
+def test_python_s_restart_and_overwrite_together_are_refused(completed):
+    """Both true silently restarted; the command line refuses --restart with --overwrite."""
+    with pytest.raises(ConfigError, match="restart=True continues the run in out, overwrite=True replaces it"):
+        model().run(out=completed.out_dir, restart=True, overwrite=True)
 
 
 def test_a_restart_needs_a_checkpoint(watching, tmp_path):
