@@ -33,8 +33,10 @@ analyses exactly the model ``primordia run CONFIG`` runs:
                     of two perturbations about a homogeneous state: no linear term
    ===============  ===========================================================================
 
+   A third party's module gives its own (:meth:`~primordia.physics.base.Physics.fourier_symbol`),
+   possibly with unknowns of its own after the species.
    No mechanics in the model: no u, p rows.  A module with no Fourier symbol
-   here, a spatially varying conductivity, or finite strain (``poroelastic_growth``:
+   (here or its own), a spatially varying conductivity, or finite strain (``poroelastic_growth``:
    a growing tissue has no steady state to linearise about, seed section 6) is
    refused in one line; ``chemistry_only=True`` analyses the chemistry alone.
 
@@ -155,15 +157,16 @@ class FourierSystem:
     """M(phi, k) = M0 + phi M1 + phi^2 M2 being assembled, for wave vectors ``k`` (shape ``batch + (d,)``).
 
     Unknowns: the displacement u_1..u_d and the pressure p when the model has
-    mechanics, then the species in the kinetics' order.
+    mechanics, then the species in the kinetics' order, then the fields third-party
+    modules add (``extra``, see :meth:`~primordia.physics.base.Physics.fourier_symbol`).
     """
 
-    def __init__(self, species: tuple[str, ...], mechanics: bool, k_vector):
+    def __init__(self, species: tuple[str, ...], mechanics: bool, k_vector, extra: tuple[str, ...] = ()):
         self.k = np.asarray(k_vector, dtype=float)
         self.d = self.k.shape[-1]
         self.K = np.sum(self.k**2, axis=-1)
         self.displacement = tuple(f"u_{i + 1}" for i in range(self.d)) if mechanics else ()
-        self.names = self.displacement + (("p",) if mechanics else ()) + tuple(species)
+        self.names = self.displacement + (("p",) if mechanics else ()) + tuple(species) + tuple(extra)
         self._index = {name: i for i, name in enumerate(self.names)}
         n = len(self.names)
         self.M = tuple(np.zeros(self.K.shape + (n, n), dtype=complex) for _ in range(3))
@@ -320,14 +323,21 @@ class LinearisedModel:
     mechanics: PoroelasticWaves | None
     parameters: Mapping
     notes: tuple = field(default_factory=tuple)  #: what was left out, and why
+    extra: tuple = ()  #: the unknowns third-party modules add, after the species
 
     # -- the matrix ----------------------------------------------------------------------
     def pencil(self, k_vector) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(M0, M1, M2), complex arrays ``batch + (n, n)`` for wave vectors ``batch + (d,)``."""
-        system = FourierSystem(self.species, self.mechanics is not None, k_vector)
+        system = FourierSystem(self.species, self.mechanics is not None, k_vector, self.extra)
         for term in self.terms:
             term.add_to(system)
         return system.M
+
+    @property
+    def third_party(self) -> tuple[str, ...]:
+        """The modules analysed by their own Fourier symbols (:meth:`~primordia.physics.base.Physics.fourier_symbol`),
+        which the seed's analysis does not describe."""
+        return tuple(name for name in self.physics if name not in CHEMISTRY | MECHANICS | COUPLINGS)
 
     @property
     def coupled(self) -> bool:
@@ -337,7 +347,7 @@ class LinearisedModel:
         return {VolumeSink, ActiveStressCoupling} <= kinds
 
     def unknowns(self, d: int) -> tuple[str, ...]:
-        return FourierSystem(self.species, self.mechanics is not None, np.zeros(d)).names
+        return FourierSystem(self.species, self.mechanics is not None, np.zeros(d), self.extra).names
 
     def matrix(self, phi, k_vector) -> np.ndarray:
         """M(phi, k) = M0 + phi M1 + phi^2 M2."""
@@ -347,6 +357,8 @@ class LinearisedModel:
 
     # -- its roots -------------------------------------------------------------------------
     def _method(self) -> str:
+        if self.extra:
+            return "qz"  # a third party's rows: M1 may be singular there (an equation without d/dt)
         if self.mechanics is None:
             return "standard"  # M1 = I: the eigenvalues of -M0
         return choose_method(self.mechanics.rho > 0 and self.mechanics.C_0 > 0, "auto")
@@ -362,12 +374,24 @@ class LinearisedModel:
         roots = roots.astype(complex, copy=False)  # real where every root is: the kinetics' rates at k = 0 may not be
         at_rest = k == 0
         if np.any(at_rest):  # every coupling carries k: the kinetics' rates, and 0 for the mechanics
-            chemistry = np.linalg.eigvals(self.reaction_jacobian).astype(complex)
+            chemistry = self._chemistry_at_rest()
             neutral = np.zeros(size - chemistry.size, dtype=complex)
             if self.mechanics is not None and not (self.mechanics.rho > 0 and self.mechanics.C_0 > 0):
                 neutral[:] = np.nan  # the degree drops with rho or C_0
             roots[at_rest] = np.concatenate([chemistry, neutral])
         return roots
+
+    def _chemistry_at_rest(self) -> np.ndarray:
+        """The roots at k = 0 of the species' rows (the kinetics' rates) and of the fields third-party modules
+        add, whose couplings to the mechanics carry k as the built-in ones do."""
+        if not self.extra:
+            return np.linalg.eigvals(self.reaction_jacobian).astype(complex)
+        import scipy.linalg
+
+        M0, M1, _ = self.pencil(np.zeros(1))
+        rows = slice(2 if self.mechanics is not None else 0, None)  # u_1 and p at d = 1
+        roots = scipy.linalg.eigvals(-M0[rows, rows], M1[rows, rows])
+        return np.where(np.isfinite(roots), roots, np.nan).astype(complex)
 
     def rates(self, k) -> np.ndarray:
         """Roots of the longitudinal (d = 1) dispersion relation at each ``k``, shape ``k.shape + (n,)``.
@@ -416,8 +440,9 @@ class LinearisedModel:
 
     def describe(self) -> str:
         mechanics = "with mechanics" if self.mechanics is not None else "no mechanics"
-        return (f"physics {', '.join(self.physics)}; kinetics {self.kinetics} (species {', '.join(self.species)}); "
-                f"{mechanics}")
+        own = f"; fields of {', '.join(self.third_party)}: {', '.join(self.extra)}" if self.extra else ""
+        return (f"physics {', '.join(self.physics)}; kinetics {self.kinetics} (species {', '.join(self.species)})"
+                f"{own}; {mechanics}")
 
 
 #: The seed's full poro-mechano-chemical model (seed section 2): what a parameter set alone describes.
@@ -462,18 +487,19 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
                 f"{name or 'this model'} grows at finite strain ({module.name}): a growing tissue has no "
                 f"homogeneous steady state, so the linear analysis of seed section 3 does not apply (seed "
                 f"section 6); --chemistry-only analyses the chemistry alone")
-        if module.name not in CHEMISTRY | MECHANICS | COUPLINGS:
-            raise ConfigError(f"physics {module.name} has no Fourier symbol in primordia.analysis.composed: "
-                              f"the analysis would not be the model that runs; --chemistry-only "
-                              f"(chemistry_only=True) analyses the chemistry alone")
     homogeneous = kinetics.homogeneous()
     rest = homogeneous_steady_state(homogeneous)
     _, jacobian = reaction_jacobian(homogeneous, rest.values)
     context = _Context(homogeneous, rest, jacobian, params)
 
-    terms, mechanics = [], None
+    terms, mechanics, extra, third_party = [], None, (), False
     for module in modules:
-        if module.name in CHEMISTRY:
+        if module.name not in CHEMISTRY | MECHANICS | COUPLINGS:
+            term = _third_party_symbol(module, context)
+            extra += _new_unknowns(module, term, homogeneous.species_names + extra)
+            terms.append(term)
+            third_party = True
+        elif module.name in CHEMISTRY:
             terms.append(CHEMISTRY[module.name](module, context))
         elif module.name in MECHANICS:
             mechanics = MECHANICS[module.name](module, context)
@@ -490,9 +516,58 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
         terms.append(COUPLINGS[module.name](module, context, mechanics))
     if uncoupled and "mechanochemical" not in [module.name for module in modules]:
         notes.append("uncoupled: the model has no mechano-chemical loop to cut")
-    return LinearisedModel(name=name, physics=tuple(module.name for module in modules), kinetics=kinetics.name,
-                           species=homogeneous.species_names, steady_state=rest, reaction_jacobian=jacobian,
-                           terms=tuple(terms), mechanics=mechanics, parameters=params, notes=tuple(notes))
+    linear = LinearisedModel(name=name, physics=tuple(module.name for module in modules), kinetics=kinetics.name,
+                             species=homogeneous.species_names, steady_state=rest, reaction_jacobian=jacobian,
+                             terms=tuple(terms), mechanics=mechanics, parameters=params, notes=tuple(notes),
+                             extra=extra)
+    if third_party:
+        _check_real(linear)
+    return linear
+
+
+def _third_party_symbol(module, context: _Context):
+    """A third party's module's Fourier symbol (:meth:`~primordia.physics.base.Physics.fourier_symbol`), or
+    one line refusing the model when it has none."""
+    from primordia.physics.base import module_code
+
+    answer = getattr(module, "fourier_symbol", None)
+    if answer is not None:
+        with module_code(module, "fourier_symbol"):
+            term = answer(context)
+    if answer is None or term is None:
+        raise ConfigError(f"physics {module.name} has no Fourier symbol (Physics.fourier_symbol): the analysis "
+                          f"would not be the model that runs; --chemistry-only (chemistry_only=True) analyses "
+                          f"the chemistry alone")
+    if not callable(getattr(term, "add_to", None)):
+        raise ConfigError(f"physics {module.name}: fourier_symbol() must return an object with add_to(system), "
+                          f"got {term!r}")
+    return term
+
+
+def _new_unknowns(module, term, taken: tuple[str, ...]) -> tuple[str, ...]:
+    """The unknowns ``term`` adds, each a name no species, displacement, pressure or other module has."""
+    unknowns = tuple(getattr(term, "unknowns", ()))
+    for name in unknowns:
+        if not isinstance(name, str) or name in taken or name == "p" or name.startswith("u_") or unknowns.count(name) > 1:
+            raise ConfigError(f"physics {module.name}: its Fourier symbol adds the unknown {name!r}, which is taken "
+                              f"or no name (the species: {', '.join(taken)}; u_1..u_d and p: the mechanics)")
+    return unknowns
+
+
+def _check_real(linear: LinearisedModel) -> None:
+    """The pencil with a third party's terms stays real after u -> -i u (:func:`.linearisation.made_real`: the
+    roots come in conjugate pairs): an odd derivative multiplies i, as every built-in coupling of a species
+    to the displacement does (i k . u).  Else one line, not the assertion of ``made_real``."""
+    d_u = 2 if linear.mechanics is not None else 0
+    pencil = linear.pencil(np.array([0.7, 0.4]))
+    scale = np.ones(pencil[0].shape[-1], dtype=complex)
+    scale[:d_u] = 1j
+    for matrix in pencil:
+        scaled = scale[:, None] * matrix * np.conj(scale)[None, :]
+        if np.any(np.abs(scaled.imag) > 1e-14 * (1.0 + np.abs(scaled).max())):
+            raise ConfigError(f"the Fourier symbols of {', '.join(linear.physics)} do not make a real pencil: a "
+                              f"term coupling a field to the displacement or pressure without the factor i k of a "
+                              f"first derivative (or with it where none belongs)")
 
 
 # -- the cross-check with the hand-derived seed analysis -------------------------------------------------
@@ -503,13 +578,13 @@ def seed_cross_check(linear: LinearisedModel, k=(0.0, 0.3, 1.0, 2.7, 8.0), phi=(
     M_seed is seed Definition 3.1 as typed in by hand (:mod:`.linearisation`), at the
     model's parameters with xi_f = 0 where the model has no volume sink and tau = 0
     where it has no active stress; without mechanics, its species block.  None when
-    the seed's matrix does not describe the model: another kinetics, or Lame
-    constants given as options (the seed reads them from E and nu).
+    the seed's matrix does not describe the model: another kinetics, a third party's
+    module, or Lame constants given as options (the seed reads them from E and nu).
     """
     from primordia.analysis.linearisation import linearise, matrix_pencil
     from primordia.physics.seed_parameters import lame
 
-    if linear.kinetics != "painter2018":
+    if linear.kinetics != "painter2018" or linear.third_party:
         return None
     values = seed_values(linear.parameters)
     if linear.mechanics is not None and not np.allclose((linear.mechanics.mu, linear.mechanics.lam),
@@ -536,11 +611,14 @@ def seed_model_values(linear: LinearisedModel):
     The seed's model (:data:`SEED_PHYSICS`) read as the composed one: xi_f = 0 where the model
     has no volume sink and tau = 0 where it has no active stress (the loop is then open, seed
     section 3.4), rather than Table 3.1's xi_f = 0.15 and tau = 60 for couplings it does not have.
-    A ConfigError when the seed's model does not describe ``linear``'s: another kinetics.
+    A ConfigError when the seed's model does not describe ``linear``'s: another kinetics, a third party's module.
     """
     if linear.kinetics != "painter2018":
         raise ConfigError(f"{linear.name or 'the model'} uses kinetics {linear.kinetics}: the seed's model "
                           f"(kinetics painter2018) does not describe it")
+    if linear.third_party:
+        raise ConfigError(f"{linear.name or 'the model'} has physics {', '.join(linear.third_party)}: the seed's "
+                          f"model does not describe it")
     kinds = {type(term) for term in linear.terms}
     values = seed_values(linear.parameters)
     values = values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,

@@ -215,6 +215,21 @@ class Physics(Configured, ABC):
         """Derived quantities to record in the run's series (after ``setup``)."""
         return []
 
+    def fourier_symbol(self, context) -> Any:
+        """This module's part of the linear stability analysis (``primordia stability``), or None: a model
+        with a module that has none is refused there, since the analysis would not be the model that runs.
+
+        Built-in modules are known to :mod:`primordia.analysis.composed` itself; a third party's answers
+        an object with ``add_to(system)``, which adds its linearised terms about the homogeneous steady
+        state under plane waves exp(i k.x + phi t) (grad -> i k, d/dt -> phi) by
+        ``system.add(order, row, column, value)`` (``order`` 0, 1, 2: the coefficient of phi^order; rows
+        and columns named ``u_1``..``u_d``, ``p``, the species and its own unknowns; ``system.k``, the
+        wave vectors, ``system.K`` = |k|^2), and ``unknowns``, the names of the fields it adds (its own
+        rows, after the species).  ``context`` holds ``steady_state.values`` (the species at rest),
+        ``jacobian`` (dR/dc there) and ``params``.  See ``plugins/primordia-morphogen``.
+        """
+        return None
+
     def check_inputs(self, mesh_data, times) -> None:
         """Refuse, in one line, inputs only the mesh and the time span show wrong (before any assembly).
 

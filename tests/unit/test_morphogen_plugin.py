@@ -52,3 +52,29 @@ def test_a_growing_tissue_is_refused_in_one_line():
 def test_a_negative_decay_rate_is_refused():
     with pytest.raises(ConfigError, match="k_h"):
         Model.from_file("examples/ex01a.toml", [*OVERRIDES, "parameters.k_h=-1"])
+
+
+@pytest.mark.parametrize("example, physics", [
+    ("ex01a", '["chemotaxis", "morphogen"]'),
+    ("ex01b", '["chemotaxis", "poroelasticity", "active_stress", "mechanochemical", "morphogen"]'),
+])
+def test_its_fourier_symbol_adds_its_own_root_to_the_analysis(example, physics):
+    """Nothing the model runs reads h: the roots of det M are the model's without it, and -(D_h K + k_h)."""
+    from primordia.analysis import linearise_model
+
+    alone = linearise_model(Model.from_file(f"examples/{example}.toml", ["mesh.cells=[4,4]"]))
+    linear = linearise_model(Model.from_file(f"examples/{example}.toml", [
+        "mesh.cells=[4,4]", f"model.physics={physics}", f"parameters.k_h={K_H}", "parameters.D_h=0.08"]))
+    assert linear.unknowns(2)[-1] == "h" and linear.extra == ("h",)
+    k = np.array([0.0, 0.4, 1.3, 2.784, 6.0])
+    with_h, without = linear.growth_rates(k, d=2), alone.growth_rates(k, d=2)
+    for i, K in enumerate(k**2):
+        expected = list(np.append(without.rates[i], -(0.08 * K + K_H)))
+        got = with_h.rates[i]
+        assert np.isfinite(got).sum() == np.isfinite(expected).sum(), K
+        for root in got[np.isfinite(got)]:  # each root matched to the nearest expected one, once
+            nearest = min(range(len(expected)), key=lambda j: abs(expected[j] - root) if np.isfinite(expected[j])
+                          else np.inf)
+            assert abs(expected.pop(nearest) - root) <= 1e-9 * (1.0 + abs(root)), (K, root)
+    assert linear.fastest_mode(kind="stationary").k_max == pytest.approx(
+        alone.fastest_mode(kind="stationary").k_max, rel=1e-6)

@@ -24,7 +24,7 @@ from primordia.analysis.composed import (
     seed_cross_check,
 )
 from primordia.analysis.linearisation import linearise, matrix_pencil
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PrimordiaError
 from primordia.core.meshes import rectangle
 from primordia.core.ops import NUMPY
 from primordia.model import Model
@@ -247,9 +247,55 @@ def test_an_unknown_physics_module_is_refused(monkeypatch):
     monkeypatch.setattr(linear_model, "physics_objects", linear_model.physics_objects + [stranger])
     with pytest.raises(ConfigError, match="physics stranger has no Fourier symbol") as error:
         linearise_model(linear_model)
-    # a third party's physics module (a passive morphogen, say) cannot be analysed: the line says what can
+    # a third party's physics module without a symbol cannot be analysed: the line says what can
     assert str(error.value).endswith("; --chemistry-only (chemistry_only=True) analyses the chemistry alone")
     assert "stranger left out" in linearise_model(linear_model, chemistry_only=True).notes[0]
+
+
+class _Term:
+    def __init__(self, unknowns, *entries):
+        self.unknowns, self.entries = unknowns, entries
+
+    def add_to(self, system):
+        for order, row, column, value in self.entries:
+            system.add(order, row, column, value(system) if callable(value) else value)
+
+
+@pytest.mark.parametrize("symbol, fragment", [
+    (lambda context: 3.0, "physics stranger: fourier_symbol() must return an object with add_to(system), got 3.0"),
+    (lambda context: _Term(("m",)), "physics stranger: its Fourier symbol adds the unknown 'm', which is taken"),
+    (lambda context: _Term(("u_3",)), "adds the unknown 'u_3', which is taken"),
+    (lambda context: 1 / 0, "physics stranger (test_stability_composed.Stranger): fourier_symbol failed: "
+                            "ZeroDivisionError"),
+    (lambda context: _Term(("q",), (1, "q", "q", 1.0), (0, "q", "u_1", lambda system: system.k[..., 0] ** 2)),
+     "do not make a real pencil"),
+], ids=["not-a-term", "a-species-name", "a-displacement-name", "raises", "not-real"])
+def test_a_third_party_s_fourier_symbol_is_checked(monkeypatch, symbol, fragment):
+    """A module's ``fourier_symbol`` answers junk, takes a name, raises or breaks the conjugate pairs: one line."""
+    linear_model = model(physics=["chemotaxis", "poroelasticity"])
+    stranger = type("Stranger", (), {"name": "stranger", "finite_strain": False,
+                                     "fourier_symbol": lambda self, context: symbol(context)})()
+    monkeypatch.setattr(linear_model, "physics_objects", linear_model.physics_objects + [stranger])
+    with pytest.raises(PrimordiaError) as error:
+        linearise_model(linear_model)
+    assert fragment in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_third_party_s_field_gets_its_own_root():
+    """An unknown q with dq/dt = -2 q + m, read by nothing: one more root, -2, at every k (QZ, not the standard
+    eigenproblem, since a third party's rows may have no d/dt)."""
+    plain = model()
+    linear_model = model()
+    term = _Term(("q",), (1, "q", "q", 1.0), (0, "q", "q", 2.0), (0, "q", "m", -1.0))
+    stranger = type("Stranger", (), {"name": "stranger", "finite_strain": False,
+                                     "fourier_symbol": lambda self, context: term})()
+    linear_model.physics_objects = linear_model.physics_objects + [stranger]
+    k = np.array([0.0, 1.0, 2.5])
+    rates, plain_rates = linearise_model(linear_model).rates(k), linearise_model(plain).rates(k)
+    for i in range(len(k)):
+        extra = [root for root in rates[i] if np.isfinite(root) and abs(root + 2.0) < 1e-10]
+        assert len(extra) == 1
+        assert np.sort(rates[i].real)[-1] == pytest.approx(np.sort(plain_rates[i].real)[-1], rel=1e-9, abs=1e-12)
 
 
 def test_couplings_without_mechanics_are_refused():

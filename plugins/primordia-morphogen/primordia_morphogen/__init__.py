@@ -49,6 +49,14 @@ class Morphogen(Physics):
     def fields(self):
         return [FieldSpec("h", degree=1, description="morphogen secreted by the cells")]
 
+    def fourier_symbol(self, context):
+        """h's part of ``primordia stability``: nothing the model runs reads h, so it adds one root,
+        -(D_h K + k_h), and leaves the others as they are."""
+        if "m" not in context.steady_state.values:
+            raise ConfigError("physics morphogen reads the cell density m, which the kinetics does not declare")
+        p = self.params
+        return MorphogenWaves(p["D_h"], p["s_h"], p["k_h"])
+
     def setup(self, disc):
         self.disc = disc
 
@@ -69,6 +77,20 @@ class Morphogen(Physics):
         return [Subproblem(name=f"{self.name}.h", unknown=unknown, residual=residual, jacobian=jacobian,
                            linear=True, constant_jacobian=jacobian_is_constant(jacobian, disc),
                            petsc_options={"ksp_type": "preonly", "pc_type": "lu"})]
+
+
+class MorphogenWaves:
+    """h's row of the linear stability analysis: (phi + D_h K + k_h) h - s_h m (plane waves, grad -> i k)."""
+
+    unknowns = ("h",)
+
+    def __init__(self, D_h: float, s_h: float, k_h: float, cells: str = "m"):
+        self.D_h, self.s_h, self.k_h, self.cells = D_h, s_h, k_h, cells
+
+    def add_to(self, system) -> None:
+        system.add(1, "h", "h", 1.0)                              # dh/dt
+        system.add(0, "h", "h", self.D_h * system.K + self.k_h)   # - D_h lap h + k_h h
+        system.add(0, "h", self.cells, -self.s_h)                 # - s_h m
 
 
 @hookimpl
