@@ -204,6 +204,7 @@ class Model:
             with module_code(module, "check_composition"):
                 module.check_composition(self.physics_objects)
         fields = _unique_fields(self.physics_objects, self.kinetics_object)
+        _check_requirements(self.physics_objects, fields)
         for key in self._field_options:  # output options that name fields (OutputOption.names_fields)
             if self.output[key] is None:
                 self.output[key] = fields[:1]
@@ -353,6 +354,21 @@ def _construct(label: str, cls, *args, **kwargs):
     with plugin_code(f"{label} {getattr(cls, 'name', cls.__name__)} ({cls.__module__}.{cls.__qualname__}) "
                      f"could not be set up", source=cls):
         return cls(*args, **kwargs)
+
+
+def _check_requirements(modules, fields: list[str]) -> None:
+    """What each module ``requires`` is a field of the model or a quantity a module ``provides``, or one line
+    naming it (and the registered modules that would provide it)."""
+    offered = set(fields) | {name for module in modules for name in getattr(module, "provides", ())}
+    for module in modules:
+        for name in module.requires:
+            if name in offered:
+                continue
+            providers = sorted(piece_name for piece_name, (piece, _) in registry("physics").items()
+                               if name in getattr(piece, "provides", ()))
+            hint = f"; physics {' or '.join(providers)} provides it" if providers else ""
+            raise ConfigError(f"physics {module.name} requires '{name}', which no physics module of this model "
+                              f"provides (fields: {', '.join(fields)}){hint}")
 
 
 def _unique_fields(modules, kinetics) -> list[str]:

@@ -161,8 +161,11 @@ class Physics(Configured, ABC):
     #: The options of the module's config table ``[physics.NAME]``, with their defaults; the values
     #: of a run are ``self.settings`` (the table's values over these defaults).
     options: ClassVar[Mapping[str, Any]] = {}
-    #: Fields this module reads but another module provides.
+    #: Fields this module reads but another module provides, and quantities another offers (``provides``).
     requires: ClassVar[tuple[str, ...]] = ()
+    #: Quantities other than its fields this module offers to others in ``setup`` (``disc.provide``), so that
+    #: a model missing what a module ``requires`` is refused when it is composed (``--dry-run``), not at set-up.
+    provides: ClassVar[tuple[str, ...]] = ()
     #: Whether the module needs a reaction kinetics plugin.
     needs_kinetics: ClassVar[bool] = False
     #: Whether the module needs a growth-law plugin (``[growth_law]``).

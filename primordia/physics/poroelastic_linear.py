@@ -83,6 +83,7 @@ class LinearPoroelasticity(Physics):
     """Seed eqs. (2.1a)-(2.1c) with (2.2) and boundary conditions (2.7b)-(2.7c)."""
 
     name = "poroelasticity"
+    provides = ("lame_constants",)  # read by active_stress
     parameters = POROELASTICITY
     options = {"displacement_degree": 1, "shear_modulus": None, "lame_lambda": None,
                "conductivity": None, "boundary": [], "preconditioner": "lu"}

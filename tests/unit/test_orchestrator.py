@@ -290,11 +290,15 @@ def test_an_unknown_backend_or_scheme_is_refused_before_any_assembly(watching, t
     assert fragment in one_line(caught)
 
 
-def test_a_field_no_module_provides_is_named_at_setup(watching, tmp_path):
+def test_a_field_no_module_provides_is_named_when_the_model_is_composed(watching, tmp_path):
+    """Before, at set-up: ``--dry-run`` said the input was valid (active_stress without poroelasticity)."""
     with pytest.raises(ConfigError) as caught:
-        Simulation(model(recorder={"read": "u"}), out_dir=tmp_path).setup()
-    assert one_line(caught) == ("field 'u' is required but no physics module of this model provides it "
-                                "(provided: m, e, f, b)")
+        model(recorder={"read": "u"})
+    assert one_line(caught) == ("physics recorder requires 'u', which no physics module of this model provides "
+                                "(fields: m, e, f, b)")
+    with pytest.raises(ConfigError) as caught:
+        model(recorder={"read": "lame_constants"})
+    assert one_line(caught).endswith("(fields: m, e, f, b); physics poroelasticity provides it")
 
 
 def test_a_restart_of_another_model_names_what_differs(watching, completed, tmp_path):
