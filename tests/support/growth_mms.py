@@ -25,8 +25,11 @@ solve the model, registered in the plugin manager like any third-party physics:
     the scheme's (u - u^n - dt v^n)/dt^2 takes exactly (v^0 the backward difference), so
     the inertia of (4.12a) makes part of the sources and its sign and size are checked.
     On 8 x 8 and 16 x 16 only: on 32 x 32 Newton converges quadratically to 4.6e-7 of
-    0.97 and then stalls at 4.0e-7 (not understood: the tangent agrees with finite
-    differences, and an exact LU Newton stalls the same way).  A wrong sign of the inertia, or a missing dt v^n, makes Newton
+    0.97 and then stalls at 3e-7, also with an exact LU at every Newton step.  The tangent
+    there is nearly singular: its smallest eigenvalue is 7e-9 against a largest of 100, its
+    eigenvector a psi oscillating over two to four cells along the traction side x = 1 near
+    y = 0.85 (u and p 1e-2 of it).  The quasi-static ``transient`` case has the same boundary
+    modes, less nearly singular (3.8e-7), and converges.  A wrong sign of the inertia, or a missing dt v^n, makes Newton
     diverge on 8 x 8 already.
 * :class:`ReferenceChemotaxisProblem` -- seed eqs. (4.17a)-(4.17d) multiplied by J,
   with the FGF sink xi_f J (tr C - d) and the boundary flux the exact species
