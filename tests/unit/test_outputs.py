@@ -166,6 +166,12 @@ class StandInRun:
     def memory_use(self):
         return {"memory_mb": 100.0 + self.step_index, "peak_memory_mb": 150.0}
 
+    def series_descriptions(self):
+        return {"newton_iterations": ("Newton iterations in the last step", "1"),
+                "dt": ("the last sub-step's length", "dimensionless"),
+                "memory_mb": ("resident memory, summed over the ranks", "MB"),
+                "peak_memory_mb": ("peak resident memory so far, summed over the ranks", "MB")}
+
     def summary(self, status):
         return {"status": status, "steps": self.step_index, "time": self.time}
 
