@@ -42,7 +42,9 @@ hookspec = pluggy.HookspecMarker("primordia")
 #: 1.4: the optional AlgebraicOperator.shifted (the lumped mass added to an operator in place).
 #: 1.5: the optional Backend.p1_cell_dofs / p1_cell_coordinates (the closed-form P1 advection).
 #: 1.6: the optional Physics.check_scheme (refuse a splitting scheme), Output.finishes_last, Discretisation.span.
-CONTRACT_VERSION = (1, 6)
+#: 1.7: the optional Physics.fourier_symbol and Physics.provides, Discretisation.at_balance,
+#: Kinematics.volume_ratio_of.
+CONTRACT_VERSION = (1, 7)
 
 
 @hookspec

@@ -399,6 +399,11 @@ class Simulation:
     def _restore(self, tree: dict) -> None:
         """Put the run back where the checkpoint left it (every rank takes its own part of each field)."""
         wrong = False
+        missing = [key for key in self.disc.state_functions() if "_balance" in key and key not in tree["fields"]]
+        if missing:  # checkpoints written before 2026-12-05 kept no displacement at the species' balance
+            raise ConfigError(f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}: it holds no "
+                              f"{missing[0]} (the displacement where the species were last balanced, which the "
+                              f"conservative accumulation reads since 2026-12-05); run it again from the start")
         for key, function in self.disc.state_functions().items():
             owned = self.backend.petsc_vector(function)
             values = tree["fields"].get(key)

@@ -103,6 +103,9 @@ class Discretisation:
         self._contributions: dict[str, list[tuple[Term, str]]] = defaultdict(list)
         self._consumed: set[str] = set()
         self._kinematics: tuple[Kinematics, str] | None = None
+        #: (group of the balance, group read): that group's function as it stood when the balance's group last
+        #: completed a sub-step (see :meth:`at_balance`)
+        self._balances: dict[tuple[str, str], Any] = {}
 
     # -- spaces and fields --------------------------------------------------------------
     def element(self, spec: FieldSpec) -> ufl.FiniteElementBase:
@@ -155,6 +158,27 @@ class Discretisation:
         """The value of a field at the start of the step."""
         group = self._group(name)
         return self._component(name, group.previous, "previous")
+
+    def at_balance(self, name: str, of: str) -> Expr:
+        """Field ``name`` as it stood when field ``of``'s group last completed a sub-step (before any: its value
+        when this is first asked, after the initial state is complete).
+
+        What a balance of ``of`` reads of another field at its own previous state. The conservative
+        accumulation J c - J_b c^n needs J_b, the volume ratio when c^n was balanced: under ``strang``
+        the species' two half steps straddle the mechanics, and J at the start of the mechanics' step
+        counted each volume change twice; with ``inner_steps`` each inner step counted it again.  In
+        the same group (``monolithic``), or when the schemes solve ``of`` after ``name`` in each
+        step (``sequential``, ``fixed_point``), it is ``name``'s value at the start of the step.
+        """
+        key = (self._group(of).name, self._group(name).name)
+        if key[0] == key[1]:
+            return self.previous(name)
+        if key not in self._balances:
+            source = self._groups[key[1]]
+            function = self.backend.function(source.space, f"{key[1]}_at_{key[0]}_balance")
+            self.backend.local_array(function)[:] = self.backend.local_array(source.current)
+            self._balances[key] = function
+        return self._component(name, self._balances[key], f"at_{key[0]}_balance")
 
     def rate(self, name: str) -> Expr:
         """(field at the end - at the start of the last completed step) / dt: e.g. the solid velocity."""
@@ -395,13 +419,17 @@ class Discretisation:
                 group.span.value = self.dt.value
 
     def update_rates(self, dt: float, groups: Sequence[str] | None = None) -> None:
-        """rate <- (current - previous) / dt for every group (or the given ones) whose rate is used."""
+        """rate <- (current - previous) / dt for every group (or the given ones) whose rate is used, at the end
+        of their sub-step; and what their balances read of other groups (:meth:`at_balance`) <- current."""
         for name in groups or self._groups:
             group = self._groups[name]
             if group.rate is not None:
                 rate = self.backend.local_array(group.rate)  # in place: the same numbers, no temporaries
                 np.subtract(self.backend.local_array(group.current), self.backend.local_array(group.previous), out=rate)
                 np.divide(rate, dt, out=rate)
+        for (balanced, read), function in self._balances.items():
+            if groups is None or balanced in groups:
+                self.backend.local_array(function)[:] = self.backend.local_array(self._groups[read].current)
 
     def set_time(self, t: float, dt: float) -> None:
         self.time = t
@@ -410,7 +438,8 @@ class Discretisation:
 
     # -- state: what the next step reads ------------------------------------------------
     def state_functions(self) -> dict[str, Any]:
-        """Every backend function the next step reads, by ``GROUP/current``, ``GROUP/previous``, ``GROUP/rate``.
+        """Every backend function the next step reads, by ``GROUP/current``, ``GROUP/previous``, ``GROUP/rate``
+        and ``GROUP/at_OTHER_balance`` (:meth:`at_balance`).
 
         A splitting scheme stores a group's start value when it advances that group,
         so between steps ``previous`` may still hold an older value that another
@@ -422,6 +451,8 @@ class Discretisation:
             functions[f"{name}/previous"] = group.previous
             if group.rate is not None:
                 functions[f"{name}/rate"] = group.rate
+        for (balanced, read), function in self._balances.items():
+            functions[f"{read}/at_{balanced}_balance"] = function
         return functions
 
     def copy_state(self, into: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:

@@ -50,8 +50,10 @@ class Kinematics:
     """The motion of the tissue, provided by the mechanics module (UFL expressions or identity defaults).
 
     ``volume_ratio``            J = det F (dimensionless); ``1`` without finite strain.
-    ``volume_ratio_previous``   J at the start of the time step (for the conservative form of the
-                                accumulation); ``1`` without finite strain.
+    ``volume_ratio_previous``   J at the start of the mechanics' time step; ``1`` without finite strain.
+    ``volume_ratio_of``         J of a given displacement (a callable), or ``None`` without finite strain:
+                                the conservative accumulation reads J where its species was last
+                                balanced (:meth:`~primordia.physics.discretisation.Discretisation.at_balance`).
     ``metric``                  the pulled-back diffusion metric J C^-1 (d x d); ``None`` = identity.
     ``volume_change``           the volume-change measure of the FGF sink: div u (seed (2.3c)) or
                                 tr C - d (seed (4.17c)); ``None`` = no motion.
@@ -69,6 +71,7 @@ class Kinematics:
     velocity: Any = None
     deformation_gradient: Any = None
     quadrature_degree: int | None = None
+    volume_ratio_of: Any = None
 
     @property
     def finite_strain(self) -> bool:
@@ -107,10 +110,16 @@ def finite_strain_kinematics(displacement, displacement_previous,
     F = deformation_gradient(displacement)
     C = right_cauchy_green(F)
     J = ufl.det(F)
-    return Kinematics(volume_ratio=J, volume_ratio_previous=ufl.det(deformation_gradient(displacement_previous)),
+    return Kinematics(volume_ratio=J, volume_ratio_previous=volume_ratio(displacement_previous),
                       metric=J * ufl.inv(C),                       # J C^-1 (4.17a)-(4.17d)
                       volume_change=ufl.tr(C) - len(displacement),  # tr C - d (4.17c)
-                      velocity=None, deformation_gradient=F, quadrature_degree=quadrature_degree)
+                      velocity=None, deformation_gradient=F, quadrature_degree=quadrature_degree,
+                      volume_ratio_of=volume_ratio)
+
+
+def volume_ratio(displacement):
+    """J = det(I + Grad u)."""
+    return ufl.det(deformation_gradient(displacement))
 
 
 def rigid_motions(points: np.ndarray) -> np.ndarray:

@@ -178,12 +178,10 @@ class DofMap:
 
 # -- states ------------------------------------------------------------------------------------------
 def group_functions(disc, group: str) -> dict:
-    """The backend functions of a field group: current, previous and (if used) rate."""
-    internal = disc._groups[group]  # test-only access to the discretisation's storage
-    functions = {"current": internal.current, "previous": internal.previous}
-    if internal.rate is not None:
-        functions["rate"] = internal.rate
-    return functions
+    """The state functions of a field group: current, previous, rate if used, and the copies taken at other
+    groups' balances (``at_balance``), by kind."""
+    return {key.partition("/")[2]: function for key, function in disc.state_functions().items()
+            if key.partition("/")[0] == group}
 
 
 def start_next_step(sim) -> None:
