@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, one_line
 from primordia.core.validation import is_number, number
 
 #: The option that seeds the random initial perturbation (``--seeds``).
@@ -57,6 +57,8 @@ PICTURE_FILE = "sweep_map.png"
 RECORD_FILE = "sweep.json"
 #: Environment variables by which an MPI launcher tells a process it is one rank of a job.
 MPI_LAUNCHER_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "HYDRA_")
+#: Seconds to wait for the dask scheduler of ``--scheduler`` to answer.
+SCHEDULER_TIMEOUT = 20.0
 
 
 @dataclass(frozen=True)
@@ -271,17 +273,20 @@ def _failure_reason(finished: subprocess.CompletedProcess, directory: Path) -> s
 
 
 @contextmanager
-def dask_client(scheduler: str | None = None, workers: int | None = None):
-    """A dask.distributed Client: of the cluster at ``scheduler``, or of a local cluster of ``workers`` processes."""
+def dask_client(scheduler: str | None = None, workers: int | None = None, timeout: float | None = None):
+    """A dask.distributed Client: of the cluster at ``scheduler`` (which must answer within ``timeout``
+    seconds, default :data:`SCHEDULER_TIMEOUT`), or of a local cluster of ``workers`` processes."""
     import logging
 
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
+        timeout = SCHEDULER_TIMEOUT if timeout is None else timeout
+        _check_scheduler(scheduler, timeout)
         try:
-            client = Client(scheduler, timeout="20s")
-        except OSError as error:
-            raise ConfigError(f"cannot reach the dask scheduler at {scheduler}: {error}") from None
+            client = Client(scheduler, timeout=f"{timeout:g}s")
+        except Exception as error:  # noqa: BLE001 - gone between the check and the client: one line
+            raise ConfigError(f"cannot reach the dask scheduler at {scheduler}: {one_line(error)}") from None
         with client:
             yield client
         return
@@ -290,6 +295,44 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
                       dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+def _check_scheduler(address: str, timeout: float | None = None) -> None:
+    """A ConfigError (one line) unless a dask scheduler answers at ``address`` within ``timeout`` seconds.
+
+    ``Client(address, timeout=...)`` raised a bare ValueError or TypeError for a malformed
+    address ("nonsense", "host:8786x", "http://..."), and waited forever, whatever its timeout,
+    at a port that accepts connections but is no scheduler (the dashboard's HTTP port); a
+    server that answers with other bytes made it try to allocate exabytes.  One "identity"
+    request under a hard deadline tells all of these apart from a scheduler.
+    """
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    timeout = SCHEDULER_TIMEOUT if timeout is None else timeout
+
+    async def identity():
+        comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
+        try:
+            await comm.write({"op": "identity"})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        answer = asyncio.run(asyncio.wait_for(identity(), timeout))
+    except (TimeoutError, asyncio.TimeoutError):
+        raise ConfigError(f"cannot reach the dask scheduler at {address}: no answer within {timeout:g} s "
+                          "(is it a dask scheduler's address, not its dashboard's?)") from None
+    except MemoryError:  # a length prefix read from bytes that are not dask's protocol
+        raise ConfigError(f"{address} is not a dask scheduler (its answer is not dask's protocol)") from None
+    except Exception as error:  # noqa: BLE001 - malformed address, refused: one line
+        raise ConfigError(f"cannot reach the dask scheduler at {address}: {one_line(error)}") from None
+    if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+        kind = answer.get("type") if isinstance(answer, dict) else type(answer).__name__
+        raise ConfigError(f"{address} is not a dask scheduler (it answers as {kind!r})")
 
 
 def run_sweep(sweep: Sweep, scheduler: str | None = None, workers: int | None = None,
@@ -307,8 +350,9 @@ def run_sweep(sweep: Sweep, scheduler: str | None = None, workers: int | None = 
     records = {p.directory: _read_record(p.directory) for p, finished in zip(points, done) if finished}
     start = time.perf_counter()
     if todo:
-        bar = _progress_bar(len(points), len(points) - len(todo), progress)
-        with dask_client(scheduler, workers) as client:
+        # the bar once the cluster is there: not before a one-line error about its scheduler
+        with dask_client(scheduler, workers) as client, \
+                _progress_bar(len(points), len(points) - len(todo), progress) as bar:
             futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
                                      str(p.directory.resolve()), p.fingerprint, timeout, pure=False): p
                        for p in todo}
@@ -319,7 +363,6 @@ def run_sweep(sweep: Sweep, scheduler: str | None = None, workers: int | None = 
                 except Exception as error:  # noqa: BLE001 - e.g. the worker died: record it, go on
                     records[point.directory] = {"status": "failed", "reason": f"{type(error).__name__}: {error}"}
                 bar.update(1)
-        bar.close()
     ds = gather(sweep, points, records)
     ds.attrs.update({"runs": len(points), "runs_skipped": len(points) - len(todo), "runs_executed": len(todo),
                      "runs_failed": int(np.sum(ds["status"].values != "completed")),

@@ -10,13 +10,18 @@ the failed ones.
 
 from __future__ import annotations
 
+import contextlib
+import socket
+import threading
+import time
+
 import numpy as np
 import pytest
 import xarray as xr
 from dask.distributed import LocalCluster
 
 from primordia.core.errors import ConfigError
-from primordia.sweep import SEED_KEY, Axis, Sweep, execute, run_sweep
+from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, run_sweep
 
 from small_config import SMALL_CONFIG
 
@@ -118,6 +123,10 @@ def test_integer_and_float_axes():
     (["--vary", "parameters.alpha=2:8:3", "--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--vary", "parameters.alpha=2:8:3", "--seeds", "-1"], "--seeds must be an integer >= 0, got -1"),
     ([], "sweep needs at least one --vary"),
+    (["--vary", "parameters.alpha=2:8:3", "--scheduler", "nonsense"],  # was a ValueError traceback
+     "cannot reach the dask scheduler at nonsense: ValueError: missing port number"),
+    (["--vary", "parameters.alpha=2:8:3", "--scheduler", "http://127.0.0.1:8786"],
+     "cannot reach the dask scheduler at http://127.0.0.1:8786: ValueError: unknown address scheme 'http'"),
 ])
 def test_sweep_bad_input_is_one_line(small_config, primordia_cli, tmp_path, arguments, message):
     result = primordia_cli("sweep", small_config(), *arguments, "--out", tmp_path / "out")
@@ -145,3 +154,28 @@ def test_sweep_into_an_output_that_cannot_be_a_directory(small_config, primordia
 def test_sweep_of_a_missing_config(primordia_cli, tmp_path):
     result = primordia_cli("sweep", tmp_path / "missing.toml", "--vary", "parameters.alpha=2:8:3")
     assert result.returncode == 2 and result.stderr.startswith("primordia: error: config file not found")
+
+
+@pytest.mark.parametrize("answer", [None, b"HTTP/1.1 404 Not Found\r\ncontent-length: 0\r\n\r\n" * 8],
+                         ids=["silent", "http"])
+def test_a_scheduler_address_that_is_no_scheduler_is_one_line_not_a_hang(answer):
+    """A port that accepts connections but is no dask scheduler (a dashboard, a proxy): Client(address,
+    timeout=20s) waited forever at a silent one, and tried to allocate exabytes at one answering HTTP."""
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+
+        def serve():
+            with contextlib.suppress(OSError):
+                connection, _ = server.accept()
+                with connection:
+                    if answer:
+                        connection.sendall(answer)
+                    time.sleep(5)
+
+        threading.Thread(target=serve, daemon=True).start()
+        start = time.perf_counter()
+        with pytest.raises(ConfigError, match=f"({address} is not a dask scheduler|cannot reach the dask "
+                                              f"scheduler at {address}: no answer within 1 s)"):
+            with dask_client(address, timeout=1.0):
+                pass
+        assert time.perf_counter() - start < 4
