@@ -11,7 +11,12 @@ the failed ones.
 from __future__ import annotations
 
 import contextlib
+import json
+import os
+import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -21,6 +26,7 @@ import xarray as xr
 from dask.distributed import LocalCluster
 
 from primordia.core.errors import ConfigError
+from primordia.core.outputs import run_is_alive
 from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, run_sweep
 
 from small_config import SMALL_CONFIG
@@ -179,3 +185,32 @@ def test_a_scheduler_address_that_is_no_scheduler_is_one_line_not_a_hang(answer)
             with dask_client(address, timeout=1.0):
                 pass
         assert time.perf_counter() - start < 4
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernel's parent-death signal is Linux's")
+def test_a_run_dies_with_the_worker_that_started_it(small_config, tmp_path):
+    """A worker killed mid-run (SIGKILL, out of memory) left its `primordia run` running on, orphaned:
+    a core kept busy, and the run dask retried elsewhere failed on the directory's run in progress."""
+    config = small_config(SMALL_CONFIG.replace("t_final = 1.0", "t_final = 100000.0"))
+    run = tmp_path / "run"
+    worker = subprocess.Popen([sys.executable, "-c", "import sys; from primordia.sweep import execute; "
+                               "execute(sys.argv[1], [], sys.argv[2], 'fingerprint')", str(config), str(run)])
+    try:
+        pid, deadline = None, time.monotonic() + 20
+        while pid is None and time.monotonic() < deadline:  # the run's own summary names its process
+            with contextlib.suppress(OSError, ValueError, KeyError):
+                pid = json.loads((run / "summary.json").read_text())["process"]["pid"]
+            time.sleep(0.1)
+        assert pid is not None, "the run did not start"
+        worker.kill()
+        worker.wait()
+        deadline = time.monotonic() + 5
+        while run_is_alive({"pid": pid, "host": socket.gethostname()}) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        alive = run_is_alive({"pid": pid, "host": socket.gethostname()})
+        if alive:
+            os.kill(pid, signal.SIGKILL)
+        assert not alive, "the run outlived its worker"
+    finally:
+        worker.kill()
+        worker.wait()
