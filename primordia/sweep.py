@@ -221,6 +221,8 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     Returns and writes ``sweep.json``: status ("completed" or "failed"), reason, wall time.
     Never raises for a failed run.
     """
+    import dask
+
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
     from primordia.core.atomic_files import atomic_write_text
     from primordia.core.json_toml import write_json
@@ -245,7 +247,12 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     atomic_write_text(directory / "run.log", log)
     if not reason:
         try:
-            analyse_run(directory, pictures=False)
+            # dask's own scheduler: in a worker, xarray would lock metrics.nc with a dask.distributed
+            # Lock through the cluster's scheduler (and a client it opens for it), and fail, with the
+            # run done, when the sweep stops (Ctrl-C) while the run is measured.  The run's folder is
+            # its own: no other process writes there.
+            with dask.config.set(scheduler="synchronous"):
+                analyse_run(directory, pictures=False)
         except Exception as error:  # noqa: BLE001 - a failed analysis is recorded like a failed run
             reason = f"pattern metrics: {type(error).__name__}: {error}"
     record = {"status": "failed" if reason else "completed", "reason": reason, "fingerprint": fingerprint,

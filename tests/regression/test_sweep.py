@@ -23,7 +23,7 @@ import time
 import numpy as np
 import pytest
 import xarray as xr
-from dask.distributed import LocalCluster
+from dask.distributed import Client, LocalCluster
 
 from primordia.core.errors import ConfigError
 from primordia.core.outputs import run_is_alive
@@ -214,3 +214,15 @@ def test_a_run_dies_with_the_worker_that_started_it(small_config, tmp_path):
     finally:
         worker.kill()
         worker.wait()
+
+
+def test_a_runs_metrics_are_written_without_the_scheduler(small_config, tmp_path):
+    """xarray took a dask.distributed Lock for metrics.nc inside a worker, through a client the worker
+    opened to the scheduler: a sweep stopped (Ctrl-C, SIGTERM) while runs were being measured
+    recorded completed runs as failed ("pattern metrics: RuntimeError: ConnectionPool is closed")
+    and printed the workers' "Exception ignored in Client.__del__" tracebacks."""
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0") as cluster, \
+            Client(cluster) as client:
+        record = client.submit(execute, str(small_config()), [], str(tmp_path / "run"), "fingerprint").result()
+        assert record["status"] == "completed", record
+        assert not [name for name in cluster.scheduler.clients if name.startswith("Client-worker")]
