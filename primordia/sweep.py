@@ -575,12 +575,37 @@ def command_sweep(args) -> int:
                   tuple(args.overrides), Path(args.out) if args.out else Path("out") / f"sweep_{config.stem}")
     print(f"primordia sweep: {len(sweep.points())} runs of {config} over "
           + " x ".join(f"{name} ({len(values)})" for name, values in sweep.dimensions) + f" -> {sweep.out}")
-    ds = run_sweep(sweep, args.scheduler, args.workers, args.timeout, progress=not args.no_progress)
+    try:
+        ds = run_sweep(sweep, args.scheduler, args.workers, args.timeout, progress=not args.no_progress)
+    except KeyboardInterrupt as interrupted:  # said as a sweep's, not as a run's "during start-up"
+        raise _sweep_interrupted(interrupted, sweep) from None
     print(f"  {ds.attrs['runs_skipped']} done before (skipped), {ds.attrs['runs_executed']} run, "
           f"{ds.attrs['runs_failed']} failed, in {ds.attrs['wall_time_s']:.1f} s")
     for text, count in Counter(ds["reason"].values[ds["status"].values != "completed"]).most_common():
         print(f"  failed ({count}): {text}")
-    picture = sweep_picture(ds, sweep, sweep.out / PICTURE_FILE)
+    try:
+        picture = sweep_picture(ds, sweep, sweep.out / PICTURE_FILE)
+    except KeyboardInterrupt as interrupted:
+        raise _sweep_interrupted(interrupted, sweep, f"after writing {sweep.out / DATASET_FILE}, "
+                                                    "before drawing its map") from None
     print(f"  wrote {sweep.out / DATASET_FILE}" + (f" and {picture}" if picture else
                                                     " (no map: it needs exactly two --vary keys)"))
     return 0
+
+
+def _sweep_interrupted(interrupted: KeyboardInterrupt, sweep: Sweep, where: str = ""):
+    """The InterruptedRun that says how far the sweep got and how to go on (cli's "interrupted" line).
+
+    Without it the CLI said "interrupted (Ctrl-C) during start-up, before the first step", a run's words.
+    """
+    import signal
+
+    from primordia.core.errors import InterruptedRun
+    from primordia.core.signals import INTERRUPTS, signal_name
+
+    signum = getattr(interrupted, "signum", None) or INTERRUPTS.received or signal.SIGINT
+    points = sweep.points()
+    done = sum(is_done(point) for point in points)
+    return InterruptedRun(signum, f"interrupted ({signal_name(signum)}) {where or 'while running the sweep'}: "
+                                  f"{done} of {len(points)} runs done and kept in {sweep.out / 'runs'}; "
+                                  "the same command goes on from there")

@@ -226,3 +226,26 @@ def test_a_runs_metrics_are_written_without_the_scheduler(small_config, tmp_path
         record = client.submit(execute, str(small_config()), [], str(tmp_path / "run"), "fingerprint").result()
         assert record["status"] == "completed", record
         assert not [name for name in cluster.scheduler.clients if name.startswith("Client-worker")]
+
+
+def test_an_interrupted_sweep_says_how_far_it_got(small_config, tmp_path):
+    """Ctrl-C or SIGTERM to a sweep said "interrupted (SIGTERM) during start-up, before the first step",
+    the words of a run, for a sweep that had runs done and would go on from them."""
+    config = small_config(SMALL_CONFIG.replace("t_final = 1.0", "t_final = 100000.0"))
+    out = tmp_path / "sweep"
+    sweep = subprocess.Popen([sys.executable, "-m", "primordia", "sweep", str(config), "--vary",
+                              "parameters.alpha=2:4:2", "--workers", "1", "--out", str(out), "--no-progress"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 25
+        while not list(out.glob("runs/*/summary.json")) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        sweep.send_signal(signal.SIGTERM)
+        _, stderr = sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 128 + signal.SIGTERM, stderr
+    assert stderr.strip().splitlines()[-1] == (f"primordia: interrupted (SIGTERM) while running the sweep: 0 of 2 "
+                                               f"runs done and kept in {out / 'runs'}; the same command goes on "
+                                               "from there"), stderr
+    assert "Traceback" not in stderr, stderr
