@@ -588,8 +588,8 @@ def command_sweep(args) -> int:
     except KeyboardInterrupt as interrupted:
         raise _sweep_interrupted(interrupted, sweep, f"after writing {sweep.out / DATASET_FILE}, "
                                                     "before drawing its map") from None
-    print(f"  wrote {sweep.out / DATASET_FILE}" + (f" and {picture}" if picture else
-                                                    " (no map: it needs exactly two --vary keys)"))
+    why = "it needs exactly two --vary keys" if len(sweep.axes) != 2 else "no run completed"
+    print(f"  wrote {sweep.out / DATASET_FILE}" + (f" and {picture}" if picture else f" (no map: {why})"))
     return 0
 
 

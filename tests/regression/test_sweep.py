@@ -249,3 +249,13 @@ def test_an_interrupted_sweep_says_how_far_it_got(small_config, tmp_path):
                                                f"runs done and kept in {out / 'runs'}; the same command goes on "
                                                "from there"), stderr
     assert "Traceback" not in stderr, stderr
+
+
+def test_a_sweep_whose_runs_all_fail_says_why_it_has_no_map(small_config, primordia_cli, tmp_path):
+    """It said "no map: it needs exactly two --vary keys" of a sweep over two keys."""
+    result = primordia_cli("sweep", small_config(), "--vary", "parameters.D_m=-0.03:-0.01:2", "--vary",
+                           "parameters.alpha=2:4:2", "--workers", "2", "--out", tmp_path / "out", "--no-progress")
+    assert result.returncode == 0, result.stderr
+    assert "4 run, 4 failed" in result.stdout, result.stdout
+    assert "(no map: no run completed)" in result.stdout, result.stdout
+    assert not (tmp_path / "out" / "sweep_map.png").exists()
