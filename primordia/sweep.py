@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primordia.core.errors import ConfigError, one_line
+from primordia.core.errors import ConfigError, one_line, warn
 from primordia.core.validation import is_number, number
 
 #: The option that seeds the random initial perturbation (``--seeds``).
@@ -322,6 +322,8 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
         except Exception as error:  # noqa: BLE001 - gone between the check and the client: one line
             raise ConfigError(f"cannot reach the dask scheduler at {scheduler}: {one_line(error)}") from None
         with client:
+            if not client.scheduler_info().get("workers"):  # dask waits for one, silently, as long as it takes
+                warn(f"the dask scheduler at {scheduler} has no workers yet: the runs wait until one joins")
             yield client
         return
     # the scheduler's HTTP routes on any free loopback port (None would mean port 8787, and a warning if taken)

@@ -259,3 +259,12 @@ def test_a_sweep_whose_runs_all_fail_says_why_it_has_no_map(small_config, primor
     assert "4 run, 4 failed" in result.stdout, result.stdout
     assert "(no map: no run completed)" in result.stdout, result.stdout
     assert not (tmp_path / "out" / "sweep_map.png").exists()
+
+
+def test_a_scheduler_without_workers_is_said(capsys):
+    """The runs wait for a worker to join, and the sweep waited without a word (its bar at 0%)."""
+    with LocalCluster(n_workers=0, processes=False, dashboard_address="127.0.0.1:0") as cluster:
+        with dask_client(cluster.scheduler_address):
+            pass
+    assert capsys.readouterr().err == (f"primordia: warning: the dask scheduler at {cluster.scheduler_address} has no "
+                                       "workers yet: the runs wait until one joins\n")
