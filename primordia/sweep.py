@@ -327,8 +327,9 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
             yield client
         return
     # the scheduler's HTTP routes on any free loopback port (None would mean port 8787, and a warning if taken)
+    # preload: Ctrl-C is the sweep's to handle (see dask_setup)
     with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                      dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR) as cluster, \
+                      dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, preload=[__name__]) as cluster, \
             Client(cluster) as client:
         yield client
 
@@ -369,6 +370,26 @@ def _check_scheduler(address: str, timeout: float | None = None) -> None:
     if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
         kind = answer.get("type") if isinstance(answer, dict) else type(answer).__name__
         raise ConfigError(f"{address} is not a dask scheduler (it answers as {kind!r})")
+
+
+def dask_setup(worker) -> None:
+    """Preload of the local cluster's worker processes: a Ctrl-C leaves them to the sweep that started them.
+
+    A terminal's Ctrl-C reaches its whole process group, and each worker process printed
+    asyncio's KeyboardInterrupt tracebacks (some 60 lines) while the sweep closed the cluster,
+    which ends the workers anyway.  A handler that does nothing, not SIG_IGN: a handler is
+    not inherited across exec, so each ``primordia run`` still gets the Ctrl-C and stops there,
+    as it does on its own.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _leave_to_the_sweep)
+
+
+def _leave_to_the_sweep(signum, frame) -> None:
+    """SIGINT in a local worker process: nothing (the sweep closes the cluster)."""
 
 
 def run_sweep(sweep: Sweep, scheduler: str | None = None, workers: int | None = None,

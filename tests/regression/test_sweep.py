@@ -268,3 +268,28 @@ def test_a_scheduler_without_workers_is_said(capsys):
             pass
     assert capsys.readouterr().err == (f"primordia: warning: the dask scheduler at {cluster.scheduler_address} has no "
                                        "workers yet: the runs wait until one joins\n")
+
+
+def test_ctrl_c_in_a_terminal_is_one_line(small_config, tmp_path):
+    """Ctrl-C in a terminal signals the whole process group: the local cluster's worker processes too,
+    and each printed asyncio's KeyboardInterrupt tracebacks (some 60 lines) before the sweep's own line."""
+    config = small_config(SMALL_CONFIG.replace("t_final = 1.0", "t_final = 100000.0"))
+    out = tmp_path / "sweep"
+    sweep = subprocess.Popen([sys.executable, "-m", "primordia", "sweep", str(config), "--vary",
+                              "parameters.alpha=2:4:2", "--workers", "2", "--out", str(out), "--no-progress"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 25
+        while len(list(out.glob("runs/*/summary.json"))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(0.5)
+        os.killpg(sweep.pid, signal.SIGINT)  # as the terminal does
+        _, stderr = sweep.communicate(timeout=60)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(sweep.pid, signal.SIGKILL)
+    assert sweep.returncode == 128 + signal.SIGINT, stderr
+    assert stderr.strip().splitlines() == [f"primordia: interrupted (Ctrl-C) while running the sweep: 0 of 2 runs "
+                                           f"done and kept in {out / 'runs'}; the same command goes on from there"]
+    for run in out.glob("runs/*"):  # each run stopped where it was, as `primordia run` does on Ctrl-C
+        assert "interrupted" in json.loads((run / "sweep.json").read_text())["reason"]
