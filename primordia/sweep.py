@@ -57,6 +57,9 @@ PICTURE_FILE = "sweep_map.png"
 RECORD_FILE = "sweep.json"
 #: Environment variables by which an MPI launcher tells a process it is one rank of a job.
 MPI_LAUNCHER_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "HYDRA_")
+#: The most runs one sweep makes: beyond it, a typo (``alpha=1:5:100000000``) filled the memory
+#: with the runs' names (1 GB per million) before a word was said.
+MAX_RUNS = 100_000
 #: Seconds to wait for the dask scheduler of ``--scheduler`` to answer.
 SCHEDULER_TIMEOUT = 20.0
 
@@ -82,6 +85,8 @@ class Axis:
             raise ConfigError(f"--vary {text}: LO and HI must be numbers and N an integer") from None
         if count < 1 or (count == 1 and low != high) or not (np.isfinite(low) and np.isfinite(high)):
             raise ConfigError(f"--vary {text}: need N >= 1 finite values (N = 1 only with LO = HI)")
+        if count > MAX_RUNS:
+            raise ConfigError(f"--vary {text}: N = {count} values, more runs than a sweep makes ({MAX_RUNS})")
         if low > high:  # as stability map's axes: the sweep's coordinates and map axes increase
             raise ConfigError(f"--vary {text}: LO must not exceed HI (the values go from LO up to HI)")
         if count > 1 and low == high:  # N copies of one run, all writing into one folder
@@ -143,6 +148,9 @@ class Sweep:
         self.config, self.out = Path(self.config), Path(self.out)
         if not self.axes:
             raise ConfigError("sweep needs at least one --vary SECTION.KEY=LO:HI:N")
+        runs = int(np.prod([len(values) for _, values in self.dimensions], dtype=float))
+        if runs > MAX_RUNS:
+            raise ConfigError(f"the sweep would make {runs} runs, more than a sweep makes ({MAX_RUNS})")
         keys = self.keys
         if len(set(keys)) != len(keys):
             raise ConfigError(f"a key is varied twice: {', '.join(k for k in keys if keys.count(k) > 1)}")

@@ -129,6 +129,9 @@ def test_integer_and_float_axes():
     (["--vary", "parameters.alpha=2:8:3", "--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--vary", "parameters.alpha=2:8:3", "--seeds", "-1"], "--seeds must be an integer >= 0, got -1"),
     ([], "sweep needs at least one --vary"),
+    (["--vary", "parameters.alpha=2:8:100000000"], "N = 100000000 values, more runs than a sweep makes (100000)"),
+    (["--vary", "parameters.alpha=2:8:1000", "--vary", "parameters.m0=0.5:1.5:1000"],  # was minutes and gigabytes
+     "the sweep would make 1000000 runs, more than a sweep makes (100000)"),
     (["--vary", "parameters.alpha=2:8:3", "--scheduler", "nonsense"],  # was a ValueError traceback
      "cannot reach the dask scheduler at nonsense: ValueError: missing port number"),
     (["--vary", "parameters.alpha=2:8:3", "--scheduler", "http://127.0.0.1:8786"],
