@@ -153,8 +153,14 @@ class Sweep:
             raise ConfigError(f"the sweep would make {runs} runs, more than a sweep makes ({MAX_RUNS})")
         keys = self.keys
         if len(set(keys)) != len(keys):
-            raise ConfigError(f"a key is varied twice: {', '.join(k for k in keys if keys.count(k) > 1)}")
+            twice = sorted({k for k in keys if keys.count(k) > 1})
+            raise ConfigError(f"a key is varied twice: {', '.join(twice)}"
+                              + (" (--seeds varies it)" if SEED_KEY in twice else ""))
         model = Model.from_file(self.config, list(self.fixed))  # missing config, bad --set: one line
+        for text in self.fixed:  # a --set the --vary would override without a word
+            for key in set(_assigned_keys(text)) & set(keys):
+                raise ConfigError(f"{key} is both fixed (--set {text}) and varied "
+                                  f"({'--seeds' if key == SEED_KEY else '--vary'}): drop one of them")
         from primordia.core.outputs import directory_problem
 
         for directory in (self.out, self.out / "runs"):  # before any worker fails to make its run's folder
@@ -196,6 +202,20 @@ class Sweep:
             digest = hashlib.sha256("\n".join((self.config_text, *overrides)).encode()).hexdigest()[:16]
             points.append(Point(index, overrides, self.out / "runs" / name, digest))
         return points
+
+
+def _assigned_keys(text: str) -> list[str]:
+    """The dotted config keys a ``--set`` assignment sets (an inline table sets each of its keys)."""
+    from primordia.core.config import parse_assignment
+
+    path, value = parse_assignment(text)
+
+    def leaves(prefix: list[str], value) -> list[str]:
+        if isinstance(value, dict):
+            return [key for name, item in value.items() for key in leaves([*prefix, str(name)], item)]
+        return [".".join(prefix)]
+
+    return leaves(path, value)
 
 
 def _lookup(table: dict, key: str):

@@ -129,6 +129,14 @@ def test_integer_and_float_axes():
     (["--vary", "parameters.alpha=2:8:3", "--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--vary", "parameters.alpha=2:8:3", "--seeds", "-1"], "--seeds must be an integer >= 0, got -1"),
     ([], "sweep needs at least one --vary"),
+    (["--vary", "parameters.alpha=2:8:3", "--set", "parameters.alpha=3"],  # the --set was dropped silently
+     "parameters.alpha is both fixed (--set parameters.alpha=3) and varied (--vary): drop one of them"),
+    (["--vary", "parameters.alpha=2:8:3", "--seeds", "2", "--set", "physics.chemotaxis={seed=5, perturbation=0.1}"],
+     "physics.chemotaxis.seed is both fixed (--set physics.chemotaxis={seed=5, perturbation=0.1}) and varied"),
+    (["--vary", "parameters.alpha=2:8:3", "--seeds", "2", "--set", "physics.chemotaxis.seed=5"],
+     "physics.chemotaxis.seed is both fixed (--set physics.chemotaxis.seed=5) and varied (--seeds)"),
+    (["--vary", "physics.chemotaxis.seed=1:3:3", "--seeds", "2"],  # named it twice, and not --seeds
+     "a key is varied twice: physics.chemotaxis.seed (--seeds varies it)"),
     (["--vary", "parameters.alpha=2:8:100000000"], "N = 100000000 values, more runs than a sweep makes (100000)"),
     (["--vary", "parameters.alpha=2:8:1000", "--vary", "parameters.m0=0.5:1.5:1000"],  # was minutes and gigabytes
      "the sweep would make 1000000 runs, more than a sweep makes (100000)"),
