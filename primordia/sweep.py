@@ -228,11 +228,27 @@ def _lookup(table: dict, key: str):
 
 def is_done(point: Point) -> bool:
     """A run directory with its metrics, completed from the same configuration and overrides."""
-    from primordia.analysis.patterns.run import METRICS_FILE
-
     record = _read_record(point.directory)
     return (record.get("status") == "completed" and record.get("fingerprint") == point.fingerprint
-            and (point.directory / METRICS_FILE).is_file())
+            and _has_metrics(point.directory))
+
+
+def _has_metrics(directory: Path) -> bool:
+    """Whether ``directory``'s metrics.nc reads, with every variable :func:`gather` takes from it.
+
+    A metrics.nc that did not (truncated, written by another version) failed every later
+    sweep of the same command in gather, with a traceback, where running that point again mends it.
+    """
+    import xarray as xr
+
+    from primordia.analysis.patterns.run import METRICS_FILE, SCALAR_METRICS
+
+    needed = {name for name, _, _ in SCALAR_METRICS} | {"pattern", "time", "configuration", "species"}
+    try:
+        with xr.open_dataset(directory / METRICS_FILE, engine="scipy") as metrics:
+            return needed <= set(metrics.variables)
+    except Exception:  # noqa: BLE001 - missing, unreadable, not NetCDF: the run is done again
+        return False
 
 
 def _read_record(directory: Path) -> dict:

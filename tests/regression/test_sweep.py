@@ -27,7 +27,7 @@ from dask.distributed import Client, LocalCluster
 
 from primordia.core.errors import ConfigError
 from primordia.core.outputs import run_is_alive
-from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, run_sweep
+from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, is_done, run_sweep
 
 from small_config import SMALL_CONFIG
 
@@ -304,3 +304,15 @@ def test_ctrl_c_in_a_terminal_is_one_line(small_config, tmp_path):
                                            f"done and kept in {out / 'runs'}; the same command goes on from there"]
     for run in out.glob("runs/*"):  # each run stopped where it was, as `primordia run` does on Ctrl-C
         assert "interrupted" in json.loads((run / "sweep.json").read_text())["reason"]
+
+
+def test_a_done_run_with_unreadable_metrics_is_run_again(small_config, tmp_path):
+    """A completed run whose metrics.nc did not read (truncated, another version's) failed every
+    later sweep in gather with a traceback: it is now one more run to do."""
+    sweep = Sweep(small_config(COARSE), (Axis.parse("parameters.alpha=2:4:2"),), out=tmp_path / "sweep")
+    points = sweep.points()
+    for point in points:
+        execute(str(sweep.config), list(point.overrides), str(point.directory), point.fingerprint)
+    assert all(is_done(point) for point in points)
+    (points[0].directory / "metrics.nc").write_text("not NetCDF")
+    assert [is_done(point) for point in points] == [False, True]
