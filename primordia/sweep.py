@@ -36,6 +36,7 @@ import hashlib
 import itertools
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -55,6 +56,7 @@ SEED_KEY = "physics.chemotaxis.seed"
 DATASET_FILE = "sweep.nc"
 PICTURE_FILE = "sweep_map.png"
 RECORD_FILE = "sweep.json"
+LOCK_FILE = ".sweep.lock"
 #: Environment variables by which an MPI launcher tells a process it is one rank of a job.
 MPI_LAUNCHER_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "HYDRA_")
 #: The most runs one sweep makes: beyond it, a typo (``alpha=1:5:100000000``) filled the memory
@@ -443,6 +445,51 @@ def run_sweep(sweep: Sweep, scheduler: str | None = None, workers: int | None = 
     The Dataset's attributes say how many runs were skipped (done before), run, and failed.
     Paths given to the workers are absolute: a remote worker has a working directory of its own.
     """
+    if scheduler:  # a wrong address: one line before OUT is made for the lock
+        _check_scheduler(scheduler)
+    with _only_sweep_into(sweep.out):
+        return _run_sweep(sweep, scheduler, workers, timeout, progress)
+
+
+@contextmanager
+def _only_sweep_into(out: Path):
+    """Hold ``OUT/.sweep.lock`` (an flock) for the sweep; a ConfigError if another sweep holds it.
+
+    The same command started twice at once (two terminals, a batch job resubmitted) ran every
+    point twice: each run that met the other's in progress was recorded as failed, and the
+    sweep.nc of the one that ended last said so of runs that had completed.
+    """
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        yield
+        return
+    from primordia.core.atomic_files import make_directory
+
+    make_directory(out)
+    with open(out / LOCK_FILE, "a+") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as error:
+            if not isinstance(error, BlockingIOError):  # a file system without locks (some Lustre mounts)
+                yield
+                return
+            lock.seek(0)
+            holder = lock.read().strip() or "another process"
+            raise ConfigError(f"another sweep is running into {out} ({holder}): let it finish, "
+                              "or give this one another --out") from None
+        lock.seek(0)
+        lock.truncate()
+        lock.write(f"process {os.getpid()} on {socket.gethostname()}\n")
+        lock.flush()
+        try:
+            yield
+        finally:
+            lock.seek(0)
+            lock.truncate()
+
+
+def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
     from dask.distributed import as_completed
 
     points = sweep.points()

@@ -316,3 +316,23 @@ def test_a_done_run_with_unreadable_metrics_is_run_again(small_config, tmp_path)
     assert all(is_done(point) for point in points)
     (points[0].directory / "metrics.nc").write_text("not NetCDF")
     assert [is_done(point) for point in points] == [False, True]
+
+
+def test_a_second_sweep_into_the_same_folder_is_refused(small_config, tmp_path):
+    """The same command started twice at once ran every point twice; runs that met the other's in
+    progress were recorded as failed, and the last sweep.nc said so of runs that had completed."""
+    sweep = Sweep(small_config(COARSE), (Axis.parse("parameters.alpha=2:4:2"),), out=tmp_path / "sweep")
+    (tmp_path / "sweep").mkdir()
+    hold = ("import fcntl, sys, time; lock = open(sys.argv[1], 'a+'); fcntl.flock(lock, fcntl.LOCK_EX); "
+            "lock.write('process 1 on elsewhere'); lock.flush(); print(flush=True); time.sleep(60)")
+    holder = subprocess.Popen([sys.executable, "-c", hold, str(tmp_path / "sweep" / ".sweep.lock")],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        holder.stdout.readline()
+        with pytest.raises(ConfigError, match=f"another sweep is running into {tmp_path / 'sweep'} "
+                                              r"\(process 1 on elsewhere\)"):
+            run_sweep(sweep, workers=1)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not (tmp_path / "sweep" / "runs").exists()
