@@ -36,6 +36,7 @@ import hashlib
 import itertools
 import json
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -284,8 +285,8 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
     start = time.perf_counter()
     try:
-        finished = subprocess.run(command, capture_output=True, text=True, env=environment, timeout=timeout,
-                                  preexec_fn=_dies_with_its_parent())
+        finished = subprocess.run(_dying_with_its_parent(command), capture_output=True, text=True,
+                                  env=environment, timeout=timeout)
         log, reason = finished.stdout + finished.stderr, _failure_reason(finished, directory)
     except subprocess.TimeoutExpired as expired:  # its output so far comes as bytes
         log = b"".join(part or b"" for part in (expired.stdout, expired.stderr)).decode(errors="replace")
@@ -307,30 +308,19 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     return record
 
 
-def _dies_with_its_parent():
-    """A ``preexec_fn`` that has the kernel kill the run when the worker that started it dies (Linux), or None.
+def _dying_with_its_parent(command: list[str]) -> list[str]:
+    """``command`` run by ``setpriv --pdeathsig KILL`` (util-linux), so that the kernel kills the run when the
+    worker thread that started it dies; ``command`` itself where there is no setpriv.
 
     A worker killed (SIGKILL, out of memory) left its ``primordia run`` going on, reparented to init:
     it kept a core busy, and the run dask retried on another worker failed at once on the
     directory's "run in progress".  The run is killed rather than asked to stop: a killed run's
-    directory is one that ``--overwrite`` clears at once.  The signal follows the thread that forked
-    the run, which waits in :func:`subprocess.run` for as long as the run lives.
+    directory is one that ``--overwrite`` clears at once.  setpriv sets the signal and execs the run
+    (same process); a ``preexec_fn`` doing it would run Python between fork and exec in a worker
+    with several threads, which subprocess documents as unsafe.
     """
-    if not sys.platform.startswith("linux"):
-        return None
-    import ctypes
-    import signal
-
-    try:
-        prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up here: nothing to import after fork
-    except (OSError, AttributeError):
-        return None
-    pr_set_pdeathsig = 1
-
-    def die_with_parent():
-        prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
-
-    return die_with_parent
+    setpriv = shutil.which("setpriv") if sys.platform.startswith("linux") else None
+    return [setpriv, "--pdeathsig", "KILL", "--", *command] if setpriv else list(command)
 
 
 def _failure_reason(finished: subprocess.CompletedProcess, directory: Path) -> str:
