@@ -54,6 +54,15 @@ def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaE
         raise PluginError(f"{what}: {one_line(error)}{_place_in(error, source)}") from error
 
 
+def third_party_code(what: str, source):
+    """:func:`plugin_code` for code that may be primordia's own or a plugin's (a physics module's method, a term
+    it contributes): a plugin's bug is one line; primordia's own (``source`` defined in ``primordia.``) keeps
+    its traceback, since it is primordia's bug."""
+    if getattr(source, "__module__", "").startswith("primordia."):
+        return contextlib.nullcontext()
+    return plugin_code(what, source=source)
+
+
 def _place_in(error: BaseException, source: type | None) -> str:
     """`` (at FILE:LINE)``: the innermost frame of ``error``'s traceback in the files of ``source``'s top-level
     package (or module), or "" when it passed through none of them."""

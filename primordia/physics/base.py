@@ -22,7 +22,6 @@ the promise has failed and is retried with a smaller time step.
 
 from __future__ import annotations
 
-import contextlib
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,7 +32,7 @@ import ufl
 from ufl.algorithms import expand_derivatives
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import PluginError, plugin_code
+from primordia.core.errors import PluginError, third_party_code
 from primordia.core.parameters import Parameter
 
 if TYPE_CHECKING:
@@ -295,18 +294,13 @@ class Coupling(Physics):
         return []
 
 
-@contextlib.contextmanager
 def module_code(module: Physics, method: str):
     """Run ``method`` of a physics module: a third party's bug in it (any exception but primordia's own
     one-line errors) is one line naming the module, the method and where in the plugin's files it
-    happened (:func:`~primordia.core.errors.plugin_code`), not a traceback.  primordia's own modules
+    happened (:func:`~primordia.core.errors.third_party_code`), not a traceback.  primordia's own modules
     are left alone: their bugs are primordia's and keep their tracebacks."""
     cls = type(module)
-    if cls.__module__.startswith("primordia."):
-        yield
-        return
-    with plugin_code(f"physics {module.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", source=cls):
-        yield
+    return third_party_code(f"physics {module.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls)
 
 
 def fields_of(module: Physics) -> list[FieldSpec]:

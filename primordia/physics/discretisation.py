@@ -24,7 +24,6 @@ and declares to it, and never needs the backend behind it.
 
 from __future__ import annotations
 
-import contextlib
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -35,7 +34,7 @@ import ufl
 from ufl.core.expr import Expr
 
 from primordia.core.backend import Backend, BoundaryCondition, PointFunction
-from primordia.core.errors import ConfigError, plugin_code
+from primordia.core.errors import ConfigError, third_party_code
 from primordia.core.mesh_data import MeshData
 from primordia.physics.kinematics import MOTIONLESS, Kinematics
 
@@ -58,17 +57,6 @@ class _Group:
 
     def index(self, field: str) -> int | None:
         return None if len(self.fields) == 1 else self.fields.index(field)
-
-
-@contextlib.contextmanager
-def _plugin_term(term: Term, what: str):
-    """Call a contributed term: a third party's bug in it is one line naming its module and where (its owner's
-    balance law, primordia's own module, reads it), not a traceback; primordia's own terms are left alone."""
-    if getattr(term, "__module__", "").startswith("primordia."):
-        yield
-        return
-    with plugin_code(what, source=term):
-        yield
 
 
 class Discretisation:
@@ -370,7 +358,7 @@ class Discretisation:
         self._consumed.add(field_name)
         forms = []
         for term, by in self._contributions[field_name]:
-            with _plugin_term(term, f"the term {by} adds to the balance law of '{field_name}' failed"):
+            with third_party_code(f"the term {by} adds to the balance law of '{field_name}' failed", term):
                 form = term(test)
             if form is not None:
                 forms.append(form)
