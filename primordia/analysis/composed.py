@@ -548,7 +548,8 @@ def _new_unknowns(module, term, taken: tuple[str, ...]) -> tuple[str, ...]:
     """The unknowns ``term`` adds, each a name no species, displacement, pressure or other module has."""
     unknowns = tuple(getattr(term, "unknowns", ()))
     for name in unknowns:
-        if not isinstance(name, str) or name in taken or name == "p" or name.startswith("u_") or unknowns.count(name) > 1:
+        mechanics = name == "p" or str(name).startswith("u_")
+        if not isinstance(name, str) or name in taken or mechanics or unknowns.count(name) > 1:
             raise ConfigError(f"physics {module.name}: its Fourier symbol adds the unknown {name!r}, which is taken "
                               f"or no name (the species: {', '.join(taken)}; u_1..u_d and p: the mechanics)")
     return unknowns

@@ -44,8 +44,8 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe,
-    depends_on_step, petsc_reason, read_options)
+    FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, depends_on_step,
+    flatten, option_text, parallel_safe, petsc_reason, read_options)
 from primordia.physics.kinematics import rigid_motions
 
 

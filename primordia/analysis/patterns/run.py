@@ -180,7 +180,8 @@ def read_run(directory: str | Path) -> RunFields:
             times.append(float(t))
             snapshots.append({name: np.asarray(values)[vertices] for name, values in fields.items()})
     except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, SyntaxError) as error:
-        raise ConfigError(f"{xdmf} (or the HDF5 files it names) cannot be read: {one_line(error, named=False)}") from None
+        reason = one_line(error, named=False)
+        raise ConfigError(f"{xdmf} (or the HDF5 files it names) cannot be read: {reason}") from None
     if not snapshots:
         raise ConfigError(f"{xdmf}: no output time written")
     config_path, summary_path = directory / "config.toml", directory / "summary.json"
