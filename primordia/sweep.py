@@ -265,32 +265,36 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
             timeout: float | None = None) -> dict:
     """Run one point (in a dask worker): ``primordia run`` in a subprocess, then its pattern metrics.
 
-    Returns and writes ``sweep.json``: status ("completed" or "failed"), reason, wall time.
-    Never raises for a failed run.
+    A point whose folder holds a checkpoint (its run was interrupted: the sweep stopped, a worker
+    was lost, a time limit) goes on from it (``--restart``) instead of starting again; a
+    checkpoint of another model (the sweep's config or overrides changed) is replaced by a run
+    from the start.  Returns and writes ``sweep.json``: status ("completed" or "failed"),
+    reason, wall time.  Never raises for a failed run.
     """
     import dask
 
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
     from primordia.core.atomic_files import atomic_write_text
-    from primordia.core.json_toml import write_json
+    from primordia.core.checkpoint import CHECKPOINT_FILE
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     for stale in (RECORD_FILE, METRICS_FILE):
         (directory / stale).unlink(missing_ok=True)
-    command = [sys.executable, "-m", "primordia.cli", "run", str(config), "--out", str(directory), "--no-progress",
-               "--overwrite"]  # a retried run replaces the failed one in its directory
+    command = [sys.executable, "-m", "primordia.cli", "run", str(config), "--no-progress"]
     for assignment in overrides:
         command += ["--set", assignment]
-    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
-    start = time.perf_counter()
-    try:
-        finished = subprocess.run(_dying_with_its_parent(command), capture_output=True, text=True,
-                                  env=environment, timeout=timeout)
-        log, reason = finished.stdout + finished.stderr, _failure_reason(finished, directory)
-    except subprocess.TimeoutExpired as expired:  # its output so far comes as bytes
-        log = b"".join(part or b"" for part in (expired.stdout, expired.stderr)).decode(errors="replace")
-        reason = f"timed out after {timeout:g} s"
+    start, log, reason = time.perf_counter(), "", ""
+    if (directory / CHECKPOINT_FILE).is_file():  # an interrupted run (a sweep stopped, a worker lost): go on
+        log, reason = _run_point([*command, "--restart", str(directory)], directory, timeout)
+        if reason and not _has_checkpoint_of_another_run(log):
+            atomic_write_text(directory / "run.log", log)
+            return _record(directory, fingerprint, overrides, reason, start)
+    if not log or reason:  # a fresh run, or the checkpoint was another model's: the point is run from the start
+        earlier = log
+        log, reason = _run_point([*command, "--out", str(directory), "--overwrite"], directory, timeout)
+        log = (f"{earlier}\n[the checkpoint could not be continued: the point is run from the start]\n{log}"
+               if earlier else log)
     atomic_write_text(directory / "run.log", log)
     if not reason:
         try:
@@ -302,6 +306,33 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
                 analyse_run(directory, pictures=False)
         except Exception as error:  # noqa: BLE001 - a failed analysis is recorded like a failed run
             reason = f"pattern metrics: {type(error).__name__}: {error}"
+    return _record(directory, fingerprint, overrides, reason, start)
+
+
+def _run_point(command: list[str], directory: Path, timeout: float | None) -> tuple[str, str]:
+    """(its output, why it failed or "") of ``primordia run`` in a subprocess, killed with its worker."""
+    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    try:
+        finished = subprocess.run(_dying_with_its_parent(command), capture_output=True, text=True,
+                                  env=environment, timeout=timeout)
+        return finished.stdout + finished.stderr, _failure_reason(finished, directory)
+    except subprocess.TimeoutExpired as expired:  # its output so far comes as bytes
+        log = b"".join(part or b"" for part in (expired.stdout, expired.stderr)).decode(errors="replace")
+        return log, f"timed out after {timeout:g} s"
+
+
+#: What ``primordia run --restart`` says when the checkpoint is not this point's model (then run from the start).
+ANOTHER_RUN = ("differs from the checkpointed run's", "it was written on backend", "cannot restart from")
+
+
+def _has_checkpoint_of_another_run(log: str) -> bool:
+    return any(text in log for text in ANOTHER_RUN)
+
+
+def _record(directory: Path, fingerprint: str, overrides: Sequence[str], reason: str, start: float) -> dict:
+    """``sweep.json`` of a point: status, reason, fingerprint, wall time (written, and returned)."""
+    from primordia.core.json_toml import write_json
+
     record = {"status": "failed" if reason else "completed", "reason": reason, "fingerprint": fingerprint,
               "wall_time_s": time.perf_counter() - start, "overrides": list(overrides)}
     write_json(directory / RECORD_FILE, record)

@@ -227,6 +227,59 @@ def test_a_run_dies_with_the_worker_that_started_it(small_config, tmp_path):
         worker.wait()
 
 
+def _interrupted_point(small_config, tmp_path):
+    """A point whose run was stopped (SIGTERM, as a sweep stopped or a batch job's time limit) after its
+    first checkpointed steps: (config, directory)."""
+    config = small_config(SMALL_CONFIG.replace("t_final = 1.0", "t_final = 60.0").replace(
+        "pictures = false", "pictures = false\ntimes = [30.0, 60.0]\n\n[checkpoint]\nevery_steps = 10"))
+    run = tmp_path / "run"
+    worker = subprocess.Popen([sys.executable, "-c", "import sys; from primordia.sweep import execute; "
+                               "execute(sys.argv[1], [], sys.argv[2], 'fingerprint')", str(config), str(run)])
+    try:
+        step, deadline = 0, time.monotonic() + 60
+        while step < 20 and time.monotonic() < deadline:
+            with contextlib.suppress(OSError, ValueError, KeyError):
+                summary = json.loads((run / "summary.json").read_text())
+                step = summary["steps"]
+            time.sleep(0.05)
+        assert step >= 20, "the run did not get going"
+        os.kill(summary["process"]["pid"], signal.SIGTERM)
+        assert worker.wait(timeout=60) == 0
+    finally:
+        worker.kill()
+    record = json.loads((run / "sweep.json").read_text())
+    assert record["status"] == "failed" and "interrupted" in record["reason"], record
+    return config, run
+
+
+def test_an_interrupted_point_goes_on_from_its_checkpoint(small_config, tmp_path):
+    """Every run the sweep had started was run again from t = 0 when the same command went on, though
+    each had written a checkpoint when it was stopped."""
+    config, run = _interrupted_point(small_config, tmp_path)
+    stopped_at = json.loads((run / "summary.json").read_text())["time"]
+    assert 0 < stopped_at < 60
+    record = execute(str(config), [], str(run), "fingerprint")
+    summary = json.loads((run / "summary.json").read_text())
+    assert record["status"] == "completed", record
+    assert (summary["status"], summary["restarts"], summary["time"]) == ("completed", 1, pytest.approx(60.0))
+    assert is_done_record(run)
+
+
+def test_a_checkpoint_of_another_model_is_replaced_by_a_run_from_the_start(small_config, tmp_path):
+    config, run = _interrupted_point(small_config, tmp_path)
+    record = execute(str(config), ["parameters.D_m=0.04"], str(run), "another")
+    summary = json.loads((run / "summary.json").read_text())
+    assert record["status"] == "completed", record
+    assert (summary["restarts"], summary["time"]) == (0, pytest.approx(60.0))
+    assert "the point is run from the start" in (run / "run.log").read_text()
+
+
+def is_done_record(run) -> bool:
+    from primordia.analysis.patterns.run import METRICS_FILE
+
+    return (run / METRICS_FILE).is_file() and json.loads((run / "sweep.json").read_text())["status"] == "completed"
+
+
 def test_a_runs_metrics_are_written_without_the_scheduler(small_config, tmp_path):
     """xarray took a dask.distributed Lock for metrics.nc inside a worker, through a client the worker
     opened to the scheduler: a sweep stopped (Ctrl-C, SIGTERM) while runs were being measured
