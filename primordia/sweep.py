@@ -391,6 +391,8 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
         with client:
             if not client.scheduler_info().get("workers"):  # dask waits for one, silently, as long as it takes
                 warn(f"the dask scheduler at {scheduler} has no workers yet: the runs wait until one joins")
+            else:
+                _check_workers_primordia(client)
             yield client
         return
     # the scheduler's HTTP routes on any free loopback port (None would mean port 8787, and a warning if taken)
@@ -399,6 +401,31 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
                       dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, preload=[__name__]) as cluster, \
             Client(cluster) as client:
         yield client
+
+
+def primordia_identity() -> tuple[str, str]:
+    """(where primordia is imported from, a digest of its source files): what a worker runs."""
+    import primordia
+
+    root = Path(primordia.__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return str(root), digest.hexdigest()[:12]
+
+
+def _check_workers_primordia(client) -> None:
+    """One warning per worker of an external cluster that imports no primordia, or another one than this
+    process (another checkout or version): its runs would fail, or differ from this one's."""
+    here = primordia_identity()
+    answers = client.run(primordia_identity, on_error="return")
+    for worker, answer in sorted(answers.items()):
+        if isinstance(answer, BaseException):
+            warn(f"dask worker {worker} cannot run primordia ({one_line(answer)}): its runs will fail")
+        elif tuple(answer)[1] != here[1]:
+            warn(f"dask worker {worker} runs another primordia ({answer[0]}, sources {answer[1]}) than this "
+                 f"sweep ({here[0]}, sources {here[1]}): its runs may differ")
 
 
 def _check_scheduler(address: str, timeout: float | None = None) -> None:

@@ -19,6 +19,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -332,6 +333,40 @@ def test_a_scheduler_without_workers_is_said(capsys):
             pass
     assert capsys.readouterr().err == (f"primordia: warning: the dask scheduler at {cluster.scheduler_address} has no "
                                        "workers yet: the runs wait until one joins\n")
+
+
+def test_a_worker_running_another_primordia_is_said(capsys, tmp_path):
+    """External workers import their own primordia: another checkout ran the points with other code, and
+    nothing said so (found by the sweep QA pass). Here a worker imports a copy whose sources differ."""
+    import shutil
+
+    import primordia
+
+    copy = tmp_path / "other"
+    shutil.copytree(Path(primordia.__file__).parent, copy / "primordia",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    with open(copy / "primordia" / "sweep.py", "a") as changed:
+        changed.write("\n# another checkout\n")
+    with LocalCluster(n_workers=1, processes=True, threads_per_worker=1, dashboard_address="127.0.0.1:0",
+                      host="127.0.0.1") as cluster:
+        with dask_client(cluster.scheduler_address):  # its own worker: the same primordia, no word
+            pass
+        assert capsys.readouterr().err == ""
+        environment = {**os.environ, "PYTHONPATH": str(copy)}
+        worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", cluster.scheduler_address,
+                                   "--nthreads", "1", "--no-dashboard"], env=environment, cwd=copy,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            with Client(cluster.scheduler_address) as client:
+                client.wait_for_workers(2, timeout=60)
+            with dask_client(cluster.scheduler_address):
+                pass
+        finally:
+            worker.terminate()
+            worker.wait(timeout=30)
+    err = capsys.readouterr().err
+    assert "runs another primordia" in err and str(copy / "primordia") in err, err
+    assert len(err.splitlines()) == 1, err
 
 
 def test_ctrl_c_in_a_terminal_is_one_line(small_config, tmp_path):
