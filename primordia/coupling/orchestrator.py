@@ -364,7 +364,11 @@ class Simulation:
             "outputs": {output.name: output.state() for output in self.outputs},
         }
         try:
-            checkpoint_file.write(self.out_dir / checkpoint_file.CHECKPOINT_FILE, tree)
+            # shielded: a second Ctrl-C or SIGTERM while the run writes the checkpoint of its stop aborted the
+            # write (the previous checkpoint stayed, while the run said where it had stopped); it is counted,
+            # and the run stops once the checkpoint is whole
+            with INTERRUPTS.mode_of("shielded"):
+                checkpoint_file.write(self.out_dir / checkpoint_file.CHECKPOINT_FILE, tree)
         except (OSError, PrimordiaError) as error:  # a full disk must not end the run
             warn(f"cannot write the checkpoint at t = {self.time:g}: {error}; the run goes on without it")
 

@@ -409,3 +409,30 @@ def test_the_series_ends_with_the_last_state_whatever_series_every_says(watching
                out_dir=tmp_path).setup().run()
     with xr.open_dataset(tmp_path / "series.nc") as series:
         assert [int(step) for step in series["step"].values] == [0, 2, 3, 5]
+
+
+def test_a_checkpoint_is_written_whole_whatever_signals_arrive_meanwhile(completed, monkeypatch):
+    """A second signal while a stopping run wrote its checkpoint aborted the write (found through a sweep that
+    stops its runs: "Exception ignored in ZipFile.__del__"): the run said it stopped at t, its checkpoint
+    was older. The signals are counted and the checkpoint is written whole."""
+    import signal
+
+    from primordia.core import checkpoint
+    from primordia.core.signals import INTERRUPTS
+
+    real = checkpoint.write
+
+    def write(path, tree):
+        INTERRUPTS._handle(signal.SIGTERM, None)
+        INTERRUPTS._handle(signal.SIGTERM, None)  # a second signal: "at once" outside the write
+        return real(path, tree)
+
+    monkeypatch.setattr(checkpoint, "write", write)
+    try:
+        with INTERRUPTS.mode_of("deferred"):
+            completed.write_checkpoint()
+        assert INTERRUPTS.count == 2 and INTERRUPTS.urgent  # noted for the run to stop at once afterwards
+    finally:
+        INTERRUPTS.reset()
+    meta = checkpoint.read_meta(completed.out_dir / checkpoint.CHECKPOINT_FILE)
+    assert meta["run"]["step"] == completed.step_index
