@@ -32,6 +32,7 @@ boundary and predicted wavelength over it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import itertools
 import json
@@ -40,6 +41,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -262,15 +264,18 @@ def _read_record(directory: Path) -> dict:
 
 
 def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: str,
-            timeout: float | None = None) -> dict:
+            timeout: float | None = None, sweep: str | None = None) -> dict:
     """Run one point (in a dask worker): ``primordia run`` in a subprocess, then its pattern metrics.
 
     A point whose folder holds a checkpoint (its run was interrupted: the sweep stopped, a worker
     was lost, a time limit) goes on from it (``--restart``) instead of starting again; a
     checkpoint of another model (the sweep's config or overrides changed) is replaced by a run
     from the start.  Returns and writes ``sweep.json``: status ("completed" or "failed"),
-    reason, wall time.  Never raises for a failed run.
+    reason, wall time.  Never raises for a failed run.  ``sweep``: a token of the sweep that asks; once
+    that sweep is interrupted (:func:`stop_runs`), its points not yet started are not started.
     """
+    if sweep is not None and sweep in _STOPPED:
+        return {"status": "failed", "reason": "not started: the sweep was interrupted", "fingerprint": fingerprint}
     import dask
 
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
@@ -309,16 +314,49 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     return _record(directory, fingerprint, overrides, reason, start)
 
 
+#: The runs this (worker) process has going, by directory: what :func:`stop_runs` asks to stop.
+_RUNNING: dict[str, subprocess.Popen] = {}
+_RUNNING_LOCK = threading.Lock()
+#: The sweeps (their tokens) that were interrupted: their points not started yet are not started.
+_STOPPED: set[str] = set()
+
+
 def _run_point(command: list[str], directory: Path, timeout: float | None) -> tuple[str, str]:
     """(its output, why it failed or "") of ``primordia run`` in a subprocess, killed with its worker."""
     environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    process = subprocess.Popen(_dying_with_its_parent(command), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, env=environment)
+    with _RUNNING_LOCK:
+        _RUNNING[str(directory)] = process
     try:
-        finished = subprocess.run(_dying_with_its_parent(command), capture_output=True, text=True,
-                                  env=environment, timeout=timeout)
-        return finished.stdout + finished.stderr, _failure_reason(finished, directory)
-    except subprocess.TimeoutExpired as expired:  # its output so far comes as bytes
-        log = b"".join(part or b"" for part in (expired.stdout, expired.stderr)).decode(errors="replace")
-        return log, f"timed out after {timeout:g} s"
+        try:
+            stdout, stderr = process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            stdout, stderr = process.communicate()
+            return stdout + stderr, f"timed out after {timeout:g} s"
+    finally:
+        with _RUNNING_LOCK:
+            _RUNNING.pop(str(directory), None)
+    finished = subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
+    return stdout + stderr, _failure_reason(finished, directory)
+
+
+def stop_runs(sweep: str | None = None) -> int:
+    """Ask every run this process has going to stop (SIGTERM: each finishes its step, writes its checkpoint
+    and says "interrupted"), and start no more points of ``sweep`` (its token); how many were asked.  Run
+    on every worker when a sweep is interrupted: a run on another machine hears no Ctrl-C, and a local
+    one would be killed with its worker."""
+    import signal
+
+    with _RUNNING_LOCK:
+        if sweep is not None:
+            _STOPPED.add(sweep)
+        running = [process for process in _RUNNING.values() if process.poll() is None]
+    for process in running:
+        with contextlib.suppress(ProcessLookupError):
+            process.send_signal(signal.SIGTERM)
+    return len(running)
 
 
 #: What ``primordia run --restart`` says when the checkpoint is not this point's model (then run from the start).
@@ -362,6 +400,9 @@ def _failure_reason(finished: subprocess.CompletedProcess, directory: Path) -> s
     for line in lines:
         if line.startswith("primordia: error: "):
             return line.removeprefix("primordia: error: ")
+    for line in reversed(lines):  # "primordia: interrupted at t = ...": the run's own word, not what followed it
+        if line.startswith("primordia: ") and not line.startswith("primordia: warning: "):
+            return line
     try:
         status = json.loads((directory / "summary.json").read_text()).get("status", "")
     except (OSError, ValueError):
@@ -549,16 +590,22 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
         # the bar once the cluster is there: not before a one-line error about its scheduler
         with dask_client(scheduler, workers) as client, \
                 _progress_bar(len(points), len(points) - len(todo), progress) as bar:
+            token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
             futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
-                                     str(p.directory.resolve()), p.fingerprint, timeout, pure=False): p
+                                     str(p.directory.resolve()), p.fingerprint, timeout, token, pure=False): p
                        for p in todo}
-            for future in as_completed(futures):
-                point = futures[future]
-                try:
-                    records[point.directory] = future.result()
-                except Exception as error:  # noqa: BLE001 - e.g. the worker died: record it, go on
-                    records[point.directory] = {"status": "failed", "reason": f"{type(error).__name__}: {error}"}
-                bar.update(1)
+            try:
+                for future in as_completed(futures):
+                    point = futures[future]
+                    try:
+                        records[point.directory] = future.result()
+                    except Exception as error:  # noqa: BLE001 - e.g. the worker died: record it, go on
+                        records[point.directory] = {"status": "failed",
+                                                    "reason": f"{type(error).__name__}: {error}"}
+                    bar.update(1)
+            except KeyboardInterrupt:  # the runs going on stop with a checkpoint, and go on from it next time
+                _stop_the_runs(client, list(futures), token)
+                raise
     ds = gather(sweep, points, records)
     ds.attrs.update({"runs": len(points), "runs_skipped": len(points) - len(todo), "runs_executed": len(todo),
                      "runs_failed": int(np.sum(ds["status"].values != "completed")),
@@ -567,6 +614,20 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
 
     save_dataset(ds, sweep.out / DATASET_FILE)
     return ds
+
+
+#: Seconds an interrupted sweep waits for its runs to write their checkpoints and stop.
+STOP_GRACE = 60.0
+
+
+def _stop_the_runs(client, futures, token: str) -> None:
+    """Ask every worker's runs to stop and its points not started to stay so (:func:`stop_runs`), and wait up
+    to :data:`STOP_GRACE` seconds for them (another signal ends the wait)."""
+    from dask.distributed import wait
+
+    client.run(stop_runs, token, on_error="return")
+    with contextlib.suppress(Exception):
+        wait(futures, timeout=STOP_GRACE)
 
 
 def _progress_bar(total: int, done: int, enabled: bool):

@@ -275,6 +275,39 @@ def test_a_checkpoint_of_another_model_is_replaced_by_a_run_from_the_start(small
     assert "the point is run from the start" in (run / "run.log").read_text()
 
 
+def test_a_sweep_stopped_by_sigterm_stops_its_runs_with_a_checkpoint_and_goes_on_next_time(small_config, tmp_path):
+    """SIGTERM to the sweep alone (a batch system stopping the job's main process): the local cluster closed,
+    its workers died, and the runs died with them (SIGKILL), their last steps lost and their summaries left
+    saying "running". Now each run is asked to stop first: it writes its checkpoint and says "interrupted",
+    and the same command goes on from there."""
+    config = small_config(SMALL_CONFIG.replace("t_final = 1.0", "t_final = 1000.0").replace(
+        "pictures = false", "pictures = false\ntimes = [500.0, 1000.0]"))
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "primordia", "sweep", str(config), "--vary", "parameters.alpha=4:4:1",
+               "--workers", "1", "--out", str(out), "--no-progress"]
+    sweep = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        summary, deadline = {}, time.monotonic() + 60
+        while summary.get("steps", 0) < 30 and time.monotonic() < deadline:
+            with contextlib.suppress(OSError, ValueError, StopIteration):
+                summary = json.loads(next(out.glob("runs/*/summary.json")).read_text())
+            time.sleep(0.05)
+        assert summary.get("steps", 0) >= 30, "the run did not get going"
+        sweep.send_signal(signal.SIGTERM)  # the sweep's process only
+        _, stderr = sweep.communicate(timeout=120)
+    finally:
+        sweep.kill()
+    assert sweep.returncode != 0 and "interrupted (SIGTERM)" in stderr, stderr
+    run = next(out.glob("runs/*"))
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["status"].startswith("interrupted") and summary["time"] < 1000, summary["status"]
+    assert (run / "checkpoint.npz").is_file()
+    finished = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert finished.returncode == 0, finished.stderr
+    summary = json.loads((run / "summary.json").read_text())
+    assert (summary["status"], summary["restarts"], summary["time"]) == ("completed", 1, pytest.approx(1000.0))
+
+
 def is_done_record(run) -> bool:
     from primordia.analysis.patterns.run import METRICS_FILE
 
