@@ -42,6 +42,7 @@ class SplittingScheme(Configured, ABC):
     #: Options of the ``[coupling]`` table this scheme reads (with defaults); the values of a run are
     #: ``self.settings`` (the table's values over these defaults).
     options: dict = {"inner_steps": 1}
+    _tables_checked = False  # see check_solver_tables
 
     def __init__(self, physics: list, **given):
         self.physics = physics
@@ -67,9 +68,17 @@ class SplittingScheme(Configured, ABC):
         self.check_solver_tables(sim)
 
     def check_solver_tables(self, sim) -> None:
-        """Every ``[solver.NAME]`` table of the config names a subproblem of this run (or one line, exit 2)."""
+        """Every ``[solver.NAME]`` table of the config names a subproblem of this run (or one line, exit 2).
+
+        Once a run: neither the tables nor the subproblems' names change within it, while the solvers are
+        made again at every checkpoint and rejected step, where building the initial subproblems again for
+        their names took 24 of the 173 ms (example 2a at 86 x 86).
+        """
+        if self._tables_checked:
+            return
         initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
         check_tables(sim.model.solver, [solver.sub.prefix for solver in sim.solvers] + initial)
+        self._tables_checked = True
 
     @abstractmethod
     def advance(self, sim, t0: float, dt: float) -> dict:
