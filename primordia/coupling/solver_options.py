@@ -38,7 +38,7 @@ direct solve.  A relative ``rebuild_preconditioner_after = "fresh+K"`` stays: it
 the kept preconditioner against a fresh one of whatever kind (the cell density's default;
 ``pc_type = "hypre"`` there keeps BoomerAMG over steps instead of building it at each).
 A factor package changed to MUMPS drops the defaults' fill-reducing ordering, which MUMPS
-would use in place of its own (see :func:`_mumps_orders_itself`).
+would use in place of its own (see :func:`mumps_orders_itself`).
 
 Mistakes are one line (:class:`~primordia.core.errors.ConfigError`, exit status
 2): an unknown KSP, PC, SNES or factor-package type or matrix ordering, a value this
@@ -149,16 +149,17 @@ def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, A
         if (level == "" and str(defaults.get("pc_type")) in DIRECT and "ksp_type" not in user
                 and kept.get("ksp_type") == "preonly"):
             del kept["ksp_type"]
-    return _mumps_orders_itself({**kept, **user}, user)
+    return mumps_orders_itself({**kept, **user}, user)
 
 
-def _mumps_orders_itself(options: dict[str, Any], user: Mapping[str, Any]) -> dict[str, Any]:
+def mumps_orders_itself(options: dict[str, Any], user: Iterable[str]) -> dict[str, Any]:
     """``options`` without a default fill-reducing ordering at a level whose factor package is MUMPS.
 
     Handed an ordering of PETSc's, serial MUMPS factorises in that order instead of its own analysis
     (``ICNTL(7) = 1``): PETSc's nested dissection of a 150 x 150 five-point Laplacian filled its factors
     with 16.3M entries against 0.92M with MUMPS's own, and example 2a's monolithic step at 43 x 43 took
-    4.4 s against 1.0.  On more than one rank MUMPS ignores it.  An ordering the user wrote stays.
+    4.4 s against 1.0.  On more than one rank MUMPS ignores it.  An ordering the user wrote (a key of
+    ``user``) stays.
     """
     for key, value in list(options.items()):
         level = key[: -len(PACKAGE)]

@@ -45,7 +45,7 @@ from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
     FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, depends_on_step,
-    flatten, option_text, parallel_safe, petsc_reason, read_options)
+    flatten, mumps_orders_itself, option_text, parallel_safe, petsc_reason, read_options)
 from primordia.physics.kinematics import rigid_motions
 
 
@@ -344,15 +344,11 @@ class _Solver:
             return False
         warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=4)
         operators = ksp.getOperators()
-        database = PETSc.Options()
-        database[self.sub.prefix + PACKAGE] = "mumps"
-        _WRITTEN.setdefault(self.sub.prefix, set()).add(self.sub.prefix + PACKAGE)
-        own_ordering = ORDERING not in self._user_keys  # a default ordering: MUMPS's own is better (combine)
-        if own_ordering:
-            database.delValue(self.sub.prefix + ORDERING)
+        self.options = mumps_orders_itself({**self.options, PACKAGE: "mumps"}, self._user_keys)  # as combine does
+        write_options(self.sub.prefix, self.options)
         ksp.reset()
         ksp.setFromOptions()
-        if own_ordering:  # the PC keeps the ordering it read before the reset
+        if ORDERING not in self.options:  # the PC keeps the ordering it read before the reset
             ksp.getPC().setFactorOrdering("external")
         ksp.setOperators(*operators)
         return True
