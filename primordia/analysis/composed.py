@@ -492,13 +492,12 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
     _, jacobian = reaction_jacobian(homogeneous, rest.values)
     context = _Context(homogeneous, rest, jacobian, params)
 
-    terms, mechanics, extra, third_party = [], None, (), False
+    terms, mechanics, extra = [], None, ()
     for module in modules:
         if module.name not in CHEMISTRY | MECHANICS | COUPLINGS:
             term = _third_party_symbol(module, context)
             extra += _new_unknowns(module, term, homogeneous.species_names + extra)
             terms.append(term)
-            third_party = True
         elif module.name in CHEMISTRY:
             terms.append(CHEMISTRY[module.name](module, context))
         elif module.name in MECHANICS:
@@ -520,7 +519,7 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
                              species=homogeneous.species_names, steady_state=rest, reaction_jacobian=jacobian,
                              terms=tuple(terms), mechanics=mechanics, parameters=params, notes=tuple(notes),
                              extra=extra)
-    if third_party:
+    if linear.third_party:
         _check_real(linear)
     return linear
 
@@ -556,19 +555,14 @@ def _new_unknowns(module, term, taken: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _check_real(linear: LinearisedModel) -> None:
-    """The pencil with a third party's terms stays real after u -> -i u (:func:`.linearisation.made_real`: the
-    roots come in conjugate pairs): an odd derivative multiplies i, as every built-in coupling of a species
-    to the displacement does (i k . u).  Else one line, not the assertion of ``made_real``."""
-    d_u = 2 if linear.mechanics is not None else 0
-    pencil = linear.pencil(np.array([0.7, 0.4]))
-    scale = np.ones(pencil[0].shape[-1], dtype=complex)
-    scale[:d_u] = 1j
-    for matrix in pencil:
-        scaled = scale[:, None] * matrix * np.conj(scale)[None, :]
-        if np.any(np.abs(scaled.imag) > 1e-14 * (1.0 + np.abs(scaled).max())):
-            raise ConfigError(f"the Fourier symbols of {', '.join(linear.physics)} do not make a real pencil: a "
-                              f"term coupling a field to the displacement or pressure without the factor i k of a "
-                              f"first derivative (or with it where none belongs)")
+    """The pencil with a third party's terms stays real after u -> -i u (:func:`.linearisation.made_real`, which
+    the roots are found through): else one line, when the model is linearised."""
+    try:
+        made_real(linear.pencil(np.array([0.7, 0.4])), 2 if linear.mechanics is not None else 0)
+    except ValueError:
+        raise ConfigError(f"the Fourier symbols of {', '.join(linear.physics)} do not make a real pencil: a "
+                          f"term coupling a field to the displacement or pressure without the factor i k of a "
+                          f"first derivative (or with it where none belongs)") from None
 
 
 # -- the cross-check with the hand-derived seed analysis -------------------------------------------------
