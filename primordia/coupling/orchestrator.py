@@ -403,20 +403,20 @@ class Simulation:
     def _restore(self, tree: dict) -> None:
         """Put the run back where the checkpoint left it (every rank takes its own part of each field)."""
         wrong = False
-        missing = [key for key in self.disc.state_functions() if "_balance" in key and key not in tree["fields"]]
-        if missing:  # checkpoints written before 2026-12-05 kept no displacement at the species' balance
+        missing = [key for key in self.disc.state_functions() if key not in tree["fields"]]
+        if missing:  # e.g. the displacement at the species' last balance, kept since 2026-12-05
             raise ConfigError(f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}: it holds no "
-                              f"{missing[0]} (the displacement where the species were last balanced, which the "
-                              f"conservative accumulation reads since 2026-12-05); run it again from the start")
+                              f"{missing[0]}, which this run reads (it was written by an older primordia); run it "
+                              f"again from the start")
         for key, function in self.disc.state_functions().items():
             owned = self.backend.petsc_vector(function)
-            values = tree["fields"].get(key)
-            if values is not None and self.comm.size > 1:
+            values = tree["fields"][key]
+            if self.comm.size > 1:
                 stored, mine = _rows(tree["layout"][key]), _rows(self._dof_layout(key, function).keys)
                 at = np.minimum(np.searchsorted(stored, mine), len(stored) - 1)
                 wrong |= not np.array_equal(stored[at], mine)
                 values = values[at]
-            if values is None or len(values) != owned.getLocalSize():
+            if len(values) != owned.getLocalSize():
                 wrong = True
                 continue
             owned.array[:] = values
