@@ -280,7 +280,6 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
 
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
     from primordia.core.atomic_files import atomic_write_text
-    from primordia.core.checkpoint import CHECKPOINT_FILE
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -289,17 +288,8 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     command = [sys.executable, "-m", "primordia.cli", "run", str(config), "--no-progress"]
     for assignment in overrides:
         command += ["--set", assignment]
-    start, log, reason = time.perf_counter(), "", ""
-    if (directory / CHECKPOINT_FILE).is_file():  # an interrupted run (a sweep stopped, a worker lost): go on
-        log, reason = _run_point([*command, "--restart", str(directory)], directory, timeout)
-        if reason and not _has_checkpoint_of_another_run(log):
-            atomic_write_text(directory / "run.log", log)
-            return _record(directory, fingerprint, overrides, reason, start)
-    if not log or reason:  # a fresh run, or the checkpoint was another model's: the point is run from the start
-        earlier = log
-        log, reason = _run_point([*command, "--out", str(directory), "--overwrite"], directory, timeout)
-        log = (f"{earlier}\n[the checkpoint could not be continued: the point is run from the start]\n{log}"
-               if earlier else log)
+    start = time.perf_counter()
+    log, reason = _resume_or_run(command, directory, timeout)
     atomic_write_text(directory / "run.log", log)
     if not reason:
         try:
@@ -338,8 +328,7 @@ def _run_point(command: list[str], directory: Path, timeout: float | None) -> tu
     finally:
         with _RUNNING_LOCK:
             _RUNNING.pop(str(directory), None)
-    finished = subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
-    return stdout + stderr, _failure_reason(finished, directory)
+    return stdout + stderr, _failure_reason(process.returncode, stderr, directory)
 
 
 def stop_runs(sweep: str | None = None) -> int:
@@ -363,8 +352,19 @@ def stop_runs(sweep: str | None = None) -> int:
 ANOTHER_RUN = ("differs from the checkpointed run's", "it was written on backend", "cannot restart from")
 
 
-def _has_checkpoint_of_another_run(log: str) -> bool:
-    return any(text in log for text in ANOTHER_RUN)
+def _resume_or_run(command: list[str], directory: Path, timeout: float | None) -> tuple[str, str]:
+    """(log, why it failed or "") of the point's run: continued from its checkpoint if its folder holds one of
+    this model (an interrupted run), else from the start."""
+    from primordia.core.checkpoint import CHECKPOINT_FILE
+
+    fresh = [*command, "--out", str(directory), "--overwrite"]
+    if not (directory / CHECKPOINT_FILE).is_file():
+        return _run_point(fresh, directory, timeout)
+    log, reason = _run_point([*command, "--restart", str(directory)], directory, timeout)
+    if not reason or not any(text in log for text in ANOTHER_RUN):
+        return log, reason
+    again, reason = _run_point(fresh, directory, timeout)
+    return f"{log}\n[the checkpoint could not be continued: the point is run from the start]\n{again}", reason
 
 
 def _record(directory: Path, fingerprint: str, overrides: Sequence[str], reason: str, start: float) -> dict:
@@ -392,11 +392,11 @@ def _dying_with_its_parent(command: list[str]) -> list[str]:
     return [setpriv, "--pdeathsig", "KILL", "--", *command] if setpriv else list(command)
 
 
-def _failure_reason(finished: subprocess.CompletedProcess, directory: Path) -> str:
+def _failure_reason(returncode: int, stderr: str, directory: Path) -> str:
     """Why ``primordia run`` failed, in one line ("" if it completed)."""
-    if finished.returncode == 0:
+    if returncode == 0:
         return ""
-    lines = [line.strip() for line in finished.stderr.splitlines() if line.strip()]
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
     for line in lines:
         if line.startswith("primordia: error: "):
             return line.removeprefix("primordia: error: ")
@@ -409,9 +409,9 @@ def _failure_reason(finished: subprocess.CompletedProcess, directory: Path) -> s
         status = ""
     if status.startswith("stopped"):
         return status
-    if finished.returncode < 0:
-        return f"killed by signal {-finished.returncode}"
-    return lines[-1] if lines else f"exit status {finished.returncode}"
+    if returncode < 0:
+        return f"killed by signal {-returncode}"
+    return lines[-1] if lines else f"exit status {returncode}"
 
 
 @contextmanager
