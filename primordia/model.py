@@ -307,8 +307,6 @@ def _refuse_a_parameter_of_another_piece(name: str, used: list[str]) -> None:
     """One line when the unknown parameter ``name`` is one of a registered piece this model does not use (say,
     example 4's delta_1 after its growth law was switched to seed2d); nothing otherwise (the caller's
     "unknown parameter" line, with its suggestions, follows)."""
-    from primordia.core.plugins import registry
-
     labels = {"physics": "physics", "kinetics": "kinetics", "growth_laws": "growth law"}
     owners = [f"{label} {piece_name}" for kind, label in labels.items()
               for piece_name, (piece, _) in registry(kind).items()

@@ -183,12 +183,18 @@ def _slice_surface(mesh: MeshData) -> _View:
         raise PrimordiaError(f"cannot draw a slice of the mesh: no cell is cut by the plane y = {level:g}")
     from scipy.sparse import csr_matrix
 
-    a, b = ends.T
-    share = np.divide(side[a], side[a] - side[b], out=np.zeros(len(ends)), where=a != b)  # point (1 - t) x_a + t x_b
+    share = _edge_share(side, ends)
     rows = np.repeat(np.arange(len(ends)), 2)
     weights = csr_matrix((np.column_stack([1.0 - share, share]).ravel(), (rows, ends.ravel())),
                          shape=(len(ends), mesh.num_vertices))  # a vertex on the plane: 1 + 0, summed
     return _View(weights, triangles, (0, 2), f"slice y = {level:g}")
+
+
+def _edge_share(side: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """t of each cut point (1 - t) x_a + t x_b on its edge (a, b) (rows of ``ends``): where ``side`` is 0; 0 for a
+    vertex on the plane (a == b)."""
+    a, b = np.asarray(ends).T
+    return np.divide(side[a], side[a] - side[b], out=np.zeros(len(a)), where=a != b)
 
 
 def _plane_cut(plane_xy: np.ndarray, cells: np.ndarray, side: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -209,8 +215,9 @@ def _plane_cut(plane_xy: np.ndarray, cells: np.ndarray, side: np.ndarray) -> tup
             continue  # the plane touches the cell at a vertex or along an edge
         ids = [index.setdefault(corner, len(index)) for corner in corners]
         if len(ids) == 4:  # a quadrilateral: its corners in turn around the centre, then two triangles
-            share = [0.0 if a == b else side[a] / (side[a] - side[b]) for a, b in corners]
-            xy = np.array([(1 - t) * plane_xy[a] + t * plane_xy[b] for (a, b), t in zip(corners, share)])
+            a, b = np.array(corners).T
+            t = _edge_share(side, corners)[:, None]
+            xy = (1 - t) * plane_xy[a] + t * plane_xy[b]
             turn = np.argsort(np.arctan2(*(xy - xy.mean(axis=0)).T[::-1]))
             ids = [ids[i] for i in turn]
             triangles.update({tuple(sorted(ids[:3])), tuple(sorted([ids[0], ids[2], ids[3]]))})

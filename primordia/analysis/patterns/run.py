@@ -162,13 +162,13 @@ def read_run(directory: str | Path) -> RunFields:
         points = np.asarray(points)
         triangles = [block.data for block in blocks if block.type == "triangle"]
         tetrahedra = [block.data for block in blocks if block.type == "tetra"]
-        triangles_given = bool(triangles)
         if triangles:
-            vertices, triangles = slice(None), triangles[0]
+            vertices, triangles, surface = slice(None), triangles[0], "the mesh"
         elif tetrahedra:  # a slab (example 4): its top face, where the pictures show the pattern
             from primordia.core.meshes import top_face
 
             vertices, triangles = top_face(points, np.asarray(tetrahedra[0]))
+            surface = f"the top face z = {points[:, 2].max():g}"
             if not len(triangles):
                 raise ConfigError(f"{xdmf}: the tetrahedral mesh has no face at its largest z to measure patterns on")
         else:
@@ -194,7 +194,6 @@ def read_run(directory: str | Path) -> RunFields:
         status = str(summary.get("status", "unknown"))
     except (OSError, ValueError, AttributeError):
         status = "unknown"  # only the run's status is read from it, for the report
-    surface = f"the top face z = {points[:, 2].max():g}" if not triangles_given else "the mesh"
     return RunFields(directory, points[vertices][:, :2], triangles, tuple(times), tuple(snapshots), config, status,
                      surface)
 
