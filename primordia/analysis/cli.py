@@ -65,7 +65,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         help="map: parameter whose critical value gives panels 2-3 (default: the --x one)")
     parser.add_argument("--theta", choices=("corrected", "seed"), default=None,
                         help=f"map, coupled: theta_i of section 3.6 for the boundary curves (default {DEFAULT_THETA})")
-    parser.add_argument("--nk", type=int, default=None, help=f"map: number of wavenumbers searched (default {DEFAULT_NK})")
+    parser.add_argument("--nk", type=int, default=None,
+                        help=f"map: number of wavenumbers searched (default {DEFAULT_NK})")
     parser.set_defaults(func=run)
     return parser
 

@@ -195,7 +195,8 @@ class Monolithic(SplittingScheme):
         stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]
         combined = Subproblem(
             name="monolithic", unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
-            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False, petsc_options=grouped_direct(sub.petsc_options for sub in subproblems),
+            bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False,
+            petsc_options=grouped_direct(sub.petsc_options for sub in subproblems),
             fields=sim.disc.unknown_fields(sim.disc.field_names()[0]),
             rigid_body=next((sub.rigid_body for sub in subproblems if sub.rigid_body), None),
             preconditioner=sum(stabilisations[1:], stabilisations[0]) if stabilisations else None)

@@ -23,7 +23,8 @@ POROELASTICITY = (
 )
 
 ACTIVE_STRESS = (
-    Parameter("tau", 60.0, "active stress magnitude (> 0 a tension: the tissue contracts; < 0 dilates)", constraint="any"),
+    Parameter("tau", 60.0, "active stress magnitude (> 0 a tension: the tissue contracts; < 0 dilates)",
+              constraint="any"),
     Parameter("zeta", 1.0, "saturation of the active stress tau m / (1 + zeta m^2)",
               constraint="nonnegative"),
 )
