@@ -199,32 +199,48 @@ def _edge_share(side: np.ndarray, ends: np.ndarray) -> np.ndarray:
 
 def _plane_cut(plane_xy: np.ndarray, cells: np.ndarray, side: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The cut of tetrahedra by the plane side = 0: (its points as the two ends (a, b) of the edge they lie
-    on, a == b for a vertex on the plane; its triangles in the points' indices, each once).
+    on, a == b for a vertex on the plane, numbered in the order the cells first meet them; its triangles in
+    the points' indices, each once, sorted).
 
     ``side`` is the signed distance of each vertex from the plane (exactly 0 on it), ``plane_xy`` the
-    vertices' coordinates in the plane, which order a quadrilateral's corners around its centre.
+    vertices' coordinates in the plane, which order a quadrilateral's corners around its centre.  A cell
+    has up to ten corner candidates (its four vertices on the plane, its six edges crossing it): three or
+    four of them make its cut, fewer mean the plane touches it at a vertex or along an edge.
     """
+    on = side[cells] == 0
     lowest, highest = side[cells].min(axis=1), side[cells].max(axis=1)
-    crossed = cells[(lowest <= 0) & (highest >= 0) & (np.count_nonzero(side[cells] == 0, axis=1) < 4)]
-    index: dict[tuple[int, int], int] = {}
-    triangles = set()
-    for cell in crossed:
-        corners = [(int(v), int(v)) for v in cell if side[v] == 0]
-        corners += [(int(min(a, b)), int(max(a, b))) for a, b in combinations(cell, 2) if side[a] * side[b] < 0]
-        if len(corners) < 3:
-            continue  # the plane touches the cell at a vertex or along an edge
-        ids = [index.setdefault(corner, len(index)) for corner in corners]
-        if len(ids) == 4:  # a quadrilateral: its corners in turn around the centre, then two triangles
-            a, b = np.array(corners).T
-            t = _edge_share(side, corners)[:, None]
-            xy = (1 - t) * plane_xy[a] + t * plane_xy[b]
-            turn = np.argsort(np.arctan2(*(xy - xy.mean(axis=0)).T[::-1]))
-            ids = [ids[i] for i in turn]
-            triangles.update({tuple(sorted(ids[:3])), tuple(sorted([ids[0], ids[2], ids[3]]))})
-        else:
-            triangles.add(tuple(sorted(ids)))
-    ends = np.array(sorted(index, key=index.get), dtype=np.int64).reshape(-1, 2)
-    return ends, np.array(sorted(triangles), dtype=np.int64).reshape(-1, 3)
+    crossed = cells[(lowest <= 0) & (highest >= 0) & (np.count_nonzero(on, axis=1) < 4)]
+    pairs = np.array([(i, i) for i in range(4)] + list(combinations(range(4), 2)))
+    a, b = crossed[:, pairs[:, 0]], crossed[:, pairs[:, 1]]
+    corner = np.concatenate([side[a[:, :4]] == 0, side[a[:, 4:]] * side[b[:, 4:]] < 0], axis=1)
+    count = np.count_nonzero(corner, axis=1)
+    cut = count >= 3
+    corner, count = corner[cut], count[cut]
+    lo, hi = np.minimum(a[cut], b[cut]), np.maximum(a[cut], b[cut])
+    # each cell's corners in its candidates' order, padded with its first corner to four
+    slot = np.argsort(~corner, axis=1, kind="stable")[:, :4]
+    slot = np.where(np.arange(4) < count[:, None], slot, slot[:, :1])
+    rows = np.arange(len(slot))[:, None]
+    ends = np.stack([lo[rows, slot], hi[rows, slot]], axis=-1)  # (cells, 4, 2)
+    listed = ends[np.arange(4) < count[:, None]]  # every cell's corners in turn
+    keys, first, point = np.unique(listed[:, 0] * len(side) + listed[:, 1], return_index=True,
+                                   return_inverse=True)
+    numbering = np.empty(len(keys), dtype=np.int64)
+    numbering[np.argsort(first, kind="stable")] = np.arange(len(keys))
+    ids = np.zeros(slot.shape, dtype=np.int64)
+    ids[np.arange(4) < count[:, None]] = numbering[point]
+    ids = np.where(np.arange(4) < count[:, None], ids, ids[:, :1])
+    quad = count == 4  # its corners in turn around the centre, then two triangles
+    t = _edge_share(side, ends[quad].reshape(-1, 2)).reshape(-1, 4, 1)
+    xy = (1 - t) * plane_xy[ends[quad][..., 0]] + t * plane_xy[ends[quad][..., 1]]
+    offset = xy - xy.mean(axis=1, keepdims=True)
+    turn = np.argsort(np.arctan2(offset[..., 1], offset[..., 0]), axis=1)
+    around = np.take_along_axis(ids[quad], turn, axis=1)
+    triangles = np.concatenate([ids[~quad][:, :3], around[:, :3], around[:, [0, 2, 3]]])
+    triangles = np.unique(np.sort(triangles, axis=1), axis=0).reshape(-1, 3)
+    points = np.empty((len(keys), 2), dtype=np.int64)
+    points[numbering] = np.column_stack([keys // len(side), keys % len(side)])
+    return points, triangles
 
 
 def _panel_data(mesh: MeshData, view: _View, key, values, displacement, scale):
