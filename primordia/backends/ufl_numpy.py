@@ -1067,6 +1067,19 @@ class _Evaluator:
             raise unsupported("Erf (needs scipy)") from None
         return erf(self.value(o.ufl_operands[0]))
 
+    def bessel_function(self, o):
+        """J_n and Y_n of integer order n: those FFCx compiles (C's jn and yn), so both backends take them."""
+        order, argument = o.ufl_operands
+        name = type(o).__name__
+        if name not in _BESSEL or not isinstance(order, (uc.IntValue, uc.Zero)):  # UFL's order 0 is a Zero
+            raise unsupported(f"{name} (of a non-integer order)" if name in _BESSEL else name)
+        try:
+            from scipy import special
+        except ImportError:
+            raise unsupported(f"{name} (needs scipy)") from None
+        return getattr(special, _BESSEL[name])(int(order) if isinstance(order, uc.IntValue) else 0,
+                                                self.value(argument))
+
     def atan2(self, o):
         a, b = self._scalar_operands(o)
         return np.arctan2(a, b)
@@ -1203,6 +1216,9 @@ _MATH_FUNCTIONS = {
     uc.Atan: np.arctan,
 }
 
+#: the Bessel functions FFCx compiles, and scipy's name of each (BesselI and BesselK FFCx does not)
+_BESSEL = {"BesselJ": "jv", "BesselY": "yv"}
+
 _CONDITIONS = {
     uc.EQ: np.equal, uc.NE: np.not_equal, uc.LT: np.less, uc.GT: np.greater, uc.LE: np.less_equal,
     uc.GE: np.greater_equal, uc.AndCondition: np.logical_and, uc.OrCondition: np.logical_or,
@@ -1216,7 +1232,7 @@ _HANDLER_NAMES = {
     uc.Sum: "sum", uc.Product: "product", uc.Division: "division", uc.Power: "power", uc.Abs: "abs",
     uc.Erf: "erf", uc.Atan2: "atan2", uc.MinValue: "min_value", uc.MaxValue: "max_value",
     uc.Conj: "real_part", uc.Real: "real_part", uc.Imag: "imag_part", uc.Variable: "variable",
-    uc.NotCondition: "not_condition", uc.Conditional: "conditional",
+    uc.NotCondition: "not_condition", uc.Conditional: "conditional", uc.BesselFunction: "bessel_function",
     **{cls: "math_function" for cls in _MATH_FUNCTIONS},
     **{cls: "condition" for cls in _CONDITIONS},
 }

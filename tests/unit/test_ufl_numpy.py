@@ -287,6 +287,12 @@ FORMS = {
         + ufl.atan(s["c"]) + ufl.atan_2(s["m"], s["c"]) + ufl.cosh(s["m"]) + ufl.sinh(s["c"]) + ufl.erf(s["m"])
         + abs(s["c"] - 1.0)) * s.test("P1") * ufl.dx,
     "division": lambda s: s["c"] / (1 + s["m"]) * ufl.div(s.test("vector P1")) * ufl.dx,
+    # the Bessel functions FFCx compiles (C's jn, yn: integer order), and their derivatives (orders n - 1, n + 1)
+    "bessel J Y and their derivatives": lambda s: (
+        (ufl.bessel_J(0, s["c"]) + ufl.bessel_J(2, 3 * s["m"]) + ufl.bessel_Y(1, 1 + s["m"])) * s.test("P1")
+        + ufl.derivative(ufl.bessel_J(1, s["m"]) + ufl.bessel_Y(2, 1 + s["m"]), s["m"], s.test("P1"))) * ufl.dx,
+    "bessel matrix": lambda s: ufl.bessel_J(1, s["c"]) * ufl.bessel_Y(0, 1 + s["m"]) * s.trial("P1") * s.test("P1")
+                               * ufl.dx,
     # conditionals
     "conditional": lambda s: (
         ufl.conditional(ufl.lt(s["c"], 0.8), s["c"], 1 - s["c"])
@@ -799,8 +805,8 @@ def test_the_fields_kept_at_the_points_hold_at_most_their_limit(skfem_setup, mon
 
 def test_unsupported_operator_is_named(skfem_setup):
     s = skfem_setup
-    with pytest.raises(UnsupportedUFL, match="'BesselJ' is not supported by the scikit-fem backend"):
-        s.backend.assemble_scalar(ufl.bessel_J(1, s.fields["m"]) * ufl.dx)
+    with pytest.raises(UnsupportedUFL, match="'BesselI' is not supported by the scikit-fem backend"):
+        s.backend.assemble_scalar(ufl.bessel_I(1, s.fields["m"]) * ufl.dx)
 
 
 def test_interior_facet_integrals_are_unsupported(skfem_setup):
