@@ -1,5 +1,6 @@
 """The ``primordia`` command.
 
+    primordia [-p PLUGIN ...] COMMAND ...     (a plugin not installed: a module name or a .py file)
     primordia run CONFIG.toml [--backend NAME] [--out DIR] [--set section.key=value ...] [--overwrite]
     primordia run --restart OUT_DIR [--set time.t_final=...]
     primordia plugins
@@ -40,6 +41,9 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="primordia", description=__doc__.split("\n\n")[0].replace("``", ""))
     parser.add_argument("--version", action="version", version=f"primordia {_version()}")
+    parser.add_argument("-p", "--plugin", dest="plugins", action="append", default=[], metavar="MODULE_OR_FILE",
+                        help="load a plugin that is not installed: a module name or a .py file (repeatable; "
+                             "added to PRIMORDIA_PLUGINS, so a sweep's runs load it too)")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = commands.add_parser("run", help="run a model from a TOML configuration")
@@ -223,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(argv)
             _broken_pipes_raise()
+            _name_plugins(args.plugins)
             return args.func(args)
         except BrokenPipeError:  # `primordia plugins | head`: the reader has all it wanted
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush at exit
@@ -240,6 +245,21 @@ def main(argv: list[str] | None = None) -> int:
                 return _interrupted(InterruptedRun(INTERRUPTS.received))
             _abort_other_ranks(exc)
             raise
+
+
+def _name_plugins(plugins: list[str]) -> None:
+    """Add ``-p`` plugins to ``PRIMORDIA_PLUGINS`` (read when the plugin manager is built; inherited by the
+    processes a sweep starts)."""
+    if not plugins:
+        return
+    from primordia.core import plugins as plugins_
+
+    if any(not item.strip() or "," in item for item in plugins):
+        raise ConfigError("-p needs one module name or .py file each time (no commas)")
+    named = [str(Path(item.strip()).resolve()) if plugins_.names_a_file(item.strip()) else item.strip()
+             for item in plugins]  # a file by its absolute path: a sweep's runs start in other directories
+    os.environ[plugins_.PLUGINS_VARIABLE] = ",".join(plugins_.named_plugins() + named)
+    plugins_.get_plugin_manager(reload=True)
 
 
 def _broken_pipes_raise() -> None:

@@ -1,9 +1,12 @@
 """The plugin manager: built-ins and entry points, loaded once.
 
 :func:`get_plugin_manager` registers the built-in plugins of
-:data:`DEFAULT_PLUGINS` and then every entry point of the group ``primordia``.
-A plugin that fails to import or register produces one warning naming it and
-is skipped; the rest keeps working.  :func:`registry` turns the contribute
+:data:`DEFAULT_PLUGINS`, every entry point of the group ``primordia``, and then
+the plugins the environment variable ``PRIMORDIA_PLUGINS`` names, installed or not
+(as pytest's ``PYTEST_PLUGINS``: module names or paths of ``.py`` files, separated
+by commas; ``primordia -p`` adds to it).  An installed plugin that fails to import or
+register produces one warning naming it and is skipped; the rest keeps working.  A
+plugin named in the variable was asked for: one that fails stops the program in one line.  :func:`registry` turns the contribute
 hooks into name -> class tables and reports where each piece came from.
 
 A plugin is trusted with nothing: a contribute hook that raises, returns
@@ -21,8 +24,13 @@ from __future__ import annotations
 import difflib
 import importlib
 import importlib.metadata
+import importlib.util
 import inspect
+import os
+import sys
+import traceback
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import pluggy
 
@@ -136,8 +144,66 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
             pm.load_report.report(entry_point.name, message)
             continue
         pm.load_report.sources[entry_point.name] = origin
+    for item in named_plugins():
+        _register_named(pm, item)
     _manager = pm
     return pm
+
+
+#: The environment variable naming plugins to load without installing them.
+PLUGINS_VARIABLE = "PRIMORDIA_PLUGINS"
+
+
+def named_plugins() -> list[str]:
+    """The module names and ``.py`` paths of ``PRIMORDIA_PLUGINS``, in order."""
+    return [item.strip() for item in os.environ.get(PLUGINS_VARIABLE, "").split(",") if item.strip()]
+
+
+def names_a_file(item: str) -> bool:
+    """Whether an item of ``PRIMORDIA_PLUGINS`` is a file's path (else a module's name)."""
+    return item.endswith(".py") or os.sep in item
+
+
+def _register_named(pm: pluggy.PluginManager, item: str) -> None:
+    """Load and register a plugin ``PRIMORDIA_PLUGINS`` names; any failure is a PluginError naming it."""
+    is_file = names_a_file(item)
+    name = Path(item).stem if is_file else item
+    asked = f"plugin {item!r} ({PLUGINS_VARIABLE})"
+    if pm.has_plugin(name):
+        raise PluginError(f"{asked}: the name '{name}' is taken by {_origin(pm, name)}")
+    if is_file and not Path(item).is_file():
+        raise PluginError(f"{asked}: no such file")
+    try:
+        plugin = _load_file(item, name) if is_file else importlib.import_module(item)
+        if pm.get_name(plugin) is not None:  # an installed plugin's module, or a built-in one
+            raise PluginError(f"it is registered already, as '{pm.get_name(plugin)}' "
+                              f"({_origin(pm, pm.get_name(plugin))})")
+        _check_contract(plugin)
+        pm.register(plugin, name=name)
+        _check_hook_names(pm, plugin, name)
+    except Exception as exc:  # noqa: BLE001 - the plugin's own import may raise anything
+        lines = [line for frame, line in traceback.walk_tb(exc.__traceback__) if frame.f_code.co_filename == item]
+        place = f" (at {item}:{lines[-1]})" if lines else ""
+        raise PluginError(f"{asked} failed to load: {one_line(exc, named=not isinstance(exc, PluginError))}"
+                          f"{place}") from exc
+    where = str(Path(item).resolve()) if is_file else f"module {item}"
+    pm.load_report.sources[name] = f"{where} ({PLUGINS_VARIABLE})"
+
+
+def _load_file(path: str, name: str):
+    """The module of the Python file ``path``, under a name of its own (so pickle and dataclasses find it)."""
+    module_name = f"primordia_plugin_{name}"
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"{path} is not a Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[module_name]
+        raise
+    return module
 
 
 def _check_contract(plugin) -> None:

@@ -9,6 +9,7 @@ skipped; the ``firstresult`` choosers can be overridden; unknown names raise
 from __future__ import annotations
 
 import json
+import os
 import tomllib
 
 import pytest
@@ -121,6 +122,82 @@ def test_a_broken_entry_point_is_one_warning_and_the_rest_works(primordia_cli, p
     assert len(ran.stderr.splitlines()) == 1 and "plugin 'broken'" in ran.stderr
     assert "Traceback" not in ran.stderr
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
+
+
+# -- plugins not installed: PRIMORDIA_PLUGINS and -p ------------------------------------------------
+
+
+def test_a_plugin_file_not_installed_is_loaded_by_p_and_used_in_a_run(primordia_cli, small_config, tmp_path):
+    """Before, a plugin had to be installed (an entry point) to be found: "-p" was an unknown argument."""
+    plugin = tmp_path / "my_frozen.py"
+    plugin.write_text(FROZEN_KINETICS)
+    listed = primordia_cli("-p", plugin, "plugins")
+    assert listed.returncode == 0, listed.stderr
+    assert listing(listed.stdout)["kinetics"]["frozen"] == f"{plugin.resolve()} (PRIMORDIA_PLUGINS)"
+    out = tmp_path / "out"
+    ran = primordia_cli("-p", plugin, "run", small_config(), "--out", out, "--no-progress",
+                        "--set", "kinetics.name=frozen")
+    assert ran.returncode == 0, ran.stderr
+    final = json.loads((out / "summary.json").read_text())["final"]
+    assert final["e"]["min"] == pytest.approx(0.5, abs=1e-12) and final["e"]["max"] == pytest.approx(0.5, abs=1e-12)
+    relative = primordia_cli("-p", "my_frozen.py", "plugins", cwd=tmp_path)  # a sweep's runs start elsewhere
+    assert listing(relative.stdout)["kinetics"]["frozen"] == f"{plugin.resolve()} (PRIMORDIA_PLUGINS)"
+
+
+def test_primordia_plugins_names_modules_on_the_path_and_files(primordia_cli, tmp_path):
+    (tmp_path / "frozen_module.py").write_text(FROZEN_KINETICS)
+    other = tmp_path / "elsewhere" / "frozen_file.py"
+    other.parent.mkdir()
+    other.write_text(FROZEN_KINETICS.replace('"frozen"', '"frozen_too"'))
+    env = {**os.environ, "PYTHONPATH": str(tmp_path), "PRIMORDIA_PLUGINS": f" frozen_module , {other}"}
+    listed = primordia_cli("plugins", env=env)
+    assert listed.returncode == 0, listed.stderr
+    kinetics = listing(listed.stdout)["kinetics"]
+    assert kinetics["frozen"] == "module frozen_module (PRIMORDIA_PLUGINS)"
+    assert kinetics["frozen_too"] == f"{other} (PRIMORDIA_PLUGINS)"
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda tmp: tmp / "absent.py", "plugin '{path}' (PRIMORDIA_PLUGINS): no such file"),
+    (lambda tmp: "no_such_plugin_module", "plugin 'no_such_plugin_module' (PRIMORDIA_PLUGINS) failed to load: "
+                                          "ModuleNotFoundError: No module named 'no_such_plugin_module'"),
+    (lambda tmp: _written(tmp / "broken.py", BROKEN_PLUGIN),
+     "plugin '{path}' (PRIMORDIA_PLUGINS) failed to load: RuntimeError: this plugin is broken on purpose "
+     "(at {path}:1)"),
+    (lambda tmp: _written(tmp / "misspelt.py", "from primordia.core.plugins import hookimpl\n\n"
+                                               "@hookimpl\ndef primordia_kinetic():\n    return []\n"),
+     "failed to load: its @hookimpl primordia_kinetic is not a hook of primordia (did you mean primordia_kinetics?)"),
+    (lambda tmp: _written(tmp / "painter2018.py", FROZEN_KINETICS),  # the name a built-in module is registered by?
+     None),
+    (lambda tmp: "primordia.physics.kinetics", "the name 'primordia.physics.kinetics' is taken by primordia "
+                                               "(built-in)"),
+    (lambda tmp: "primordia_logistic", "failed to load: it is registered already, as 'logistic' "
+                                       "(primordia-logistic 0.1.0)"),
+], ids=["missing file", "missing module", "raises on import", "misspelt hook", "file named like a piece",
+        "a built-in again", "an installed plugin again"])
+def test_a_named_plugin_that_cannot_be_loaded_is_one_line_and_exit_2(primordia_cli, tmp_path, make, expected):
+    """A plugin asked for by name stops the program (an installed one that breaks is a warning and skipped)."""
+    item = make(tmp_path)
+    result = primordia_cli("-p", item, "plugins")
+    if expected is None:  # a file's name is its plugin's name, which may equal a piece's: no clash
+        assert result.returncode == 0, result.stderr
+        return
+    assert result.returncode == 2, result.stdout
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("primordia: error: "), result.stderr
+    assert expected.format(path=item) in lines[0]
+
+
+def test_p_with_a_comma_or_nothing_is_refused(primordia_cli):
+    for item in ["a.py,b.py", " "]:
+        result = primordia_cli("-p", item, "plugins")
+        assert result.returncode == 2
+        assert result.stderr.strip() == "primordia: error: -p needs one module name or .py file each time (no commas)"
+
+
+def _written(path, text: str):
+    path.write_text(text)
+    return path
 
 
 # -- the firstresult choosers ---------------------------------------------------------------------
