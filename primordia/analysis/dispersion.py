@@ -342,7 +342,8 @@ class FastestMode:
     growth_rate: float  #: Re phi at k_max (> 0: the steady state is unstable)
     frequency: float  #: |Im phi| of that root (0 for a stationary Turing mode)
     band: tuple[float, float]  #: (lowest, highest) k with Re phi > 0: the grid's outermost unstable k, each
-    #: refined by bisection towards its stable neighbour (an end of the grid stays); NaN if none
+    #: refined by bisection towards its stable neighbour (an end of the grid stays; a band between two k of the
+    #: grid is bisected out from k_max); NaN if none
     at_edge: bool  #: the maximum sits at an end of the k range: widen it
     kind: str = "any"  #: which roots were searched: "any", "stationary" or "oscillatory"
 
@@ -415,4 +416,7 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
         first, last = int(np.argmax(grows)), int(k.size - 1 - np.argmax(grows[::-1]))
         band = (_band_edge(growth_at, k[first], k[first - 1]) if first > 0 else float(k[first]),
                 _band_edge(growth_at, k[last], k[last + 1]) if last < k.size - 1 else float(k[last]))
+    elif rate > 0:  # a band narrower than the grid's steps, just past onset: only the refined k_max grows
+        band = (_band_edge(growth_at, k_max, k[best - 1]) if best > 0 else k_max,
+                _band_edge(growth_at, k_max, k[best + 1]) if best < k.size - 1 else k_max)
     return FastestMode(k_max=k_max, growth_rate=rate, frequency=frequency, band=band, at_edge=at_edge, kind=kind)

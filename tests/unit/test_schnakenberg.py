@@ -125,6 +125,24 @@ def test_unstable_band_is_between_the_roots_of_h_of_k_squared():
     assert np.all(max_growth_of_kind(linear.rates(outside), "any") < 0)
 
 
+def test_just_past_onset_the_band_is_murrays_and_the_box_modes_in_it_grow():
+    """D_v = 0.4284 with D_u = 0.05: d = 8.568, 1e-5 past d_c = 8.5676.  The band, k in [2.6040, 2.6239],
+    is narrower than the k grid's steps, so no grid point grows: it was reported [nan, nan], and on
+    the 20 x 20 box "no admissible mode grows", while n = (14, 9), (9, 14) (k = 2.6143) grow."""
+    from primordia.analysis.domain import domain_modes
+
+    a, b, D_u, D_v = 0.1, 0.9, 0.05, 0.4284
+    m = murray(a, b)
+    K = np.sort(np.roots([D_u * D_v, -(D_v * m["f_u"] + D_u * m["g_v"]), m["det"]]).real)
+    linear = linearise_model(schnakenberg(a=a, b=b, D_u=D_u, D_v=D_v))
+    turing = linear.fastest_mode("stationary")
+    assert turing.growth_rate > 0
+    np.testing.assert_allclose(turing.band, np.sqrt(K), rtol=1e-6)
+    modes = domain_modes(linear.rates, (20.0, 20.0), turing.band)
+    assert sorted(modes.ties(modes.fastest)) == [(9, 14), (14, 9)]
+    assert np.count_nonzero(modes.unstable) == 2
+
+
 def test_turing_space_is_murrays_conditions():
     """Over random (a, b, d), the derived analysis patterns exactly where Murray's (i)-(iv) hold."""
     rng = np.random.default_rng(4)
