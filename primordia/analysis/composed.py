@@ -66,6 +66,7 @@ from primordia.analysis.autodiff import DUAL, Dual, seeded, value_and_gradient
 from primordia.analysis.dispersion import (
     FastestMode,
     GrowthRates,
+    checked_wavenumbers,
     choose_method,
     fastest_mode_of,
     max_growth_of_kind,
@@ -404,9 +405,7 @@ class LinearisedModel:
 
     def growth_rates(self, k, d: int = 2, direction=None) -> GrowthRates:
         """Every root of det M for d = 1, 2, 3, the shear waves (+-i k sqrt(mu/rho), d-1 times) apart."""
-        k = np.atleast_1d(np.asarray(k, dtype=float))
-        if np.any(k < 0):
-            raise ValueError("wavenumbers must be >= 0")
+        k = checked_wavenumbers(k)
         roots = self._roots(k, d, direction)
         mechanics = self.mechanics
         n_transverse = 2 * (d - 1) if mechanics is not None and mechanics.rho > 0 else 0

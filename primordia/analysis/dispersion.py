@@ -135,6 +135,15 @@ def choose_method(invertible: bool, method: str) -> str:
     return method
 
 
+def checked_wavenumbers(k) -> np.ndarray:
+    """``k`` as a 1-D float array of finite wavenumbers >= 0, or a ValueError naming what is wrong."""
+    k = np.atleast_1d(np.asarray(k, dtype=float))
+    if k.ndim != 1 or not np.all(np.isfinite(k)) or np.any(k < 0):
+        raise ValueError(f"wavenumbers must be a 1-D list of finite numbers >= 0, "
+                         f"got {np.array2string(k, threshold=8)}")
+    return k
+
+
 def sort_by_growth(rates):
     """Descending real part, then descending imaginary part; NaN last.
 
@@ -244,9 +253,7 @@ def growth_rates(params, k, d: int = 2, coupled: bool = True, method: str = "qz"
         raise ValueError("growth_rates takes one parameter set; use max_growth_rate for grids")
     if not coupled:
         c = _uncouple(c)
-    k = np.atleast_1d(np.asarray(k, dtype=float))
-    if np.any(k < 0):
-        raise ValueError("wavenumbers must be >= 0")
+    k = checked_wavenumbers(k)
     M0, M1, _ = real_pencil(c, wave_vectors(k, d, direction))
     n_transverse = 2 * (d - 1) if float(c.rho) > 0 else 0
     roots = pencil_roots(M0, M1, c.rho, d, _choose_method(c, method), LONGITUDINAL_DEGREE + n_transverse)
@@ -395,6 +402,9 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
     def growth_at(kk):
         return max_growth_of_kind(rates_at(np.atleast_1d(kk)), kind)
 
+    k = checked_wavenumbers(k)
+    if k.size == 0:
+        raise ValueError("the fastest mode needs at least one wavenumber, got none")
     growth = growth_at(k)
     best = int(np.argmax(growth))
     at_edge = best in (0, k.size - 1)

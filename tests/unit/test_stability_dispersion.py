@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from primordia.analysis.composed import linearise_seed
 from primordia.analysis.dispersion import (
     fastest_growing_mode,
     growth_rates,
@@ -180,3 +181,24 @@ def test_table_3_1_coupled_has_only_a_weak_oscillatory_instability():
     assert not turing.unstable
     assert anything.unstable and not anything.stationary
     assert 0 < anything.growth_rate < 1e-4 and anything.k_max < 0.1
+
+
+@pytest.mark.parametrize("k, problem", [
+    ([], "needs at least one wavenumber"),
+    ([1.0, np.nan, 2.0], "finite numbers >= 0"),
+    ([-1.0, 2.0, 3.0], "finite numbers >= 0"),
+])
+def test_a_wavenumber_list_without_a_usable_k_is_one_clear_error(k, problem):
+    """Before: an empty list failed in argmax or reshape, a NaN in LAPACK ("Array must not contain infs
+    or NaNs", or "the pencil is not real"), and a negative k gave the band (-1, 3)."""
+    params = seed_parameters(m0=0.75, D_m=0.03)
+    with pytest.raises(ValueError, match=problem):
+        fastest_growing_mode(params, k=k, coupled=False)
+    chemistry = linearise_seed(params, chemistry_only=True)
+    with pytest.raises(ValueError, match=problem):
+        chemistry.fastest_mode(k=k)
+    if k:
+        with pytest.raises(ValueError, match="finite numbers >= 0"):
+            growth_rates(params, k)
+        with pytest.raises(ValueError, match="finite numbers >= 0"):
+            chemistry.growth_rates(k)
