@@ -203,7 +203,11 @@ def _mode_text(mode) -> str:
         return f"none grows (largest Re phi {mode.growth_rate:.3g} at k = {mode.k_max:.3g})"
     nature = "stationary" if mode.stationary else f"oscillatory, frequency {mode.frequency:.4g}"
     edge = "; at the end of the k range searched" if mode.at_edge else ""
-    return (f"k_max = {mode.k_max:.4g}, wavelength 2 pi / k_max = {mode.wavelength:.4g}, "
+    if mode.k_max == 0:
+        where = "k_max = 0: the well-mixed kinetics are unstable on their own (homogeneous, not a pattern)"
+    else:
+        where = f"k_max = {mode.k_max:.4g}, wavelength 2 pi / k_max = {mode.wavelength:.4g}"
+    return (f"{where}, "
             f"growth rate {mode.growth_rate:.4g} ({nature}; unstable band k in "
             f"[{mode.band[0]:.3g}, {mode.band[1]:.3g}]{edge})")
 

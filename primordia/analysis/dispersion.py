@@ -351,7 +351,7 @@ class FastestMode:
     band: tuple[float, float]  #: (lowest, highest) k with Re phi > 0: the grid's outermost unstable k, each
     #: refined by bisection towards its stable neighbour (an end of the grid stays; a band between two k of the
     #: grid is bisected out from k_max); NaN if none
-    at_edge: bool  #: the maximum sits at an end of the k range: widen it
+    at_edge: bool  #: the maximum sits at an end of the k range: widen it (k_max = 0, the homogeneous mode, is no edge)
     kind: str = "any"  #: which roots were searched: "any", "stationary" or "oscillatory"
 
     @property
@@ -409,7 +409,10 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
     best = int(np.argmax(growth))
     at_edge = best in (0, k.size - 1)
     k_max = float(k[best])
-    if not at_edge and np.isfinite(growth[best]):
+    if best == 0 and k[0] > 0 and growth_at(0.0)[0] > max(growth[0], 0.0):
+        # the homogeneous mode itself grows fastest (e.g. a Hopf instability of the kinetics): k = 0 is no edge
+        k_max, at_edge = 0.0, False
+    elif not at_edge and np.isfinite(growth[best]):
         found = scipy.optimize.minimize_scalar(
             lambda kk: -float(growth_at(kk)[0]), bounds=(k[best - 1], k[best + 1]), method="bounded",
             options={"xatol": 1e-8 * k[best]})
@@ -424,7 +427,7 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
     band = (np.nan, np.nan)
     if np.any(grows):  # the grid's outermost unstable k, refined towards its stable neighbour
         first, last = int(np.argmax(grows)), int(k.size - 1 - np.argmax(grows[::-1]))
-        band = (_band_edge(growth_at, k[first], k[first - 1]) if first > 0 else float(k[first]),
+        band = (_band_edge(growth_at, k[first], k[first - 1]) if first > 0 else min(k_max, float(k[first])),
                 _band_edge(growth_at, k[last], k[last + 1]) if last < k.size - 1 else float(k[last]))
     elif rate > 0:  # a band narrower than the grid's steps, just past onset: only the refined k_max grows
         band = (_band_edge(growth_at, k_max, k[best - 1]) if best > 0 else k_max,

@@ -180,6 +180,20 @@ def test_predicted_mode_of_example_1a():
     assert np.isnan(stable.k_max) and np.isnan(stable.wavelength) and stable.rate <= 0 and "stable" in stable.note
 
 
+def test_predicted_mode_when_the_homogeneous_state_grows_fastest(monkeypatch):
+    """Kinetics whose real root at k = 0 grows fastest: the fastest stationary mode is at k = 0 (no longer the
+    grid's first k, 0.001), which has no wavelength; 2 pi / k_max must not divide by zero."""
+    from primordia.analysis.composed import LinearisedModel
+    from primordia.analysis.dispersion import FastestMode
+
+    homogeneous = FastestMode(k_max=0.0, growth_rate=0.3, frequency=0.0, band=(0.0, 1.0), at_edge=False,
+                              kind="stationary")
+    monkeypatch.setattr(LinearisedModel, "fastest_mode", lambda self, kind="any", k=None: homogeneous)
+    mode = predicted_mode("examples/ex01a.toml")
+    assert mode.k_max == 0.0 and mode.wavelength == np.inf and mode.rate == 0.3
+    assert "homogeneous state itself is unstable" in mode.note
+
+
 def test_analyse_command(tmp_path, primordia_cli):
     write_run(tmp_path, stretch=1.0)
     result = primordia_cli("analyse", tmp_path, "--species", "m", "--no-pictures")

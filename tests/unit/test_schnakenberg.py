@@ -158,3 +158,20 @@ def test_turing_space_is_murrays_conditions():
             agree += 1
             patterns += expected
     assert agree >= 35 and 5 <= patterns <= agree - 5  # both sides of the boundary were sampled
+
+
+def test_a_hopf_instability_of_the_kinetics_grows_fastest_at_k_0():
+    """a = 0.05, b = 0.5: f_u + g_v = 0.516 > 0, det = 0.3025, so the well-mixed kinetics oscillate and grow at
+    Re phi = (f_u + g_v) / 2 = 0.2578; with D_u = D_v diffusion only damps, so k = 0 grows fastest. It was
+    reported as k_max = 0.001 (the grid's first k), wavelength 6283, "at the end of the k range searched"."""
+    from primordia.analysis import cli
+
+    a, b = 0.05, 0.5
+    m = murray(a, b)
+    linear = linearise_model(schnakenberg(a=a, b=b, D_u=0.05, D_v=0.05))
+    mode = linear.fastest_mode()
+    assert mode.k_max == 0.0 and not mode.at_edge and not mode.stationary
+    assert mode.growth_rate == pytest.approx((m["f_u"] + m["g_v"]) / 2, rel=1e-12)
+    assert mode.frequency == pytest.approx(np.sqrt(m["det"] - (m["f_u"] + m["g_v"]) ** 2 / 4), rel=1e-12)
+    assert mode.band[0] == 0.0 and mode.band[1] == pytest.approx(np.sqrt((m["f_u"] + m["g_v"]) / 2 / 0.05), rel=1e-6)
+    assert cli._mode_text(mode).startswith("k_max = 0: the well-mixed kinetics are unstable on their own")
