@@ -199,6 +199,8 @@ def _seed_verdicts(linear, params) -> list:
 
 
 def _mode_text(mode) -> str:
+    if not np.isfinite(mode.growth_rate):
+        return f"none: no {mode.kind} root at any k searched"
     if not mode.unstable:
         return f"none grows (largest Re phi {mode.growth_rate:.3g} at k = {mode.k_max:.3g})"
     nature = "stationary" if mode.stationary else f"oscillatory, frequency {mode.frequency:.4g}"

@@ -58,7 +58,7 @@ class DomainModes:
     def describe(self) -> str:
         box = " x ".join(f"{length:g}" for length in self.lengths)
         if not np.any(self.unstable):
-            return f"on the {box} box (zero-flux cosine modes) no admissible mode grows"
+            return f"on the {box} box (zero-flux cosine modes) no admissible mode grows as a {self.kind} mode"
         best = self.fastest
         modes = ", ".join(str(mode) for mode in self.ties(best)[:4])
         wavelength = 2.0 * np.pi / self.k[best]

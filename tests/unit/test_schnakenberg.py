@@ -29,6 +29,8 @@ gamma^2 (f_u g_v - f_v g_u) = 0.  For a = 0.1, b = 0.9: d_c = 8.5676 (with D_u =
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.optimize
@@ -175,3 +177,17 @@ def test_a_hopf_instability_of_the_kinetics_grows_fastest_at_k_0():
     assert mode.frequency == pytest.approx(np.sqrt(m["det"] - (m["f_u"] + m["g_v"]) ** 2 / 4), rel=1e-12)
     assert mode.band[0] == 0.0 and mode.band[1] == pytest.approx(np.sqrt((m["f_u"] + m["g_v"]) / 2 / 0.05), rel=1e-6)
     assert cli._mode_text(mode).startswith("k_max = 0: the well-mixed kinetics are unstable on their own")
+
+
+def test_the_command_says_which_kind_of_mode_is_missing_when_the_kinetics_oscillate(tmp_path, capsys):
+    """The same Hopf case from the shell: no real root anywhere was printed as "largest Re phi -inf", and the
+    box's line said "no admissible mode grows" while its homogeneous mode n = (0, 0) grows, oscillating."""
+    from primordia.cli import main as run
+
+    config = Path(__file__).resolve().parents[2] / "examples" / "schnakenberg.toml"
+    assert run(["stability", str(config), "--set", "parameters.a=0.05", "--set", "parameters.b=0.5",
+                "--set", "parameters.D_v=0.05", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "fastest stationary (Turing) mode: none: no stationary root at any k searched" in printed
+    assert "-inf" not in printed
+    assert "no admissible mode grows as a stationary mode" in printed
