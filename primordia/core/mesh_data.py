@@ -82,6 +82,10 @@ class MeshData:
             return None
         return dict(recorded[0])
 
+    def fingerprint(self) -> str:
+        """A digest of the points, cells and boundaries (hex): equal for the same mesh, bit for bit."""
+        return self._fingerprint().hex()
+
     def _fingerprint(self) -> bytes:
         digest = hashlib.blake2b(digest_size=16)
         for array in (self.points, self.cells):

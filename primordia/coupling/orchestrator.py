@@ -354,6 +354,7 @@ class Simulation:
             return
         tree = {
             "config": self.model.resolved_config(), "backend": self.backend.name, "mpi_ranks": self.comm.size,
+            "mesh": self.model.mesh_data.fingerprint(),
             "run": {"step": self.step_index, "time": self.time, "last_dt": self.last_dt,
                     "step_begin": self.step_begin, "step_done": self.step_done,
                     "controller": self.controller.state(), "iterations": self.iterations,
@@ -396,6 +397,12 @@ class Simulation:
         if differences:
             key = differences[0]
             return f"{where}: {key} differs from the checkpointed run's (a restart continues the same model)"
+        # the config names a mesh file by its path: a file rewritten since gave the checkpoint's fields to another mesh
+        fingerprint = self.model.mesh_data.fingerprint()
+        if tree.get("mesh", fingerprint) != fingerprint:  # a checkpoint from before 2026-12-05 holds none
+            source = self.model.mesh_data.source() or {}
+            mesh = f"the mesh read from {source['path']}" if source.get("type") == "file" else "the mesh"
+            return f"{where}: {mesh} differs from the checkpointed run's (a restart continues the same model)"
         if tree["run"]["step"] > self.model.num_steps:
             return f"{where}: it is at t = {tree['run']['time']:g}, past time.t_final = {self.model.t_final:g}"
         return None

@@ -12,12 +12,13 @@ from __future__ import annotations
 import json
 import shutil
 
+import meshio
 import numpy as np
 import pytest
 import xarray as xr
 
 from primordia.core.errors import ConfigError, PluginError, SolverError
-from primordia.core.meshes import rectangle
+from primordia.core.meshes import read_mesh, rectangle
 from primordia.core.outputs import Output
 from primordia.core.plugins import hookimpl
 from primordia.coupling.orchestrator import Simulation
@@ -307,6 +308,24 @@ def test_a_restart_of_another_model_names_what_differs(watching, completed, tmp_
     with pytest.raises(ConfigError) as caught:
         Simulation(other, out_dir=tmp_path / "run", existing="restart").setup()
     assert "parameters.D_m differs from the checkpointed run's" in one_line(caught)
+
+
+def test_a_restart_on_a_mesh_file_changed_since_the_checkpoint_is_refused(watching, tmp_path):
+    """The resolved config names a mesh file by its path only: a file rewritten between the run and its restart
+    (here one interior vertex moved, the same topology) loaded the checkpoint's fields onto the other mesh, and
+    fields.xdmf went on describing the first one."""
+    square = rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4))
+    path = tmp_path / "tissue.vtu"
+    flat = np.column_stack([square.points, np.zeros(square.num_vertices)])  # z = 0, as most files hold it
+    meshio.write(path, meshio.Mesh(flat, [("triangle", square.cells)]))
+    Simulation(model(t_final=0.4, mesh=read_mesh(path)), out_dir=tmp_path / "run", existing="refuse").setup().run()
+    moved = flat.copy()
+    moved[6, :2] += 0.1  # an interior vertex of the 5 x 5 grid
+    meshio.write(path, meshio.Mesh(moved, [("triangle", square.cells)]))
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(t_final=0.6, mesh=read_mesh(path)), out_dir=tmp_path / "run", existing="restart").setup()
+    assert one_line(caught).endswith(f"the mesh read from {path.resolve()} differs from the checkpointed run's "
+                                     f"(a restart continues the same model)")
 
 
 def test_a_failed_step_is_retried_in_halves_and_the_grid_of_dt_is_kept(watching, tmp_path):
