@@ -338,6 +338,7 @@ def read_mesh(path: str | Path) -> MeshData:
     points, cells, boundaries = _drop_unused_points(points, cells, boundaries)
     what = f"mesh file {path}"
     _check_coordinate_range(points, what)
+    _check_no_coincident_vertices(points, cells, what)
     _check_not_degenerate(points, cells, what)
     cells = orient_cells(points, cells)
     _check_not_overlapping(cells, what)
@@ -516,10 +517,11 @@ def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarra
 def check_mesh(mesh: MeshData, what: str = "the model's MeshData") -> None:
     """The checks :func:`read_mesh` makes of a file, for a mesh built by hand (one MeshError line).
 
-    Finite coordinates of a sensible range, no degenerate or overlapping cells, and named
+    Finite coordinates of a sensible range, no duplicated vertices, no degenerate or overlapping cells, and named
     facets that are exterior facets of the cells, each in one boundary.
     """
     _check_coordinate_range(mesh.points, what)
+    _check_no_coincident_vertices(mesh.points, mesh.cells, what)
     _check_not_degenerate(mesh.points, mesh.cells, what)
     _check_not_overlapping(orient_cells(mesh.points, mesh.cells), what)
     _check_boundary_facets(mesh.cells, mesh.boundaries, what)
@@ -527,6 +529,24 @@ def check_mesh(mesh: MeshData, what: str = "the model's MeshData") -> None:
 
 def _facets_text(count: int) -> str:
     return f"{count} facet" if count == 1 else f"{count} facets"
+
+
+def _check_no_coincident_vertices(points: np.ndarray, cells: np.ndarray, what: str) -> None:
+    """MeshError if two vertices cells use share their coordinates (duplicated nodes).
+
+    The cells on either side of such vertices are not joined there: the mesh is cut, and each
+    field evolves on each side blind to the other, its zero-flux condition holding along the cut.
+    """
+    used = np.unique(cells)
+    _, first, inverse = np.unique(points[used], axis=0, return_index=True, return_inverse=True)
+    original = used[first[inverse.ravel()]]  # of each vertex, the first at its coordinates
+    copies = np.flatnonzero(original != used)
+    if len(copies):
+        copy = used[copies[0]]
+        where = ", ".join(f"{c:g}" for c in points[copy])
+        raise MeshError(f"{what} has {len(copies)} {'vertex' if len(copies) == 1 else 'vertices'} at the "
+                        f"coordinates of another (duplicated nodes, e.g. vertex {copy} at ({where}), as vertex "
+                        f"{original[copies[0]]}): the cells on either side are not joined there; merge them")
 
 
 def _check_not_degenerate(points: np.ndarray, cells: np.ndarray, what: str) -> None:

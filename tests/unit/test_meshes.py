@@ -347,8 +347,17 @@ UNIT_SQUARE = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
             lambda d: write_vtu(d / "surface.vtu", [[0, 0, 0], [1, 0, 0], [0, 1, 1]], [("triangle", [[0, 1, 2]])]),
             "not in a z = constant plane",
         ),
+        # the second triangle's own copies of the diagonal's ends: the square cut in two along it, m and the
+        # morphogens blind to each other across the cut, accepted without a word
+        (
+            lambda d: write_vtu(
+                d / "cut.vtu", UNIT_SQUARE + [[0, 0, 0], [1, 1, 0]], [("triangle", [[0, 1, 2], [4, 5, 3]])]
+            ),
+            r"2 vertices at the coordinates of another \(duplicated nodes, e.g. vertex 4 at \(0, 0\), as vertex 0\)",
+        ),
     ],
-    ids=["missing", "directory", "unreadable", "unknown-format", "quads", "mixed", "degenerate", "empty", "surface"],
+    ids=["missing", "directory", "unreadable", "unknown-format", "quads", "mixed", "degenerate", "empty", "surface",
+         "duplicated-nodes"],
 )
 def test_read_mesh_errors_are_one_line(tmp_path, make_file, message):
     path = make_file(tmp_path)
@@ -468,6 +477,9 @@ def _two_triangles(**changes):
     ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.0]])}, "has 1 degenerate (zero-area) cells"),
     ({"cells": np.array([[0, 1, 2], [0, 1, 2]])}, "has overlapping cells"),
     ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, np.nan], [0.0, 1.0]])}, "some coordinates are not finite"),
+    ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]),
+      "cells": np.array([[0, 1, 2], [4, 2, 3]]), "boundaries": {"left": np.array([[3, 4]])}},
+     "1 vertex at the coordinates of another (duplicated nodes"),
 ])
 def test_a_mesh_built_by_hand_is_checked_as_a_file_is(changes, message):
     """A MeshData given to Model was used unchecked: an interior 'left' gave the backends different answers."""
