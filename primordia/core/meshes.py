@@ -429,7 +429,7 @@ def _points_in_dimension(points: np.ndarray, tdim: int, path: Path) -> np.ndarra
 
 
 def _tagged_facets(raw, tdim: int) -> dict[str, np.ndarray]:
-    """Boundary name -> facets, from facet blocks tagged by ``gmsh:physical``, in tag order."""
+    """Boundary name -> facets, from facet blocks tagged by ``gmsh:physical``, in tag order (0, no group, aside)."""
     tags = raw.cell_data.get("gmsh:physical")
     if tags is None:
         return {}
@@ -438,7 +438,8 @@ def _tagged_facets(raw, tdim: int) -> dict[str, np.ndarray]:
         if block.type != FACET_TYPES[tdim]:
             continue
         block_tags = np.asarray(block_tags).ravel()
-        for tag in np.unique(block_tags):
+        # tag 0 is no group: Gmsh's mark of an element in no physical group (a file saved with Mesh.SaveAll)
+        for tag in np.unique(block_tags[block_tags != 0]):
             facets_by_tag.setdefault(int(tag), []).append(block.data[block_tags == tag])
     names = _physical_names(raw.field_data, dim=tdim - 1)
     return {

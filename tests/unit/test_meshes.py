@@ -129,6 +129,33 @@ $Elements
 $EndElements
 """
 
+#: The unit square as Gmsh 2.2 writes it with ``Mesh.SaveAll = 1``: the elements of curves in no physical
+#: group carry physical tag 0, here the bottom edge and the diagonal, a curve embedded in the surface.
+GMSH22_SAVE_ALL = """$MeshFormat
+2.2 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+1 1 "left"
+2 3 "tissue"
+$EndPhysicalNames
+$Nodes
+4
+1 0 0 0
+2 1 0 0
+3 1 1 0
+4 0 1 0
+$EndNodes
+$Elements
+5
+1 1 2 1 4 4 1
+2 1 2 0 1 1 2
+3 1 2 0 5 1 3
+4 2 2 3 1 1 2 3
+5 2 2 3 1 1 3 4
+$EndElements
+"""
+
 #: A Gmsh 2.2 file with one node and no elements.
 GMSH22_NO_ELEMENTS = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n$Elements\n0\n$EndElements\n"
 
@@ -289,6 +316,17 @@ def test_read_gmsh22_drops_unused_nodes_reorients_and_names_unnamed_tags(tmp_pat
     assert signed_volumes(mesh.points, mesh.cells).min() > 0, "the clockwise triangle is flipped"
     assert mesh.boundary_ids == {"left": 1, "boundary_7": 2}
     np.testing.assert_array_equal(mesh.points[mesh.boundaries["boundary_7"]], [[[0, 0], [1, 0]]])
+
+
+def test_read_gmsh22_saved_with_all_elements_names_only_physical_groups(tmp_path):
+    """Physical tag 0 is Gmsh's "in no physical group": it was read as a group 'boundary_0', and the mesh refused
+    for that group's facets inside the domain (the embedded diagonal), a group the file never defined."""
+    path = tmp_path / "save_all.msh"
+    path.write_text(GMSH22_SAVE_ALL)
+    mesh = read_mesh(path)
+    assert (mesh.num_cells, mesh.num_vertices) == (2, 4)
+    assert mesh.boundary_ids == {"left": 1}
+    np.testing.assert_array_equal(mesh.points[mesh.boundaries["left"]], [[[0, 1], [0, 0]]])
 
 
 def test_read_3d_gmsh_box_with_facet_names(tmp_path):
