@@ -47,6 +47,10 @@ CONFIG_KEYS = {
 #: keeps physical points and curves as ``vertex`` / ``line`` blocks).
 _AUXILIARY_CELL_TYPES = {2: {"vertex", "line"}, 3: {"vertex", "line", "triangle"}}
 
+#: A triangle mesh with 3 coordinates is plane when its z spans at most this fraction of its x, y extent:
+#: a plane mesh rotated or moved by another tool keeps z = constant only to round-off.
+_FLAT_Z_FRACTION = 1e-12
+
 #: A cell counts as degenerate below this fraction of (bounding-box diagonal)^tdim.
 _DEGENERATE_VOLUME_FRACTION = 1e-13
 
@@ -416,13 +420,16 @@ def _cells_of_type(raw, cell_type: str) -> np.ndarray:
 
 
 def _points_in_dimension(points: np.ndarray, tdim: int, path: Path) -> np.ndarray:
-    """Points with ``tdim`` coordinates: a flat 2D mesh loses its z = 0 column."""
+    """Points with ``tdim`` coordinates: a flat 2D mesh loses its z = constant column (to round-off)."""
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise MeshError(f"mesh file {path} has points of shape {points.shape}, expected 2 or 3 coordinates")
     if tdim == 3 and points.shape[1] != 3:
         raise MeshError(f"mesh file {path} has tetrahedra but only {points.shape[1]} coordinates per point")
     if tdim == 2 and points.shape[1] == 3:
-        if np.any(points[:, 2] != points[0, 2]):
+        z, extent = points[:, 2], float(np.max(np.ptp(points[:, :2], axis=0)))
+        if not np.all(np.isfinite(z)):  # x and y are checked with the vertices the cells use
+            raise MeshError(f"mesh file {path}: some coordinates are not finite (nan or inf)")
+        if np.ptp(z) > _FLAT_Z_FRACTION * extent:
             raise MeshError(f"mesh file {path} has triangles that are not in a z = constant plane (a surface mesh)")
         points = points[:, :2]
     return points

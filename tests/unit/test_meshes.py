@@ -352,6 +352,18 @@ def test_read_other_formats_without_boundary_names(tmp_path, suffix):
     np.testing.assert_array_equal(mesh.cells, original.cells)
 
 
+def test_read_a_flat_mesh_whose_z_carries_round_off(tmp_path):
+    """A plane mesh rotated or moved by another tool keeps z = 0 only to round-off: z of 1e-17 refused it as a
+    surface mesh, "not in a z = constant plane"."""
+    original = rectangle((0, 0), (4, 4), (3, 3))
+    z = 1e-17 * np.random.default_rng(1).uniform(-1.0, 1.0, original.num_vertices)
+    path = tmp_path / "flat.vtu"
+    meshio.write(path, meshio.Mesh(np.column_stack([original.points, z]), [("triangle", original.cells)]))
+    mesh = read_mesh(path)
+    assert mesh.gdim == 2
+    np.testing.assert_array_equal(mesh.points, original.points)
+
+
 def write_vtu(path, points, cells):
     meshio.write(path, meshio.Mesh(np.asarray(points, dtype=float), cells))
     return path
