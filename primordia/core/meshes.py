@@ -296,22 +296,40 @@ def orient_cells(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
 
 
 def top_face(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The face z = z_max of a tetrahedral mesh, seen from above: (its vertices, its triangles numbered in them)."""
-    facets = exterior_facets(cells)
-    z = points[:, 2]
-    tolerance = 1e-10 * np.ptp(points, axis=0).max()
-    top = facets[np.all(np.abs(z[facets] - z.max()) <= tolerance, axis=1)]
+    """The upper surface of a tetrahedral mesh, seen from above: (its vertices, its triangles numbered in them).
+
+    The exterior facets whose outward normal points up: the face z = z_max of a slab, and the whole
+    sloped or curved top of a mesh that has no face at z_max (only a vertex or an edge there).
+    """
+    facets, opposite = _exterior_facets_and_opposite_vertices(cells)
+    corner = points[facets[:, 0]]
+    normal = np.cross(points[facets[:, 1]] - corner, points[facets[:, 2]] - corner)
+    normal *= -np.sign(np.einsum("ij,ij->i", normal, points[opposite] - corner))[:, None]  # outward
+    top = facets[normal[:, 2] > 1e-10 * np.linalg.norm(normal, axis=1)]  # the sides of a box: 0 exactly
     vertices, local = np.unique(top, return_inverse=True)
     return vertices, local.reshape(top.shape)
 
 
+def height_text(z: np.ndarray) -> str:
+    """The height of a flat top face (``1``), or the span of a sloped or curved one (``1 to 1.1``)."""
+    low, high = f"{np.min(z):g}", f"{np.max(z):g}"
+    return high if low == high else f"{low} to {high}"
+
+
 def exterior_facets(cells: np.ndarray) -> np.ndarray:
     """Facets (vertex-index rows) that belong to exactly one cell, i.e. the mesh boundary."""
+    return _exterior_facets_and_opposite_vertices(cells)[0]
+
+
+def _exterior_facets_and_opposite_vertices(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exterior facets, and of each the vertex of its cell that is not on it."""
     n_vertices = cells.shape[1]
     facets = np.vstack([np.delete(cells, i, axis=1) for i in range(n_vertices)])
+    opposite = cells.T.ravel()  # facet i of each cell lies opposite its vertex i
     keys = np.sort(facets, axis=1)
     _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
-    return facets[np.sort(first[counts == 1])]
+    exterior = np.sort(first[counts == 1])
+    return facets[exterior], opposite[exterior]
 
 
 # ---------------------------------------------------------------------------

@@ -16,7 +16,7 @@ import numpy as np
 from primordia.core.atomic_files import atomic_path, writable_target
 from primordia.core.errors import PrimordiaError
 from primordia.core.mesh_data import MeshData
-from primordia.core.meshes import top_face
+from primordia.core.meshes import height_text, top_face
 
 
 def plot_field(
@@ -34,8 +34,8 @@ def plot_field(
 
     With ``displacement`` (n_vertices, gdim) the field is drawn on the
     deformed configuration ``points + displacement_scale * displacement`` and
-    the x-axis label says "displacement x<scale>".  A 3D mesh is drawn as its top
-    face (the boundary facets on z = z_max) seen from above.
+    the x-axis label says "displacement x<scale>".  A 3D mesh is drawn as its upper
+    surface (the boundary facets facing up: a slab's face z = z_max) seen from above.
     """
     return plot_fields_grid(
         path,
@@ -156,11 +156,12 @@ class _View:
 
 
 def _plot_surface(mesh: MeshData) -> _View:
-    """The whole mesh (2D), or the top face z = z_max of a 3D mesh seen from above."""
+    """The whole mesh (2D), or the upper surface of a 3D mesh (a slab's face z = z_max) seen from above."""
     if mesh.gdim == 2:
         return _View.of_vertices(np.arange(mesh.num_vertices), mesh.num_vertices, mesh.cells, (0, 1), "")
     vertices, triangles = top_face(mesh.points, mesh.cells)
-    return _View.of_vertices(vertices, mesh.num_vertices, triangles, (0, 1), f"top, z = {mesh.points[:, 2].max():g}")
+    label = f"top, z = {height_text(mesh.points[vertices, 2])}"
+    return _View.of_vertices(vertices, mesh.num_vertices, triangles, (0, 1), label)
 
 
 def _slice_surface(mesh: MeshData) -> _View:

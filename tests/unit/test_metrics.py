@@ -276,3 +276,19 @@ def test_a_slab_is_measured_on_its_top_face(tmp_path):
     assert float(m["spacing_mean"].sel(configuration="reference")) == pytest.approx(spacing, rel=0.01)
     assert float(m["spacing_mean"].sel(configuration="current")) == pytest.approx(stretch * spacing, rel=0.01)
     assert pattern_kind(ds, species="m", time=20.0, configuration="reference").item() == "spots"
+
+
+def test_a_slab_whose_top_slopes_is_measured_on_its_upper_surface(tmp_path):
+    """A slab read from a file with a sloped top has no face at z = z_max: analyse refused it ("no face at its
+    largest z"), and its run's pictures failed.  Its upper surface is measured, seen from above."""
+    from primordia.core.meshes import box
+
+    slab = box((0.0, 0.0, 0.0), (SIDE, SIDE, 1.0), cells=(80, 80, 1))
+    slab.points[:, 2] *= 1.0 + 0.005 * slab.points[:, 0]  # z = 1 at x = 0, 1.1 at x = 20
+    spacing = 3.0
+    spots = gaussian_spots(slab.points[:, :2], hexagonal_lattice(spacing, spacing / 2), spacing / 6)
+    XdmfSeries(tmp_path, slab).write(20.0, {"m": spots})
+    ds = analyse_run(tmp_path, pictures=False)
+    assert ds.attrs["surface"] == "the top face z = 1 to 1.1"
+    assert float(ds["spacing_mean"].sel(species="m", time=20.0, configuration="reference")) == pytest.approx(
+        spacing, rel=0.01)

@@ -47,6 +47,21 @@ def test_plot_field_of_a_box_draws_its_top_face(tmp_path):
     assert distinct_colours(image) > 100
 
 
+def test_plot_field_of_a_mesh_with_a_sloped_top_draws_its_upper_surface(tmp_path):
+    """A tetrahedral mesh whose top is not flat has no face at z = z_max: every picture of the run failed
+    ("ValueError: zero-size array to reduction operation maximum") and the pictures output was disabled."""
+    from primordia.core.pictures import _plot_surface
+
+    slab = box((0, 0, 0), (2, 1, 1), (4, 2, 2))
+    slab.points[:, 2] *= 1.0 + 0.05 * slab.points[:, 0]  # z = 1 at x = 0, 1.1 at x = 2
+    values = slab.points[:, 0] + slab.points[:, 1]
+    image = read_png(plot_field(tmp_path / "slope.png", slab, values))
+    assert distinct_colours(image) > 100
+    view = _plot_surface(slab)
+    assert view.label == "top, z = 1 to 1.1"
+    assert _view_area(view, slab) == pytest.approx(2.0)  # the whole upper surface, seen from above
+
+
 def test_plot_fields_grid_puts_panels_side_by_side(tmp_path, square):
     snapshots = {f"t = {t}": bump(square, t / 100) for t in (160, 280, 400, 520)}
     row = read_png(plot_fields_grid(tmp_path / "row.png", square, snapshots, title="m"))

@@ -167,12 +167,12 @@ def read_run(directory: str | Path) -> RunFields:
         if triangles:
             vertices, triangles, surface = slice(None), triangles[0], "the mesh"
         elif tetrahedra:  # a slab (example 4): its top face, where the pictures show the pattern
-            from primordia.core.meshes import top_face
+            from primordia.core.meshes import height_text, top_face
 
             vertices, triangles = top_face(points, np.asarray(tetrahedra[0]))
-            surface = f"the top face z = {points[:, 2].max():g}"
             if not len(triangles):
-                raise ConfigError(f"{xdmf}: the tetrahedral mesh has no face at its largest z to measure patterns on")
+                raise ConfigError(f"{xdmf}: the tetrahedral mesh has no face facing up to measure patterns on")
+            surface = f"the top face z = {height_text(points[vertices, 2])}"
         else:
             raise ConfigError(f"{xdmf}: pattern metrics need a triangle or tetrahedron mesh; found "
                               f"{[b.type for b in blocks]}")
