@@ -354,6 +354,7 @@ def read_mesh(path: str | Path) -> MeshData:
         raise MeshError(f"mesh file {path} is empty (no points or no cells)")
     tdim = _topological_dimension(raw, path)
     cells = _cells_of_type(raw, CELL_TYPES[tdim])
+    check_affordable(len(cells), tdim)  # before the checks and the run allocate more, as for a generated mesh
     points = _points_in_dimension(np.asarray(raw.points, dtype=np.float64), tdim, path)
     boundaries = _tagged_facets(raw, tdim)
     _check_vertex_indices(cells, boundaries, len(points), path)

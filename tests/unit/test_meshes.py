@@ -364,6 +364,18 @@ def test_read_a_flat_mesh_whose_z_carries_round_off(tmp_path):
     np.testing.assert_array_equal(mesh.points, original.points)
 
 
+def test_a_mesh_file_too_large_for_the_memory_is_refused_as_a_generated_mesh_is(tmp_path, monkeypatch):
+    """The generators refused a mesh that needs more memory than is available; a file of it was read and run
+    until the machine ran out of memory."""
+    import primordia.core.meshes as meshes
+
+    path = write_vtu(tmp_path / "big.vtu", UNIT_SQUARE, [("triangle", [[0, 1, 2], [0, 2, 3]])])
+    monkeypatch.setattr(meshes, "available_memory", lambda: 3_000)  # bytes: one triangle's worth
+    with pytest.raises(MeshError, match="a mesh of 2 cells needs at least") as error:
+        read_mesh(path)
+    assert "\n" not in str(error.value)
+
+
 def write_vtu(path, points, cells):
     meshio.write(path, meshio.Mesh(np.asarray(points, dtype=float), cells))
     return path
