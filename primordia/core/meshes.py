@@ -408,6 +408,9 @@ def _try_meshio_format(path: Path, file_format: str):
     except SystemExit:
         # meshio prints a failed reader's message and exits the interpreter.
         return None, _one_line(chatter.getvalue()) or "not readable"
+    except KeyError as error:  # a tag or name the file uses and does not define; its bare key said nothing
+        key = f" {error.args[0]!r}" if error.args else ""
+        return None, f"it refers to{key}, which it does not define (KeyError)"
     except Exception as error:  # readers raise many kinds for malformed files
         return None, _one_line(str(error)) or type(error).__name__
 

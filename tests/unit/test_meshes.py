@@ -308,6 +308,15 @@ def test_read_hand_written_gmsh41(tmp_path):
     assert np.all(mesh.points[mesh.boundaries["right"], 0] == 1.0)
 
 
+def test_a_gmsh41_file_naming_an_entity_it_lacks_is_refused_saying_so(tmp_path):
+    """meshio's reader fails with KeyError(9): the reason given was the bare key, "(as gmsh: 9; ...)"."""
+    path = tmp_path / "entity.msh"
+    path.write_text(GMSH41_SQUARE.replace("$Elements\n3 4 1 4\n1 1 1 1\n", "$Elements\n3 4 1 4\n1 9 1 1\n"))
+    with pytest.raises(MeshError, match=r"as gmsh: it refers to 9, which it does not define \(KeyError\)") as error:
+        read_mesh(path)
+    assert "\n" not in str(error.value)
+
+
 def test_read_gmsh22_drops_unused_nodes_reorients_and_names_unnamed_tags(tmp_path):
     path = tmp_path / "square22.msh"
     path.write_text(GMSH22_SQUARE)
