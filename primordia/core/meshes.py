@@ -358,8 +358,8 @@ def read_mesh(path: str | Path) -> MeshData:
     points = _points_in_dimension(np.asarray(raw.points, dtype=np.float64), tdim, path)
     boundaries = _tagged_facets(raw, tdim)
     _check_vertex_indices(cells, boundaries, len(points), path)
-    points, cells, boundaries = _drop_unused_points(points, cells, boundaries)
     what = f"mesh file {path}"
+    points, cells, boundaries = _drop_unused_points(points, cells, boundaries, what)
     _check_coordinate_range(points, what)
     _check_no_coincident_vertices(points, cells, what)
     _check_not_degenerate(points, cells, what)
@@ -494,19 +494,23 @@ def _check_vertex_indices(cells, boundaries, n_points: int, path: Path) -> None:
             raise MeshError(f"mesh file {path}: {what} refer to vertices that do not exist")
 
 
-def _drop_unused_points(points, cells, boundaries):
-    """Remove vertices no cell refers to, renumbering cells and boundary facets."""
+def _drop_unused_points(points, cells, boundaries, what: str):
+    """Remove vertices no cell refers to, renumbering cells and boundary facets; MeshError for a facet on one.
+
+    Such a facet is no side of a cell (a curve an exporter gave nodes of its own): dropping it with the
+    vertices emptied its boundary, and a condition on it was lost without a word.
+    """
     used = np.zeros(len(points), dtype=bool)
     used[cells.ravel()] = True
     if used.all():
         return points, cells, boundaries
-    new_index = np.cumsum(used) - 1
-    kept = {}
     for name, facets in boundaries.items():
-        # A facet off the cells (e.g. a stray Gmsh curve) cannot bound them.
-        on_mesh = used[facets].all(axis=1)
-        kept[name] = new_index[facets[on_mesh]]
-    return points[used], new_index[cells], kept
+        off = np.count_nonzero(~used[facets].all(axis=1))
+        if off:
+            raise MeshError(f"{what}: boundary '{name}' has {_facets_text(off)} that no cell has as a side "
+                            f"(on vertices no cell uses)")
+    new_index = np.cumsum(used) - 1
+    return points[used], new_index[cells], {name: new_index[facets] for name, facets in boundaries.items()}
 
 
 def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarray], what: str) -> None:

@@ -465,6 +465,21 @@ def test_read_mesh_refuses_named_facets_that_are_not_one_boundarys_exterior_face
     assert "\n" not in str(error.value)
 
 
+def test_read_mesh_refuses_named_facets_on_vertices_no_cell_uses(tmp_path):
+    """An exporter that gave the top curve nodes of its own (at the coordinates of the cells' nodes): the facets
+    were dropped with the unused vertices, 'top' came back empty, and a traction on it was lost without a word."""
+    square = rectangle((0, 0), (1, 1), (3, 3))
+    top = square.boundaries["top"]
+    points = np.vstack([square.points, square.points[np.unique(top)]])
+    copies = dict(zip(np.unique(top), square.num_vertices + np.arange(len(np.unique(top)))))
+    stray = {**square.boundaries, "top": np.vectorize(copies.get)(top)}
+    mesh = gmsh_mesh_from(MeshData(points, square.cells, stray))
+    meshio.write(tmp_path / "stray.msh", mesh, file_format="gmsh22")
+    with pytest.raises(MeshError, match="boundary 'top' has 3 facets that no cell has as a side") as error:
+        read_mesh(tmp_path / "stray.msh")
+    assert "\n" not in str(error.value)
+
+
 def test_read_mesh_keeps_a_boundary_listed_twice_or_reversed(tmp_path):
     square = rectangle((0, 0), (1, 1), (3, 3))
     top = square.boundaries["top"]
