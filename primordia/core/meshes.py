@@ -47,6 +47,10 @@ CONFIG_KEYS = {
 #: keeps physical points and curves as ``vertex`` / ``line`` blocks).
 _AUXILIARY_CELL_TYPES = {2: {"vertex", "line"}, 3: {"vertex", "line", "triangle"}}
 
+#: XDMF topology types of the cells and of the facets an XDMF file of several grids is read for.
+_XDMF_CELLS = {"Triangle": "triangle", "Tetrahedron": "tetra"}
+_XDMF_FACETS = {"PolyLine": "line", "Triangle": "triangle"}
+
 #: A triangle mesh with 3 coordinates is plane when its z spans at most this fraction of its x, y extent:
 #: a plane mesh rotated or moved by another tool keeps z = constant only to round-off.
 _FLAT_Z_FRACTION = 1e-12
@@ -343,9 +347,10 @@ def read_mesh(path: str | Path) -> MeshData:
     Gmsh files (``.msh`` v2 or v4): facet blocks (``line`` in 2D, ``triangle``
     in 3D) tagged by ``gmsh:physical`` become named boundaries, named after
     the physical names in ``field_data`` (``boundary_<tag>`` when a tag has no
-    name).  Other formats load without boundaries unless their facet blocks
-    carry such tags.  A 2D mesh stored with a constant z (normally 0) comes
-    back with gdim 2.  Vertices no cell uses (e.g. Gmsh geometry points) are
+    name).  An XDMF file of dolfinx's ``XDMFFile`` (a mesh grid and a facet tags
+    grid) gives each tag the boundary ``boundary_<tag>``.  Other formats load
+    without boundaries unless their facet blocks carry such tags.  A 2D mesh
+    stored with a constant z (normally 0) comes back with gdim 2.  Vertices no cell uses (e.g. Gmsh geometry points) are
     dropped and the rest renumbered; cells are reoriented to positive volume.
     """
     path = Path(path)
@@ -379,6 +384,9 @@ def _read_with_meshio(path: Path):
     reasons = []
     for file_format in _candidate_formats(path):
         mesh, reason = _try_meshio_format(path, file_format)
+        if mesh is None and file_format == "xdmf":  # meshio reads one grid, dolfinx writes a mesh and its tags as two
+            mesh, grids_reason = _xdmf_mesh_and_tags(path)
+            reason = grids_reason or reason
         if mesh is not None:
             return mesh
         reasons.append(f"as {file_format}: {reason}")
@@ -413,6 +421,59 @@ def _try_meshio_format(path: Path, file_format: str):
         return None, f"it refers to{key}, which it does not define (KeyError)"
     except Exception as error:  # readers raise many kinds for malformed files
         return None, _one_line(str(error)) or type(error).__name__
+
+
+def _xdmf_mesh_and_tags(path: Path):
+    """(the meshio.Mesh of an XDMF file that holds its mesh beside other grids, None), else (None, why not or None).
+
+    dolfinx's ``XDMFFile`` writes a mesh and its facet tags as two grids (``write_mesh``,
+    ``write_meshtags``), and a run's ``fields.xdmf`` its mesh beside a temporal collection.
+    The one grid of cells with a geometry of its own is the mesh; a grid of its facets with
+    values on them gives their tags (``gmsh:physical``: boundaries ``boundary_<tag>``).
+    A file of one grid, or of no such mesh grid, gives (None, None): meshio's reason stands.
+    """
+    import xml.etree.ElementTree as ET
+
+    import meshio
+
+    try:
+        all_grids = ET.parse(path).getroot().find("Domain").findall("Grid")
+    except (OSError, AttributeError, ET.ParseError):
+        return None, None
+    grids = [grid for grid in all_grids
+             if grid.get("GridType", "Uniform") == "Uniform" and grid.find("Topology") is not None]
+    meshes = [grid for grid in grids
+              if grid.find("Geometry") is not None and grid.find("Topology").get("TopologyType") in _XDMF_CELLS]
+    if len(all_grids) < 2 or len(meshes) != 1:
+        return None, None
+    (mesh,) = meshes
+    try:
+        cell_type = _XDMF_CELLS[mesh.find("Topology").get("TopologyType")]
+        facet_type = FACET_TYPES[3 if cell_type == "tetra" else 2]
+        blocks = [(cell_type, _xdmf_data(mesh.find("Topology/DataItem"), path.parent))]
+        tags = [np.zeros(len(blocks[0][1]), dtype=np.int64)]
+        for grid in grids:
+            topology, values = grid.find("Topology"), grid.find("Attribute[@Center='Cell']/DataItem")
+            if grid is not mesh and values is not None and _XDMF_FACETS.get(topology.get("TopologyType")) == facet_type:
+                blocks.append((facet_type, _xdmf_data(topology.find("DataItem"), path.parent)))
+                tags.append(_xdmf_data(values, path.parent).ravel())
+        points = _xdmf_data(mesh.find("Geometry/DataItem"), path.parent, np.float64)
+        return meshio.Mesh(points, blocks, cell_data={"gmsh:physical": tags}), None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:  # e.g. its HDF5 file is gone
+        return None, _one_line(str(error)) or type(error).__name__
+
+
+def _xdmf_data(item, folder: Path, dtype=np.int64) -> np.ndarray:
+    """The array of an XDMF DataItem: in an HDF5 file (``file.h5:/dataset``, next to the XDMF file) or inline."""
+    shape = [int(size) for size in item.get("Dimensions").split()]
+    text = item.text.strip()
+    if item.get("Format", "XML") == "HDF":
+        import h5py
+
+        file_name, dataset = text.rsplit(":", 1)
+        with h5py.File(folder / file_name, "r") as h5:
+            return np.asarray(h5[dataset], dtype=dtype).reshape(shape)
+    return np.array(text.split(), dtype=np.float64).astype(dtype).reshape(shape)
 
 
 def _one_line(text: str) -> str:

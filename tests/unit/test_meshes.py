@@ -385,6 +385,86 @@ def test_a_mesh_file_too_large_for_the_memory_is_refused_as_a_generated_mesh_is(
     assert "\n" not in str(error.value)
 
 
+#: A mesh and its facet tags as dolfinx's XDMFFile writes them (write_mesh, then write_meshtags): two grids,
+#: the tags' sharing the mesh's geometry.
+DOLFINX_XDMF = """<?xml version="1.0"?>
+<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>
+<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">
+  <Domain>
+    <Grid Name="mesh" GridType="Uniform">
+      <Topology TopologyType="{cell}" NumberOfElements="{cells}" NodesPerElement="{corners}">
+        <DataItem Dimensions="{cells} {corners}" NumberType="Int" Format="HDF">tissue.h5:/Mesh/mesh/topology</DataItem>
+      </Topology>
+      <Geometry GeometryType="{geometry}">
+        <DataItem Dimensions="{points} {gdim}" Format="HDF">tissue.h5:/Mesh/mesh/geometry</DataItem>
+      </Geometry>
+    </Grid>
+    <Grid Name="facet_tags" GridType="Uniform">
+      <xi:include xpointer="xpointer(/Xdmf/Domain/Grid/Geometry)" />
+      <Topology TopologyType="{facet}" NumberOfElements="{facets}" NodesPerElement="{gdim}">
+        <DataItem Dimensions="{facets} {gdim}" NumberType="Int" Format="HDF"
+          >tissue.h5:/MeshTags/facet_tags/topology</DataItem>
+      </Topology>
+      <Attribute Name="facet_tags" AttributeType="Scalar" Center="Cell">
+        <DataItem Dimensions="{facets} 1" Format="HDF">tissue.h5:/MeshTags/facet_tags/Values</DataItem>
+      </Attribute>
+    </Grid>
+  </Domain>
+</Xdmf>
+"""
+
+
+def write_dolfinx_xdmf(directory, original: MeshData):
+    """``original`` and its boundaries' facet tags (10 x its boundary ids) in directory/tissue.xdmf and .h5."""
+    import h5py
+
+    facets = np.vstack(list(original.boundaries.values()))
+    tags = np.concatenate([np.full(len(f), 10 * original.boundary_id(n)) for n, f in original.boundaries.items()])
+    with h5py.File(directory / "tissue.h5", "w") as h5:
+        h5["Mesh/mesh/topology"], h5["Mesh/mesh/geometry"] = original.cells, original.points
+        h5["MeshTags/facet_tags/topology"], h5["MeshTags/facet_tags/Values"] = facets, tags
+    gdim = original.gdim
+    (directory / "tissue.xdmf").write_text(DOLFINX_XDMF.format(
+        cell=["Triangle", "Tetrahedron"][gdim - 2], facet=["PolyLine", "Triangle"][gdim - 2], gdim=gdim,
+        geometry=["XY", "XYZ"][gdim - 2], cells=original.num_cells, corners=gdim + 1, points=original.num_vertices,
+        facets=len(facets)))
+    return directory / "tissue.xdmf"
+
+
+@pytest.mark.parametrize("make", [lambda: rectangle((0, 0), (2, 1), (4, 2)),
+                                  lambda: box((0, 0, 0), (1, 2, 3), (2, 2, 2))], ids=["triangles", "tetrahedra"])
+def test_read_an_xdmf_mesh_with_facet_tags_as_dolfinx_writes_it(tmp_path, make):
+    """meshio reads one grid per XDMF file: the mesh and facet tags of dolfinx's XDMFFile (the FEniCSx way to give
+    a mesh its boundary markers) were refused whole, "XDMF reader: Only supports one grid right now"."""
+    original = make()
+    mesh = read_mesh(write_dolfinx_xdmf(tmp_path, original))
+    np.testing.assert_array_equal(mesh.points, original.points)
+    np.testing.assert_array_equal(mesh.cells, original.cells)
+    assert list(mesh.boundaries) == [f"boundary_{10 * i}" for i in original.boundary_ids.values()]
+    for name, facets in original.boundaries.items():
+        np.testing.assert_array_equal(mesh.boundaries[f"boundary_{10 * original.boundary_id(name)}"], facets)
+
+
+def test_an_xdmf_mesh_with_facet_tags_whose_hdf5_file_is_gone_is_refused_naming_it(tmp_path):
+    path = write_dolfinx_xdmf(tmp_path, rectangle((0, 0), (2, 1), (4, 2)))
+    (tmp_path / "tissue.h5").unlink()
+    with pytest.raises(MeshError, match=r"as xdmf: .*Unable to open file.*tissue\.h5") as error:
+        read_mesh(path)
+    assert "\n" not in str(error.value)
+
+
+def test_read_the_mesh_of_a_runs_fields_xdmf(tmp_path):
+    """A run's fields.xdmf (a mesh grid and a temporal collection) gives its mesh, as ParaView reads it."""
+    from primordia.core.xdmf import XdmfSeries
+
+    original = rectangle((0, 0), (2, 1), (4, 2))
+    XdmfSeries(tmp_path, original).write(1.0, {"m": original.points[:, 0]})
+    mesh = read_mesh(tmp_path / "fields.xdmf")
+    np.testing.assert_array_equal(mesh.points, original.points)
+    np.testing.assert_array_equal(mesh.cells, original.cells)
+    assert mesh.boundaries == {}
+
+
 def write_vtu(path, points, cells):
     meshio.write(path, meshio.Mesh(np.asarray(points, dtype=float), cells))
     return path
