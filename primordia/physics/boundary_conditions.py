@@ -319,6 +319,9 @@ def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:
         if boundary not in mesh_data.boundaries:
             raise ConfigError(f"boundary condition '{kind}' names boundary {boundary!r}, which the mesh lacks "
                               f"(it has: {', '.join(mesh_data.boundaries) or 'none'})")
+        if not len(mesh_data.boundaries[boundary]):  # a MeshData built by hand; files and generators name no empty one
+            raise ConfigError(f"boundary condition '{kind}' names boundary {boundary!r}, which has no facets "
+                              f"(the condition would act on nothing)")
         condition = kinds[kind](boundary, table.get("value"), table.get("constants"), gdim)
         if _is_dirichlet(condition):
             other = next((c for c in conditions if _is_dirichlet(c) and c.boundary == boundary

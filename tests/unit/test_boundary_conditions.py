@@ -101,6 +101,15 @@ def test_a_bad_condition_is_one_line_naming_it(table, message):
     assert message in str(failure.value) and "\n" not in str(failure.value)
 
 
+def test_a_condition_on_a_boundary_without_facets_is_refused():
+    """A MeshData built by hand with an empty 'top': a traction on it acted on nothing and the run completed."""
+    mesh = MeshData(MESH.points, MESH.cells, {**MESH.boundaries, "top": np.zeros((0, 2), dtype=int)})
+    with pytest.raises(ConfigError) as failure:
+        conditions_from_config([{"boundary": "top", "type": "traction", "value": ["0", "1"]}], mesh, 2)
+    assert str(failure.value) == ("boundary condition 'traction' names boundary 'top', which has no facets "
+                                  "(the condition would act on nothing)")
+
+
 def test_normal_displacement_needs_an_axis_aligned_boundary(disc):
     slanted = MeshData(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), np.array([[0, 1, 2]]),
                        {"hypotenuse": np.array([[1, 2]])})
