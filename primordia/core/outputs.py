@@ -156,8 +156,22 @@ class ScalarSeriesNetcdf(Output):
     described: frozenset = frozenset()  # the variables given their attributes (long_name, units)
 
     def start(self, run):
-        self.series = ScalarSeries(run.out_dir / "series.nc", min_interval=SERIES_INTERVAL) if run.is_root else None
+        self.series = self._series(run)
         self.record(run)
+
+    @staticmethod
+    def _series(run) -> ScalarSeries | None:
+        """The root rank's series file, with attributes saying what wrote it (None on the other ranks)."""
+        if not run.is_root:
+            return None
+        from primordia import __version__
+
+        model = f"model {run.model.name!r}" if run.model.name else "an unnamed model"
+        about = {"title": f"primordia scalar series of {model} ({run.out_dir.name})",
+                 "source": f"primordia {__version__}, backend {run.backend.name}, {run.comm.size} MPI rank(s), "
+                           f"splitting scheme {run.scheme.name}",
+                 "references": "the run's configuration: config.toml beside this file"}
+        return ScalarSeries(run.out_dir / "series.nc", min_interval=SERIES_INTERVAL, global_attrs=about)
 
     def record(self, run):
         row = {"step": run.step_index}
@@ -183,7 +197,7 @@ class ScalarSeriesNetcdf(Output):
         return self.series.state() if self.series is not None else {}
 
     def resume(self, run, state):
-        self.series = ScalarSeries(run.out_dir / "series.nc", min_interval=SERIES_INTERVAL) if run.is_root else None
+        self.series = self._series(run)
         if run.is_root:
             self.series.restore(state)
 

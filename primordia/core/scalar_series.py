@@ -30,7 +30,8 @@ class ScalarSeries:
     per key.  A key first seen at a later row is NaN in the earlier rows, and
     a row that omits a known key is NaN there.  ``attrs`` maps a key (or
     ``"time"``) to netCDF attributes such as ``{"units": "dimensionless",
-    "description": "integral of m over the domain"}``.
+    "description": "integral of m over the domain"}``; ``global_attrs`` are the file's
+    own (``title``, ``source``, ...).
 
     Events that do not fall on the rows (e.g. every rejected time step) go to
     their own dimension: ``add_event("rejection", {"time": 0.4, "dt": 0.1,
@@ -49,8 +50,9 @@ class ScalarSeries:
     """
 
     def __init__(self, path: str | Path, attrs: Mapping[str, Mapping[str, str]] | None = None,
-                 min_interval: float = 0.0):
+                 min_interval: float = 0.0, global_attrs: Mapping[str, str] | None = None):
         self.path = writable_target(path)
+        self.global_attrs = {str(k): str(v) for k, v in (global_attrs or {}).items()}
         self.min_interval = float(min_interval)
         self._written_at: float | None = None  # time.monotonic() of the last rewrite
         self._pending = False  # rows appended since the last rewrite
@@ -106,7 +108,7 @@ class ScalarSeries:
 
         variables = self._variables()
         time = variables.pop("time")
-        return xr.Dataset(variables, coords={"time": time})
+        return xr.Dataset(variables, coords={"time": time}, attrs=self.global_attrs)
 
     def _variables(self) -> dict[str, tuple[str, np.ndarray, dict]]:
         """Every variable of the file: name -> (dimension, values, attributes), the time coordinate first."""
@@ -139,7 +141,7 @@ class ScalarSeries:
     def _write(self) -> None:
         variables = self._variables()
         with atomic_path(self.path) as temporary:
-            _write_netcdf(temporary, variables)
+            _write_netcdf(temporary, variables, self.global_attrs)
         self._written_at, self._pending = time.monotonic(), False
 
     def _check_time(self, t) -> float:
@@ -159,7 +161,8 @@ class ScalarSeries:
             self._attrs.setdefault(_variable_name(key), {}).update({str(k): str(v) for k, v in key_attrs.items()})
 
 
-def _write_netcdf(path: Path, variables: Mapping[str, tuple[str, np.ndarray, dict]]) -> None:
+def _write_netcdf(path: Path, variables: Mapping[str, tuple[str, np.ndarray, dict]],
+                  global_attrs: Mapping[str, str] | None = None) -> None:
     """NetCDF3 with 64-bit offsets, as xarray's scipy engine writes a Dataset of these variables: float64
     with a NaN ``_FillValue``, text as UTF-8 characters along a ``string<N>`` dimension.
 
@@ -173,6 +176,7 @@ def _write_netcdf(path: Path, variables: Mapping[str, tuple[str, np.ndarray, dic
     from scipy.io import netcdf_file
 
     with netcdf_file(str(path), "w", version=2) as target:
+        target._attributes.update(global_attrs or {})  # the table itself: "version" or "mode" would be the file's
         for name, (dimension, values, attrs) in variables.items():
             if dimension not in target.dimensions:
                 target.createDimension(dimension, len(values))

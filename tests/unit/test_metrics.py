@@ -159,6 +159,9 @@ def test_run_directory_in_reference_and_current_configuration(tmp_path):
     assert float(ds["predicted_wavenumber"]) == pytest.approx(2.784, abs=1e-3)
     # written, and readable with every spot
     saved = xr.open_dataset(tmp_path / "metrics.nc")
+    # units a tool can read (UDUNITS), and the series' own for the time: "2 pi / length" and "dimensionless
+    # (seed scaling)" were neither
+    assert saved["wavenumber"].attrs["units"] == "1" and saved["time"].attrs["units"] == "dimensionless"
     count = int(saved["spot_count"].sel(species="m", time=20.0, configuration="reference"))
     assert count > 20
     assert np.isfinite(saved["spot_x"].sel(species="m", time=20.0, configuration="reference").values).sum() == count

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -141,6 +142,8 @@ class StandInRun:
         self.time, self.step_index = 0.0, 0
         self.outputs: list = []  # the outputs the run calls, in order (the summary looks for the series)
         self.diagnostics: list = []  # the physics' Diagnostics (their descriptions name series variables)
+        self.model, self.backend = SimpleNamespace(name="stand-in"), SimpleNamespace(name="none")
+        self.scheme = SimpleNamespace(name="sequential")
 
     def advance(self, dt: float = 0.2) -> None:
         self.time, self.step_index = round(self.time + dt, 12), self.step_index + 1
@@ -187,12 +190,15 @@ def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_p
     series.finish(run, "completed")  # rows recorded soon after a rewrite wait for the next one, or the end
     with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
         np.testing.assert_allclose(data["time"], [0.0, 0.2, 0.4])
+        assert data.attrs["title"] == f"primordia scalar series of model 'stand-in' ({tmp_path.name})"
+        assert data.attrs["source"].endswith("backend none, 1 MPI rank(s), splitting scheme sequential")
         np.testing.assert_allclose(data["m_integral"], [0.0, 3.2, 6.4])
         np.testing.assert_allclose(data["memory_mb"], [100.0, 101.0, 102.0])
     resumed = ScalarSeriesNetcdf()
     resumed.resume(run, state)
     with xr.open_dataset(tmp_path / "series.nc", engine="scipy") as data:
         np.testing.assert_allclose(data["time"], [0.0, 0.2])
+        assert data.attrs["title"].startswith("primordia scalar series")  # a continued run's file keeps them
     assert leftovers(tmp_path) == []
 
 

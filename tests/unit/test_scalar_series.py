@@ -38,7 +38,7 @@ def test_scalar_series_write_that_dies_leaves_the_previous_file(tmp_path, monkey
     series = ScalarSeries(path)
     series.append(0.0, {"m_max": 3.0})
 
-    def die_after_partial_write(target, variables):
+    def die_after_partial_write(target, variables, global_attrs):
         with open(target, "wb") as partial:
             partial.write(b"CDF\x01 half a header")
         raise WriterDied("killed while writing netCDF")
@@ -56,7 +56,8 @@ def test_the_file_is_what_xarray_writes(tmp_path):
     """The series is written by scipy's NetCDF writer: xarray must read it as what it writes itself, values,
     attributes and encodings (float64 with a NaN fill value, UTF-8 text along string<N>)."""
     series = ScalarSeries(tmp_path / "series.nc", attrs={"m_max": {"units": "dimensionless"},
-                                                         "time": {"units": "days"}})
+                                                         "time": {"units": "days"}},
+                          global_attrs={"title": "a series", "version": "the file's own, not scipy's"})
     series.append(0.0, {"m_max": 3.0})
     series.append(0.5, {"m_max": 4.0, "linear_iterations": 7})  # NaN in the first row
     series.add_event("rejections", {"t": 0.25, "subproblem": "chemotaxis.m", "reason": "diverged, étape 1"})
@@ -75,6 +76,7 @@ def test_the_file_is_what_xarray_writes(tmp_path):
     with xr.open_dataset(series.path) as ours:
         assert ours["rejections_reason"].values.tolist() == ["diverged, étape 1", ""]
         assert ours["time"].attrs == {"units": "days"}
+        assert ours.attrs == {"title": "a series", "version": "the file's own, not scipy's"}
 
 
 def test_a_row_imports_neither_xarray_nor_dask(tmp_path):

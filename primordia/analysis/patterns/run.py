@@ -31,6 +31,7 @@ from primordia.analysis.patterns.metrics import (
     pattern_metrics,
 )
 from primordia.core.errors import ConfigError, one_line
+from primordia.core.outputs import SERIES_OWN
 
 METRICS_FILE = "metrics.nc"
 
@@ -261,11 +262,12 @@ def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predict
         spectrum[at] = np.interp(wavenumbers, m.metrics.wavenumbers, m.metrics.power, right=np.nan)
     ds = xr.Dataset(
         {name: (dims, scalars[name], {"long_name": text}) for name, _, text in SCALAR_METRICS},
-        coords={"time": ("time", np.array(times), {"units": "dimensionless (seed scaling)"}),
+        coords={"time": ("time", np.array(times), {"long_name": SERIES_OWN["time"][0], "units": SERIES_OWN["time"][1]}),
                 "configuration": ("configuration", configurations, {
                     "long_name": "reference: on X; current: on x = X + u"}),
                 "species": ("species", species),
-                "wavenumber": ("wavenumber", wavenumbers, {"units": "2 pi / length"})},
+                "wavenumber": ("wavenumber", wavenumbers, {  # radians per length, both dimensionless
+                    "long_name": "wavenumber k = 2 pi / wavelength (dimensionless, seed section 2)", "units": "1"})},
     )
     ds["pattern"] = (dims, kind, {"long_name": "pattern kind", "flag_values": np.arange(len(PATTERN_KINDS),
                                                                                         dtype=np.int8),
