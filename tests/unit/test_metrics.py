@@ -77,6 +77,18 @@ def test_stripes_of_known_wavelength():
     assert metrics.orientation_order > 0.9
 
 
+def test_the_dominant_wavelength_of_stripes_is_within_what_the_readme_states():
+    """README ("Pattern metrics"): on the 20 x 20 box, plane stripes of wavelength 2 to 4 at 0 to 90 degrees
+    give it within 2.6%, median 1.0% (the spectrum resolves k to about 2 pi / 20)."""
+    errors = []
+    for wavelength in np.linspace(2.0, 4.0, 9):
+        for angle in np.deg2rad([0, 30, 60, 90]):
+            direction = np.array([np.cos(angle), np.sin(angle)])
+            metrics = measure(np.cos(2 * np.pi / wavelength * MESH.points @ direction))
+            errors.append(abs(metrics.dominant_wavelength / wavelength - 1))
+    assert np.median(errors) < 0.011 and max(errors) < 0.027
+
+
 def test_labyrinth_from_random_waves_of_one_wavelength():
     wavelength = 3.0
     rng = np.random.default_rng(3)
