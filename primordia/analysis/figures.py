@@ -180,7 +180,7 @@ def dispersion_figure(ds: xr.Dataset, path=None, branches: int = 4):
             axes[2].plot(k, ds["d0"].values / (modulus * (2 * mu + lam) * K**3),
                          label="d_0 / ((kappa/eta)(2mu+lambda) k^6) (coupled)")
         else:
-            axes[2].plot(k, ds["constant_term"].values, label="det M(0, k) / prod |M_ii(0, k)|")
+            axes[2].plot(k, ds["constant_term"].values, label="det M(0, k) / prod |row i of M(0, k)| (in [-1, 1])")
     if seed:
         small_k = [abs(line.get_ydata()[0]) for line in axes[2].get_lines()]
         axes[2].set_yscale("symlog", linthresh=max(min(small_k), 1e-12))  # the sign at small k matters

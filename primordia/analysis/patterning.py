@@ -337,8 +337,10 @@ def model_dispersion_relation(linear, k=None, d: int = 2, nk: int = 241) -> xr.D
     ``linear`` is a :class:`~primordia.analysis.composed.LinearisedModel`.  The
     variables of :func:`dispersion_relation` (``branch`` runs over every root but
     the shear waves), with ``constant_term`` = det M(0, k), scaled by the product of
-    its diagonal entries, in place of a_0 and d_0 (negative: a real positive root);
-    attributes also name the physics, the kinetics and the steady state.
+    the norms of its rows, in place of a_0 and d_0 (negative: a real positive root);
+    attributes also name the physics, the kinetics and the steady state.  By Hadamard's
+    inequality the scaled term lies in [-1, 1]; scaled by the product of the diagonal
+    entries, as it was, it spiked wherever one of them crossed zero (Schnakenberg's at k = 4).
     """
     k = linear.wavenumbers(nk) if k is None else np.asarray(k, dtype=float)
     M0 = linear.pencil(wave_vectors(k, d))[0]
@@ -348,10 +350,11 @@ def model_dispersion_relation(linear, k=None, d: int = 2, nk: int = 241) -> xr.D
                         physics=", ".join(linear.physics), kinetics=linear.kinetics,
                         species=", ".join(linear.species), notes="; ".join(linear.notes),
                         **{f"steady_state_{name}": value for name, value in linear.steady_state.values.items()})
-    diagonal = np.prod(np.abs(np.diagonal(M0, axis1=-2, axis2=-1)), axis=-1)
+    rows = np.prod(np.linalg.norm(M0, axis=-1), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ds["constant_term"] = ("k", np.linalg.det(M0).real / diagonal, {
-            "long_name": "det M(0, k) / prod_i |M_ii(0, k)|: negative where a real root phi > 0 exists"})
+        ds["constant_term"] = ("k", np.linalg.det(M0).real / rows, {
+            "long_name": "det M(0, k) / prod_i |row i of M(0, k)|, in [-1, 1]: negative where a real root "
+                         "phi > 0 exists"})
     return ds
 
 

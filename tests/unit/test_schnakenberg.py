@@ -191,3 +191,23 @@ def test_the_command_says_which_kind_of_mode_is_missing_when_the_kinetics_oscill
     assert "fastest stationary (Turing) mode: none: no stationary root at any k searched" in printed
     assert "-inf" not in printed
     assert "no admissible mode grows as a stationary mode" in printed
+
+
+def test_the_dispersion_datasets_constant_term_has_dets_sign_and_no_spikes():
+    """Scaled by the product of M's diagonal entries it spiked where one crossed zero (here the activator's,
+    gamma f_u - k^2 with f_u = (b - a) / (a + b) = 0.8: at k = 0.894); scaled by the rows' norms (Hadamard's
+    inequality) it lies in [-1, 1] with det's sign."""
+    from primordia.analysis.dispersion import wave_vectors
+    from primordia.analysis.patterning import model_dispersion_relation
+
+    a, b, gamma = 0.1, 0.9, 1.0
+    linear = linearise_model(schnakenberg(a=a, b=b, gamma=gamma, D_u=1.0, D_v=20.0))
+    k = np.linspace(0.05, 8.0, 400)
+    term = model_dispersion_relation(linear, k=k)["constant_term"].values
+    M0 = linear.pencil(wave_vectors(k, 2))[0]
+    assert np.all(np.abs(term) <= 1.0 + 1e-12)
+    assert np.array_equal(np.sign(term), np.sign(np.linalg.det(M0).real))
+    diagonal = np.diagonal(M0, axis1=-2, axis2=-1).real
+    crossing = np.flatnonzero(np.diff(np.sign(diagonal[:, 0])))  # where the activator's entry changes sign
+    assert crossing.size  # the case the old scaling spiked at
+    assert np.all(np.abs(np.diff(term)) < 0.1)  # a smooth curve on this grid
