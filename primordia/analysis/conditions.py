@@ -443,7 +443,7 @@ def epithelium_verdict(params, case: str = "no_activation", k=None) -> Verdict:
         case=f"epithelium {case.replace('_', ' ')} (seed section 3.5)",
         patterns=numerical,
         statement=(f"{'patterns' if numerical else 'no patterns'}: A_m = A_b = 0; seed condition xi_f s > 0 "
-                   f"{_yes(seed_condition)}; xi_f s E = {float(c.coupling_strength):.4g} vs "
+                   f"{_yes(seed_condition)}; xi_f s E = {float(c.coupling_strength) + 0.0:.4g} vs "  # + 0.0: no "-0"
                    f"(2mu + lambda) D_m delta_F = {threshold:.4g}: d_0 < 0 {'near k = 0' if sharp else 'nowhere'}; "
                    f"max real rate {float(np.max(stationary)):.3g}"),
         details={"seed_condition": seed_condition, "sharp_condition": sharp, "threshold": threshold,
