@@ -6,8 +6,9 @@ the plugins the environment variable ``PRIMORDIA_PLUGINS`` names, installed or n
 (as pytest's ``PYTEST_PLUGINS``: module names or paths of ``.py`` files, separated
 by commas; ``primordia -p`` adds to it).  An installed plugin that fails to import or
 register produces one warning naming it and is skipped; the rest keeps working.  A
-plugin named in the variable was asked for: one that fails stops the program in one line.  :func:`registry` turns the contribute
-hooks into name -> class tables and reports where each piece came from.
+plugin named in the variable was asked for: one that fails stops the program in one
+line.  :func:`registry` turns the contribute hooks into name -> class tables and
+reports where each piece came from.
 
 A plugin is trusted with nothing: a contribute hook that raises, returns
 something other than a list of named pieces of the right kind, or reuses a name
