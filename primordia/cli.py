@@ -55,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "table {k=v} adds to the table it names)")
     run.add_argument("--restart", metavar="OUT_DIR",
                      help="continue the run in OUT_DIR from its checkpoint, in place (--set may change "
-                          "time.t_final, output, checkpoint and solver options)")
+                          "time.t_final, time.adaptive, time.dt_min, output, checkpoint and solver options)")
     run.add_argument("--overwrite", action="store_true",
                      help="replace the run already in the output directory (otherwise it is refused)")
     run.add_argument("--dry-run", action="store_true", help="check the input (config, mesh, formulas) and stop")
