@@ -143,14 +143,15 @@ class Sweep:
     axes: tuple[Axis, ...]
     seeds: tuple[int, ...] = ()
     fixed: tuple[str, ...] = ()
-    out: Path = Path("out/sweep")
+    out: Path | None = None  #: default out/sweep_<config name>, as the command's
     config_text: str = field(init=False, repr=False)  #: the configuration file as read, for fingerprints
     base_config: dict = field(init=False, repr=False)  #: resolved configuration with the fixed overrides
 
     def __post_init__(self):
         from primordia.model import Model
 
-        self.config, self.out = Path(self.config), Path(self.out)
+        self.config = Path(self.config)
+        self.out = Path(self.out) if self.out is not None else Path("out") / f"sweep_{self.config.stem}"
         if not self.axes:
             raise ConfigError("sweep needs at least one --vary SECTION.KEY=LO:HI:N")
         runs = int(np.prod([len(values) for _, values in self.dimensions], dtype=float))
@@ -795,7 +796,7 @@ def command_sweep(args) -> int:
         number(args.timeout, "--timeout", above=0, hint="seconds")
     config = Path(args.config)
     sweep = Sweep(config, tuple(Axis.parse(text) for text in args.vary), tuple(range(1, args.seeds + 1)),
-                  tuple(args.overrides), Path(args.out) if args.out else Path("out") / f"sweep_{config.stem}")
+                  tuple(args.overrides), Path(args.out) if args.out else None)
     print(f"primordia sweep: {len(sweep.points())} runs of {config} over "
           + " x ".join(f"{name} ({len(values)})" for name, values in sweep.dimensions) + f" -> {sweep.out}")
     try:

@@ -169,6 +169,13 @@ def test_sweep_into_an_output_that_cannot_be_a_directory(small_config, primordia
     assert len(result.stderr.strip().splitlines()) == 1
 
 
+def test_a_python_sweep_writes_where_the_command_would(small_config, tmp_path, monkeypatch):
+    """Sweep(...) wrote to out/sweep, the command to out/sweep_<config name>: the same sweep in two places."""
+    monkeypatch.chdir(tmp_path)
+    sweep = Sweep(small_config(COARSE), (Axis.parse("parameters.alpha=2:6:2"),))
+    assert sweep.out == Path("out") / "sweep_small"
+
+
 def test_sweep_of_a_missing_config(primordia_cli, tmp_path):
     result = primordia_cli("sweep", tmp_path / "missing.toml", "--vary", "parameters.alpha=2:8:3")
     assert result.returncode == 2 and result.stderr.startswith("primordia: error: config file not found")
