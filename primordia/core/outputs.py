@@ -464,8 +464,10 @@ def declared_options(outputs: Iterable[type[Output]]) -> dict[str, OutputOption]
 
 #: Files whose presence means a directory holds a run.
 RUN_FILES = ("summary.json", "config.toml", "series.nc", "fields.xdmf", CHECKPOINT_FILE)
+#: What ``primordia analyse`` writes into a run's directory (:mod:`primordia.analysis.patterns.run`).
+ANALYSIS_FILE = "metrics.nc"
 #: What a run (and ``primordia analyse`` of it) writes besides: removed with it by :func:`clear_run`.
-RUN_LEFTOVERS = ("fields_h5", "*.png", "metrics.nc", ".*.tmp-*")
+RUN_LEFTOVERS = ("fields_h5", "*.png", ANALYSIS_FILE, ".*.tmp-*")
 
 
 def existing_run(directory: str | Path) -> str | None:

@@ -151,7 +151,7 @@ class Simulation:
 
     def _claim_directory(self):
         """Make ``out_dir`` this run's: refuse, clear or keep a run already in it (decided on rank 0 for all)."""
-        from primordia.core.outputs import clear_run, directory_problem, existing_run
+        from primordia.core.outputs import ANALYSIS_FILE, clear_run, directory_problem, existing_run
 
         problem = None
         if self.is_root:
@@ -170,6 +170,9 @@ class Simulation:
                              f"({self.model.checkpoint['every_minutes']:g}) and when a run stops")
             elif found and self.existing == "overwrite":
                 clear_run(self.out_dir)
+            if problem is None and self.existing == "restart" and (self.out_dir / ANALYSIS_FILE).is_file():
+                warn(f"{self.out_dir / ANALYSIS_FILE} (primordia analyse) measures the run as it was before this "
+                     f"restart; run primordia analyse {self.out_dir} again when it ends")
             if problem is None:
                 try:
                     self.out_dir.mkdir(parents=True, exist_ok=True)

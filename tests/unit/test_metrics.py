@@ -307,3 +307,17 @@ def test_a_slab_whose_top_slopes_is_measured_on_its_upper_surface(tmp_path):
     assert ds.attrs["surface"] == "the top face z = 1 to 1.1"
     assert float(ds["spacing_mean"].sel(species="m", time=20.0, configuration="reference")) == pytest.approx(
         spacing, rel=0.01)
+
+
+def test_a_restart_says_the_analysis_in_the_run_directory_is_of_the_run_before_it(tmp_path, small_config,
+                                                                                      primordia_cli):
+    """metrics.nc and its pictures stayed beside a run a restart extended, describing fewer times than its
+    fields, without a word (mesh/outputs QA pass)."""
+    out = tmp_path / "run"
+    assert primordia_cli("run", small_config(), "--out", out, "--no-progress").returncode == 0
+    assert primordia_cli("analyse", out, "--no-pictures").returncode == 0
+    extended = primordia_cli("run", "--restart", out, "--set", "time.t_final=1.4", "--no-progress")
+    assert extended.returncode == 0, extended.stderr
+    assert extended.stderr.splitlines() == [
+        f"primordia: warning: {out / 'metrics.nc'} (primordia analyse) measures the run as it was before this "
+        f"restart; run primordia analyse {out} again when it ends"]

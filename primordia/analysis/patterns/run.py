@@ -31,9 +31,9 @@ from primordia.analysis.patterns.metrics import (
     pattern_metrics,
 )
 from primordia.core.errors import ConfigError, one_line
-from primordia.core.outputs import SERIES_OWN
+from primordia.core.outputs import ANALYSIS_FILE, SERIES_OWN
 
-METRICS_FILE = "metrics.nc"
+METRICS_FILE = ANALYSIS_FILE
 
 #: The scalar metrics of one snapshot: Dataset variable, PatternMetrics attribute, long name.
 SCALAR_METRICS = (
