@@ -17,6 +17,7 @@ import ufl
 
 from primordia.core import reductions
 from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, is_p1_scalar, sub_elements
+from primordia.core.errors import MeshError
 from primordia.core.mesh_data import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
@@ -208,9 +209,19 @@ class FenicsxBackend(Backend):
         cells = data.cells if on_root else np.empty((0, gdim + 1), dtype=np.int64)
         points = data.points if on_root else np.empty((0, gdim))
         mesh = dolfinx.mesh.create_mesh(self.comm, cells, points, domain)
+        self._refuse_ranks_without_cells(mesh, len(data.cells))
         mesh.mesh_data = data
         mesh.facet_tags = self._facet_tags(mesh, data)
         return mesh
+
+    def _refuse_ranks_without_cells(self, mesh, num_cells: int) -> None:
+        """A rank that owns no cell is refused on every rank: dolfinx 0.5.2 cannot work there (collapsing a
+        vector field's component crashes the process), and a mesh of fewer cells than ranks leaves one."""
+        owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        empty = [rank for rank, count in enumerate(self.comm.allgather(owned)) if count == 0]
+        if empty:
+            raise MeshError(f"the mesh has {num_cells} cells: on {self.comm.size} ranks, {len(empty)} own none "
+                            f"(dolfinx cannot solve on a rank without cells); run it on fewer ranks")
 
     def _facet_tags(self, mesh, data: MeshData):
         tdim = mesh.topology.dim
