@@ -342,10 +342,8 @@ class Simulation:
         fields, layout = {}, {}
         for key, function in self.disc.state_functions().items():
             owned = np.array(self.backend.petsc_vector(function).getArray(readonly=True))
-            if self.comm.size == 1:
-                fields[key] = owned  # serial: the backend's own DOF order, which a restart repeats
-                continue
-            # in parallel the mesh partition differs from run to run: DOFs are stored in an order of their own
+            # DOFs are stored in an order of their own, which no partition decides: a run continues on as many
+            # ranks as it likes (a serial checkpoint held the backend's order, which only a serial run could read)
             order = self._checkpoint_order(key, function)
             parts = self.comm.gather(owned, root=0)
             if self.is_root:
@@ -392,8 +390,11 @@ class Simulation:
     def _incompatibility(self, tree: dict) -> str | None:
         """Why this run cannot continue the checkpointed one (None: it can)."""
         where = f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}"
-        if tree["mpi_ranks"] != self.comm.size:
-            return f"{where}: it was written by {tree['mpi_ranks']} MPI ranks, this run has {self.comm.size}"
+        if tree["mpi_ranks"] != self.comm.size and (not tree["layout"] or not _alike(tree["physics"])):
+            why = ("its fields are in the DOF order of a serial run (an older primordia wrote it): continue it "
+                   "in serial" if not tree["layout"] else "a physics module's state differs between its ranks")
+            return (f"{where}: it was written on {tree['mpi_ranks']} MPI rank(s), this run has {self.comm.size}, "
+                    f"and {why}")
         if tree["backend"] != self.backend.name:
             return f"{where}: it was written on backend {tree['backend']}, this run is on {self.backend.name}"
         differences = self.model.differences(tree["config"])
@@ -421,7 +422,7 @@ class Simulation:
         for key, function in self.disc.state_functions().items():
             owned = self.backend.petsc_vector(function)
             values = tree["fields"][key]
-            if self.comm.size > 1:
+            if tree["layout"]:  # empty in a serial checkpoint of an older primordia: the backend's own order
                 stored, mine = _rows(tree["layout"][key]), _rows(self._dof_layout(key, function).keys)
                 at = np.minimum(np.searchsorted(stored, mine), len(stored) - 1)
                 wrong |= not np.array_equal(stored[at], mine)
@@ -434,8 +435,9 @@ class Simulation:
         if largest(self.comm, wrong):
             raise ConfigError(f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}: its fields are "
                               f"laid out differently (another mesh partition or another discretisation)")
+        states = tree["physics"]  # one per rank of the checkpointed run, all alike if their number is not ours
         for physics in self.model.physics_objects:
-            physics.restore_state(tree["physics"][self.comm.rank].get(physics.name, {}))
+            physics.restore_state(states[self.comm.rank if len(states) == self.comm.size else 0].get(physics.name, {}))
         run = tree["run"]
         self.step_index, self.time, self.last_dt = int(run["step"]), float(run["time"]), float(run["last_dt"])
         self.step_begin, self.step_done = float(run.get("step_begin", self.time)), float(run.get("step_done", 0.0))
@@ -995,6 +997,21 @@ class _DofLayout:
     keys: np.ndarray
     sorted: bool = False
     order: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def _alike(states: list) -> bool:
+    """Whether the ranks' physics states of a checkpoint are all the same (any rank's then serves every rank)."""
+    def same(one, other) -> bool:
+        if isinstance(one, dict):
+            return isinstance(other, dict) and one.keys() == other.keys() and all(same(one[k], other[k]) for k in one)
+        if isinstance(one, (list, tuple)):
+            return (isinstance(other, (list, tuple)) and len(one) == len(other)
+                    and all(same(a, b) for a, b in zip(one, other)))
+        if isinstance(one, np.ndarray) or isinstance(other, np.ndarray):
+            return np.array_equal(one, other)
+        return one == other
+
+    return all(same(states[0], state) for state in states[1:])
 
 
 def _rows(keys: np.ndarray) -> np.ndarray:

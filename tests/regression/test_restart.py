@@ -83,6 +83,32 @@ def test_a_run_killed_at_a_random_step_and_restarted_ends_bit_for_bit_as_the_uni
             np.testing.assert_allclose(two[name].values, one[name].values, rtol=tolerance, atol=0)
 
 
+@pytest.mark.mpi
+@pytest.mark.parametrize("written_on, continued_on", [(1, 3), (3, 2), (4, 1)], ids=["1-to-3", "3-to-2", "4-to-1"])
+def test_a_checkpoint_written_on_some_ranks_is_continued_on_others(written_on, continued_on, tmp_path):
+    """A run begun on a laptop goes on on a cluster, and back: the fields are stored by DOF keys whatever the
+    ranks.  It was refused ("it was written by 1 MPI ranks, this run has 3"), and a serial checkpoint held the
+    backend's DOF order, which no other partition has."""
+    arguments = [rc.EXAMPLES / "ex01b.toml", "--set", "mesh.cells=[4,4]", "--set", "output.pictures=false",
+                 "--no-progress"]
+    whole = rc.run("run", *arguments, "--set", "time.t_final=1.6", "--set", "output.times=[0.8,1.6]",
+                   "--out", tmp_path / "whole")
+    assert whole.returncode == 0, whole.stderr[-3000:]
+    first = rc.run("run", *arguments, "--set", "time.t_final=0.8", "--set", "output.times=[0.8]",
+                   "--out", tmp_path / "parts", ranks=written_on)
+    assert first.returncode == 0, first.stderr[-3000:]
+    second = rc.run("run", "--restart", tmp_path / "parts", "--set", "time.t_final=1.6",
+                    "--set", "output.times=[0.8,1.6]", "--no-progress", ranks=continued_on)
+    assert second.returncode == 0, (rc.primordia_lines(second.stderr), second.stderr[-3000:])
+    summary = rc.summary(tmp_path / "parts")
+    assert (summary["status"], summary["restarts"], summary["steps"], summary["mpi_ranks"]) == (
+        "completed", 1, 8, continued_on)
+    expected, got = rc.final_state(tmp_path / "whole"), rc.final_state(tmp_path / "parts")
+    assert sorted(got) == sorted(expected) and any(key.endswith("/rate") for key in got)
+    for key, values in expected.items():  # other partitions: the parallel sums' round-off
+        assert np.max(np.abs(got[key] - values)) <= 1e-12 * max(1.0, np.max(np.abs(values))), key
+
+
 def test_sigterm_stops_between_steps_with_a_checkpoint_and_the_run_continues(small_config, tmp_path):
     out = tmp_path / "out"
     arguments = [small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[16,16]", "--no-progress"]
