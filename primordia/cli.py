@@ -227,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(argv)
             _broken_pipes_raise()
+            _refuse_ranks_for_a_serial_command(args.command)
             _name_plugins(args.plugins)
             return args.func(args)
         except BrokenPipeError:  # `primordia plugins | head`: the reader has all it wanted
@@ -245,6 +246,17 @@ def main(argv: list[str] | None = None) -> int:
                 return _interrupted(InterruptedRun(INTERRUPTS.received))
             _abort_other_ranks(exc)
             raise
+
+
+def _refuse_ranks_for_a_serial_command(command: str) -> None:
+    """Only ``run`` shares its work over MPI ranks: any other command ran whole on every rank of an ``mpirun``
+    (its report printed once per rank, interleaved, and its files written by every rank at once)."""
+    mpi = sys.modules.get("mpi4py.MPI")  # started with PETSc, when petsc4py is installed
+    ranks = (mpi.COMM_WORLD.size if mpi is not None
+             else int(os.environ.get("OMPI_COMM_WORLD_SIZE") or os.environ.get("PMI_SIZE") or "1"))
+    if command != "run" and ranks > 1:
+        raise ConfigError(f"primordia {command} is serial: run it without mpirun (only primordia run uses "
+                          f"several ranks; this is one of {ranks})")
 
 
 def _name_plugins(plugins: list[str]) -> None:

@@ -62,3 +62,15 @@ def test_more_ranks_than_the_mesh_has_cells_for_is_one_line(example, tmp_path):
     result = rc.run("run", rc.EXAMPLES / f"{example}.toml", "--set", "mesh.cells=[1,1]", "--set", "time.t_final=0.4",
                     "--set", "output.times=[0.4]", "--no-progress", "--out", tmp_path / "out", ranks=3, timeout=180)
     _assert_one_line_on_every_rank(result, "2 cells", "3 ranks", "own none", "fewer ranks")
+
+
+@pytest.mark.parametrize("command", ["stability", "analyse", "plugins"])
+def test_a_serial_command_under_mpirun_is_one_line(command, tmp_path):
+    """Only ``primordia run`` shares its work over ranks.  The others ran whole on every rank: under
+    ``mpirun -n 3`` the stability report came three times, interleaved, and three processes wrote the same
+    dispersion.nc, analyse's metrics.nc and pictures likewise."""
+    arguments = {"stability": [rc.EXAMPLES / "ex01a.toml", "--out", tmp_path / "out"],
+                 "analyse": [tmp_path / "out"], "plugins": []}[command]
+    result = rc.run(command, *arguments, ranks=3, timeout=180)
+    _assert_one_line_on_every_rank(result, f"primordia {command} is serial", "without mpirun")
+    assert not result.stdout and not (tmp_path / "out").exists()
