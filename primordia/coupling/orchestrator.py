@@ -538,6 +538,9 @@ class Simulation:
                     if self.step_index == self._first_step + 1:
                         self._wall_after_first = clock.perf_counter()
         except BaseException as exc:  # record why the run stopped, then let the error through
+            # in the loop only a second signal raises (and may come back as a failed solve): a failure with one
+            # signal or none, or one before a signal that came while the run stopped, is the failure
+            raised_by_a_signal = INTERRUPTS.count > 1
             bar.close()
             with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
                 self._stop(exc)
@@ -545,6 +548,8 @@ class Simulation:
                 signum = getattr(exc, "signum", None) or INTERRUPTS.received or signal.SIGINT
                 raise InterruptedRun(signum, f"{self.status}; continue it with: primordia run --restart "
                                              f"{self.out_dir}") from None
+            if not raised_by_a_signal:  # the run has stopped, as the signal asked: the failure's line says why
+                INTERRUPTS.reset()
             raise
         bar.close()
         with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):

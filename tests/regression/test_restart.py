@@ -186,6 +186,42 @@ def test_a_signal_during_start_up_is_an_interruption_not_an_input_error(signum, 
     assert "error" not in lines[0]
 
 
+SIGNAL_AT_FINISH = """\
+import os
+import signal
+
+from primordia.core.outputs import Output
+from primordia.core.plugins import hookimpl
+
+
+class SignalAtFinish(Output):
+    name = "signal_at_finish"
+
+    def finish(self, run, status):
+        os.kill(os.getpid(), signal.SIGTERM)  # a scheduler's SIGTERM while the run writes its last files
+
+
+@hookimpl
+def primordia_outputs():
+    return [SignalAtFinish]
+"""
+
+
+def test_a_signal_while_a_failed_run_stops_leaves_the_failure_its_line(small_config, tmp_path):
+    """The run had failed (dt_min) when the signal came: its line is the failure's, exit status 2.  It was
+    "primordia: interrupted (SIGTERM) during start-up, before the first step" and 143 (seen under mpirun -n 4:
+    SIGUSR1 while example 1b at 16^2 stopped at dt_min at t = 239.238, after 1196 steps)."""
+    plugin = tmp_path / "signal_at_finish.py"
+    plugin.write_text(SIGNAL_AT_FINISH)
+    out = tmp_path / "out"
+    result = rc.run("-p", plugin, "run", small_config(), "--set", "solver.chemotaxis_m.ksp_max_it=1",
+                    "--set", "time.dt_min=0.1", "--no-progress", "--out", out)
+    lines = result.stderr.splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith("primordia: error: step 1 (t = 0 -> ") and "time.dt_min = 0.1" in lines[0]
+    assert rc.summary(out)["status"].startswith("stopped at t = 0: step 1")
+
+
 def test_a_folder_holding_a_run_is_refused_unless_overwritten_or_restarted(primordia_cli, small_config, tmp_path):
     out = tmp_path / "out"
     assert primordia_cli("run", small_config(), "--out", out, "--no-progress").returncode == 0
