@@ -353,6 +353,10 @@ class Discretisation:
         self._group(field_name)  # a field no module provides is named now
         self._contributions[field_name].append((term, by))
 
+    def contributors(self, field_name: str) -> tuple[str, ...]:
+        """The modules that add terms to ``field_name``'s balance law (:meth:`contribute`'s ``by``), in order."""
+        return tuple(dict.fromkeys(by for _, by in self._contributions.get(field_name, ())))
+
     def contributions(self, field_name: str, test: Expr) -> list[ufl.Form]:
         """The terms contributed to ``field_name``'s balance law: what its owner adds to the residual."""
         self._consumed.add(field_name)
