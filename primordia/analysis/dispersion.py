@@ -349,8 +349,9 @@ class FastestMode:
     growth_rate: float  #: Re phi at k_max (> 0: the steady state is unstable)
     frequency: float  #: |Im phi| of that root (0 for a stationary Turing mode)
     band: tuple[float, float]  #: (lowest, highest) k with Re phi > 0: the grid's outermost unstable k, each
-    #: refined by bisection towards its stable neighbour (an end of the grid stays; a band between two k of the
-    #: grid is bisected out from k_max); NaN if none
+    #: refined by bisection towards its stable neighbour (the grid's last k stays; below its first the band is
+    #: bisected towards k = 0, and is 0 when it reaches there, e.g. beside a conserved species' root 0; a band
+    #: between two k of the grid is bisected out from k_max); NaN if none
     at_edge: bool  #: the maximum sits at an end of the k range: widen it (k_max = 0, the homogeneous mode, is no edge)
     kind: str = "any"  #: which roots were searched: "any", "stationary" or "oscillatory"
 
@@ -427,8 +428,15 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
     band = (np.nan, np.nan)
     if np.any(grows):  # the grid's outermost unstable k, refined towards its stable neighbour
         first, last = int(np.argmax(grows)), int(k.size - 1 - np.argmax(grows[::-1]))
-        band = (_band_edge(growth_at, k[first], k[first - 1]) if first > 0 else min(k_max, float(k[first])),
-                _band_edge(growth_at, k[last], k[last + 1]) if last < k.size - 1 else float(k[last]))
+        if first > 0:
+            low = _band_edge(growth_at, k[first], k[first - 1])
+        elif k[0] > 0 and k_max > 0:  # below the grid: ex01a's band is (0, 5.44], its conserved m's root 0 at k = 0
+            low = _band_edge(growth_at, k[0], 0.0)  # by bisection towards 0, so also a band that starts above it
+            # below it the rate is round-off of the roots (ex01a's ~ 0.086 k^2: ~ 1e-11 at k = 1e-5): it reaches 0
+            low = 0.0 if abs(growth_at(0.5 * low)[0]) <= 1e-10 * abs(rate) else low
+        else:
+            low = min(k_max, float(k[0]))
+        band = (low, _band_edge(growth_at, k[last], k[last + 1]) if last < k.size - 1 else float(k[last]))
     elif rate > 0:  # a band narrower than the grid's steps, just past onset: only the refined k_max grows
         band = (_band_edge(growth_at, k_max, k[best - 1]) if best > 0 else k_max,
                 _band_edge(growth_at, k_max, k[best + 1]) if best < k.size - 1 else k_max)

@@ -202,3 +202,17 @@ def test_a_wavenumber_list_without_a_usable_k_is_one_clear_error(k, problem):
             growth_rates(params, k)
         with pytest.raises(ValueError, match="finite numbers >= 0"):
             chemistry.growth_rates(k)
+
+
+@pytest.mark.parametrize("onset, low", [(0.0, 0.0), (5e-4, 5e-4)], ids=["reaches k = 0", "starts below the grid"])
+def test_a_band_below_the_grids_first_k_is_followed_down(onset, low):
+    """The band's lower end was the grid's first k (ex01a printed "unstable band k in [0.001, 5.44]" for
+    (0, 5.44]: its conserved m has the root 0 at k = 0, and growth ~ k^2 above it)."""
+    from primordia.analysis.dispersion import fastest_mode_of
+
+    def rates_at(k):  # one root, k (k - onset) (5 - k): zero at k = 0 and at the onset, negative between
+        return (k * (k - onset) * (5.0 - k)).astype(complex)[:, None]
+
+    mode = fastest_mode_of(rates_at, np.linspace(1e-3, 10.0, 1000))
+    # rates within round-off of 0 count as 0 (dispersion.REAL_TOLERANCE): the onset to 1e-5 of itself
+    assert mode.band[0] == pytest.approx(low, rel=1e-5, abs=1e-15) and mode.band[1] == pytest.approx(5.0, rel=1e-9)
