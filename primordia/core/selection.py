@@ -6,9 +6,7 @@ can override these choices.
 
 from __future__ import annotations
 
-import sys
-
-from primordia.core.errors import PluginError
+from primordia.core.errors import PluginError, warn
 from primordia.core.plugins import hookimpl
 
 
@@ -29,25 +27,23 @@ def primordia_select_splitting_scheme(name, options, schemes, physics):
     if name not in schemes:
         known = ", ".join(sorted(schemes)) or "none"
         raise PluginError(f"unknown splitting scheme '{name}' (registered: {known})")
-    return schemes[name](physics, **_options_for(name, options, schemes))
+    kept, ignored = _options_for(name, options, schemes)
+    scheme = schemes[name](physics, **kept)  # refuses a bad option in one line, before any warning is printed
+    for key, other in ignored.items():
+        warn(f"coupling.{key} is an option of scheme '{other}' and is ignored by '{name}'")
+    return scheme
 
 
-def _options_for(name: str, options: dict, schemes: dict) -> dict:
-    """The [coupling] options of scheme ``name``.
+def _options_for(name: str, options: dict, schemes: dict) -> tuple[dict, dict]:
+    """The [coupling] options of scheme ``name``, and those left out: {key: the scheme whose option it is}.
 
     An option that belongs to another registered scheme (e.g. ``tolerance`` of
     ``fixed_point`` in a config whose scheme was switched with ``--set``) is left
-    out with a warning naming it; one that no scheme knows reaches the scheme,
-    which refuses it in one line.
+    out, with a warning once the scheme is made; one that no scheme knows reaches
+    the scheme, which refuses it in one line.
     """
     own = set(getattr(schemes[name], "options", {}))
     others = {key: other for other, cls in schemes.items() if other != name
               for key in getattr(cls, "options", {}) if key not in own}
-    kept = {}
-    for key, value in options.items():
-        if key in others:
-            print(f"primordia: warning: coupling.{key} is an option of scheme '{others[key]}' and is ignored "
-                  f"by '{name}'", file=sys.stderr)
-        else:
-            kept[key] = value
-    return kept
+    kept = {key: value for key, value in options.items() if key not in others}
+    return kept, {key: others[key] for key in options if key in others}

@@ -201,6 +201,8 @@ WRONG_TYPES = [
     (["output.snapshot_fields=3"], ["output.snapshot_fields must be a list of field names"]),
     (["output.times=[true]"], ["output.times[0] must be a number", "True"]),
     (["coupling.inner_steps=1.5"], ["option 'inner_steps' must be an integer"]),
+    # with an option of another scheme beside it: its warning came first, two lines (the config fuzzing found it)
+    (["coupling.inner_steps=\"\"", "coupling.tolerance=1e-6"], ["option 'inner_steps' must be an integer"]),
     (["coupling.scheme=3"], ["coupling.scheme must be the name of a splitting scheme"]),
     (["solver.chemotaxis_m=3"], ["solver.chemotaxis_m must be a table"]),
     (["kinetics.name=3"], ["kinetics.name must be the name of a kinetics"]),
