@@ -504,6 +504,7 @@ def _time(t_start, dt, t_final) -> tuple[float, float, float]:
     if not math.isfinite(steps) or steps > MAX_STEPS:
         raise ConfigError(f"time.dt = {dt:g} gives {steps:.3g} steps from t_start = {t_start:g} to t_final = "
                           f"{t_final:g}, more than {MAX_STEPS:,}: is dt in the model's (dimensionless) time units?")
-    if abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+    # a span of less than half a step is within the tolerance of 0 steps: such a run "completed" at t_start
+    if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
         raise ConfigError(f"time.t_final - time.t_start = {t_final - t_start:g} is not a multiple of dt = {dt:g}")
     return float(t_start), float(dt), float(t_final)
