@@ -177,7 +177,10 @@ class Model:
             if not self.t_start < t <= self.t_final + 1e-12:
                 raise ConfigError(f"output time {time_label(t)} lies outside (t_start, t_final] = "
                                   f"({time_label(self.t_start)}, {time_label(self.t_final)}]")
-            if abs(round((t - self.t_start) / self.dt) * self.dt - (t - self.t_start)) > 1e-9 * max(1.0, t):
+            # in steps, as t_final is: 1e-9 in time was half a step of dt = 1e-12, and a time within it of
+            # t_start fell on step 0, which no run writes
+            steps = (t - self.t_start) / self.dt
+            if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
                 raise ConfigError(f"output time {time_label(t)} is not a multiple of dt = {time_label(self.dt)} "
                                   f"after t_start")
         output["times"] = sorted(float(t) for t in times)

@@ -162,6 +162,11 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     # %g printed "output time 1 lies outside (0, 1]"
     ({"output": {"times": [1.0000000001]}}, "output time 1.0000000001 lies outside (t_start, t_final] = (0, 1]"),
     ({"output": {"times": [0.20000001]}}, "output time 0.20000001 is not a multiple of dt = 0.2"),
+    # within 1e-9 of t_start, so of step 0, which the run never writes: the run completed without it
+    ({"output": {"times": [1e-12, 1.0]}}, "output time 1e-12 is not a multiple of dt = 0.2 after t_start"),
+    # half a step off the grid, but less than 1e-9 in time: reached by a step of dt / 2 solved with dt
+    ({"dt": 1e-12, "t_final": 1e-11, "output": {"times": [3.5e-12]}},
+     "output time 3.5e-12 is not a multiple of dt = 1e-12 after t_start"),
     ({"output": {"times": "1"}}, "output.times must be a list of numbers, got '1'"),
     ({"output": {"series_every": 0}}, ("output.series_every must be", "(steps), got 0")),
     ({"output": {"pictures": "no"}}, "output.pictures must be true or false, got 'no'"),
