@@ -174,7 +174,8 @@ class Model:
             output[key] = declared[key].check(table[key], f"output.{key}")
         times = numbers(output["times"], "output.times") if output["times"] is not None else [self.t_final]
         for t in times:
-            if not self.t_start < t <= self.t_final + 1e-12:
+            # round-off of t_final only: 1e-12 was 5 steps of dt = 1e-13, past the run's end
+            if not self.t_start < t <= self.t_final + min(1e-12, 1e-9 * self.dt):
                 raise ConfigError(f"output time {time_label(t)} lies outside (t_start, t_final] = "
                                   f"({time_label(self.t_start)}, {time_label(self.t_final)}]")
             # in steps, as t_final is: 1e-9 in time was half a step of dt = 1e-12, and a time within it of

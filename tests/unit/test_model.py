@@ -161,6 +161,9 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"output": {"times": [0.0]}}, "output time 0 lies outside (t_start, t_final]"),
     # %g printed "output time 1 lies outside (0, 1]"
     ({"output": {"times": [1.0000000001]}}, "output time 1.0000000001 lies outside (t_start, t_final] = (0, 1]"),
+    # 5 steps past t_final but within the 1e-12 allowed for round-off: never reached, never written
+    ({"dt": 1e-13, "t_final": 1e-12, "output": {"times": [1.5e-12]}},
+     "output time 1.5e-12 lies outside (t_start, t_final] = (0, 1e-12]"),
     ({"output": {"times": [0.20000001]}}, "output time 0.20000001 is not a multiple of dt = 0.2"),
     # within 1e-9 of t_start, so of step 0, which the run never writes: the run completed without it
     ({"output": {"times": [1e-12, 1.0]}}, "output time 1e-12 is not a multiple of dt = 0.2 after t_start"),
