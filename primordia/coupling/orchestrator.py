@@ -36,6 +36,7 @@ import ufl
 from primordia.core import checkpoint as checkpoint_file
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
+from primordia.core.outputs import time_label
 from primordia.core.plugins import choose, get_plugin_manager, registry
 from primordia.core.reductions import largest, largest_in_place, on_every_rank
 from primordia.core.signals import INTERRUPTS, signal_name
@@ -85,6 +86,7 @@ class Simulation:
         self.newton: dict[str, list[tuple[int, int]]] = {}  # (Newton iterations, SNES reason) per step, nonlinear ones
         self.coupling_iterations: dict[str, list[int]] = {}  # outer iterations per step, by scheme
         self.rejections: list[dict] = []  # every rejected sub-step: time, dt, reason
+        self.snapshot_times: list[float] = []  # the output times whose fields were written (a restart's too)
         self.restarts = 0
         self.status = "setting up"
         self.outputs: list = []
@@ -123,6 +125,9 @@ class Simulation:
         if checkpoint is not None:
             self._restore(checkpoint)
         self._attach_outputs(checkpoint)
+        if checkpoint is not None and self._missed_snapshot():  # an output time added where the run is
+            self._snapshot()
+            self._checkpoint_step = None  # the checkpoint says it is written: the next restart skips it
         self._first_step = self.step_index
         return self
 
@@ -361,6 +366,7 @@ class Simulation:
                     "controller": self.controller.state(), "iterations": self.iterations,
                     "newton": {name: [list(r) for r in record] for name, record in self.newton.items()},
                     "coupling_iterations": self.coupling_iterations, "rejections": self.rejections,
+                    "snapshot_times": self.snapshot_times,
                     "restarts": self.restarts, "wall_time_s": self._wall_time()},
             "fields": fields, "layout": layout, "physics": physics,
             "outputs": {output.name: output.state() for output in self.outputs},
@@ -409,7 +415,22 @@ class Simulation:
             return f"{where}: {mesh} differs from the checkpointed run's (a restart continues the same model)"
         if tree["run"]["step"] > self.model.num_steps:
             return f"{where}: it is at t = {tree['run']['time']:g}, past time.t_final = {self.model.t_final:g}"
+        # an output time the run has passed without writing it (a checkpoint from before 2026-12-05 holds none)
+        written = {self._step_of(t) for t in tree["run"].get("snapshot_times", self.model.output["times"])}
+        behind = [t for t in self.model.output["times"]
+                  if self._step_of(t) not in written and self._step_of(t) <= tree["run"]["step"]]
+        if behind and (self._step_of(behind[0]) < tree["run"]["step"] or tree["run"].get("step_done", 0.0) > 0.0):
+            return (f"{where}: output time {time_label(behind[0])} is before its t = {tree['run']['time']:g}, and "
+                    f"the run did not write the fields there (a restart writes later times, and the time it is at)")
         return None
+
+    def _step_of(self, t: float) -> int:
+        return int(round((t - self.model.t_start) / self.dt))
+
+    def _missed_snapshot(self) -> bool:
+        """A restart at an output time the run did not write (checked by :meth:`_incompatibility`)."""
+        return (self.step_done == 0.0 and self.step_index not in {self._step_of(t) for t in self.snapshot_times}
+                and self.step_index in {self._step_of(t) for t in self.model.output["times"]})
 
     def _restore(self, tree: dict) -> None:
         """Put the run back where the checkpoint left it (every rank takes its own part of each field)."""
@@ -446,6 +467,8 @@ class Simulation:
         self.newton = {k: [tuple(int(i) for i in r) for r in v] for k, v in run["newton"].items()}
         self.coupling_iterations = {k: [int(i) for i in v] for k, v in run["coupling_iterations"].items()}
         self.rejections = list(run["rejections"])
+        self.snapshot_times = [float(t) for t in run.get("snapshot_times", self.model.output["times"])
+                               if self._step_of(t) <= self.step_index]
         self.restarts = int(run["restarts"]) + 1
         self._wall_before = float(run["wall_time_s"])
         self._solver_dt = self.last_dt
@@ -522,7 +545,7 @@ class Simulation:
     # -- time loop ------------------------------------------------------------------------
     def run(self, progress: bool = False) -> "Simulation":
         bar = _progress_bar(self, progress)
-        snapshot_steps = {int(round((t - self.model.t_start) / self.dt)) for t in self.model.output["times"]}
+        snapshot_steps = {self._step_of(t) for t in self.model.output["times"]}
         try:
             with INTERRUPTS.installed(), INTERRUPTS.mode_of("deferred"):
                 while self.step_index < self.model.num_steps:
@@ -533,7 +556,7 @@ class Simulation:
                             or self.step_index == self.model.num_steps):  # the last state is always in the series
                         self._notify("record")
                     if self.step_index in snapshot_steps:
-                        self._notify("snapshot")
+                        self._snapshot()
                     self._between_steps()
                     if self.step_index == self._first_step + 1:
                         self._wall_after_first = clock.perf_counter()
@@ -557,6 +580,10 @@ class Simulation:
                 self.write_checkpoint()  # a completed run can be extended: --restart with a later t_final
             self._finish("completed")
         return self
+
+    def _snapshot(self) -> None:
+        self._notify("snapshot")
+        self.snapshot_times.append(self.time)
 
     def _between_steps(self) -> None:
         """Checkpoint when due, and stop when asked: decided by all ranks together."""

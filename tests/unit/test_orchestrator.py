@@ -310,6 +310,25 @@ def test_a_restart_of_another_model_names_what_differs(watching, completed, tmp_
     assert "parameters.D_m differs from the checkpointed run's" in one_line(caught)
 
 
+def test_a_restart_writes_an_output_time_it_is_at_and_refuses_one_it_has_passed(watching, tmp_path):
+    """A run that ended at t = 0.6 with fields at 0.4, restarted with output.times = [0.4, 0.6], "completed"
+    and fields.xdmf held 0.4 only; with [0.2, 0.4] it did not say that 0.2 was behind it, never to be written."""
+    def xdmf_times():
+        with meshio.xdmf.TimeSeriesReader(tmp_path / "fields.xdmf") as reader:
+            reader.read_points_cells()
+            return [reader.read_data(k)[0] for k in range(reader.num_steps)]
+
+    Simulation(model(t_final=0.6, output={"times": [0.4]}), out_dir=tmp_path).setup().run()
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(t_final=0.6, output={"times": [0.2, 0.4]}), out_dir=tmp_path, existing="restart").setup()
+    assert one_line(caught) == (f"cannot restart from {tmp_path / 'checkpoint.npz'}: output time 0.2 is before "
+                                f"its t = 0.6, and the run did not write the fields there (a restart writes "
+                                f"later times, and the time it is at)")
+    for _ in range(2):  # written once, at the restart; the next restart finds it written
+        Simulation(model(t_final=0.6, output={"times": [0.4, 0.6]}), out_dir=tmp_path, existing="restart").setup().run()
+        assert xdmf_times() == [0.4, 0.6]
+
+
 def test_a_restart_on_a_mesh_file_changed_since_the_checkpoint_is_refused(watching, tmp_path):
     """The resolved config names a mesh file by its path only: a file rewritten between the run and its restart
     (here one interior vertex moved, the same topology) loaded the checkpoint's fields onto the other mesh, and
