@@ -126,8 +126,7 @@ class Simulation:
             self._restore(checkpoint)
         self._attach_outputs(checkpoint)
         if checkpoint is not None and self._missed_snapshot():  # an output time added where the run is
-            self._snapshot()
-            self._checkpoint_step = None  # the checkpoint says it is written: the next restart skips it
+            self._snapshot()  # the checkpoint at the end says it is written: the next restart skips it
         self._first_step = self.step_index
         return self
 
@@ -576,8 +575,10 @@ class Simulation:
             raise
         bar.close()
         with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
-            if self._checkpoint_step != self.step_index:
-                self.write_checkpoint()  # a completed run can be extended: --restart with a later t_final
+            # a completed run can be extended: --restart with a later t_final; a restart with no step left
+            # writes one too, which counts it (and holds an output time it wrote), or the next counted from its number
+            if self._checkpoint_step != self.step_index or self.step_index == self._first_step:
+                self.write_checkpoint()
             self._finish("completed")
         return self
 

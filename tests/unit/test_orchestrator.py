@@ -329,6 +329,15 @@ def test_a_restart_writes_an_output_time_it_is_at_and_refuses_one_it_has_passed(
         assert xdmf_times() == [0.4, 0.6]
 
 
+def test_restarts_with_no_step_left_are_counted(watching, tmp_path):
+    """A restart of a completed run with the same t_final wrote no checkpoint, so the next one counted from the
+    same number: summary.json said 1 restart after two."""
+    Simulation(model(t_final=0.4), out_dir=tmp_path).setup().run()
+    for count in (1, 2):
+        Simulation(model(t_final=0.4), out_dir=tmp_path, existing="restart").setup().run()
+        assert json.loads((tmp_path / "summary.json").read_text())["restarts"] == count
+
+
 def test_a_restart_on_a_mesh_file_changed_since_the_checkpoint_is_refused(watching, tmp_path):
     """The resolved config names a mesh file by its path only: a file rewritten between the run and its restart
     (here one interior vertex moved, the same topology) loaded the checkpoint's fields onto the other mesh, and
