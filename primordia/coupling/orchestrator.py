@@ -412,7 +412,8 @@ class Simulation:
             source = self.model.mesh_data.source() or {}
             mesh = f"the mesh read from {source['path']}" if source.get("type") == "file" else "the mesh"
             return f"{where}: {mesh} differs from the checkpointed run's (a restart continues the same model)"
-        if tree["run"]["step"] > self.model.num_steps:
+        inside_a_step = tree["run"].get("step_done", 0.0) > 0.0  # then past the end of step "step" too
+        if tree["run"]["step"] + inside_a_step > self.model.num_steps:
             return f"{where}: it is at t = {tree['run']['time']:g}, past time.t_final = {self.model.t_final:g}"
         # an output time the run has passed without writing it (a checkpoint from before 2026-12-05 holds none)
         written = {self._step_of(t) for t in tree["run"].get("snapshot_times", self.model.output["times"])}

@@ -393,6 +393,18 @@ def test_a_run_stopped_inside_a_step_restarts_on_the_grid_of_that_step(watching,
     assert steps == [(pytest.approx(0.4), 0.1), (pytest.approx(0.6), 0.2)]
 
 
+def test_a_restart_inside_a_step_past_t_final_is_refused(watching, tmp_path):
+    """A run stopped at t = 0.3, inside step 2, restarted with t_final = 0.2: step 1 was not past its one step,
+    so the run "completed" at t = 0.3, past its t_final, with the fields of 0.3 as its last."""
+    with pytest.raises(SolverError):
+        Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, dt_min=0.1), out_dir=tmp_path).setup().run()
+    with pytest.raises(ConfigError) as caught:
+        Simulation(model(t_final=0.2, recorder={"fail_at": 0.4}, dt_min=0.1, output={"times": []}), out_dir=tmp_path,
+                   existing="restart").setup()
+    assert one_line(caught) == (f"cannot restart from {tmp_path / 'checkpoint.npz'}: it is at t = 0.3, "
+                                f"past time.t_final = 0.2")
+
+
 def test_without_adaptive_steps_a_failed_step_stops_the_run_naming_it(watching, tmp_path):
     sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, adaptive=False), out_dir=tmp_path).setup()
     with pytest.raises(SolverError) as caught:
