@@ -81,7 +81,7 @@ class Model:
         self.parameters = self._parameter_set(parameters or {})
         self.physics_options = self._physics_options(physics_options or {})
         self.t_start, self.dt, self.t_final = _time(t_start, dt, t_final)
-        self.adaptive, self.dt_min = _adaptivity(adaptive, dt_min, self.dt)
+        self.adaptive, self.dt_min = _adaptivity(adaptive, dt_min, self.dt, max(abs(self.t_start), abs(self.t_final)))
         self.output = self._output(output or {})
         self.checkpoint = _checkpoint(checkpoint)
         self._instantiate_physics()  # validates kinetics and physics options now
@@ -437,12 +437,23 @@ def _backend_name(value, where: str) -> str:
     return value
 
 
-def _adaptivity(adaptive, dt_min, dt: float) -> tuple[bool, float]:
-    """(time.adaptive, time.dt_min): whether failed steps are retried smaller, and down to which dt."""
+def _adaptivity(adaptive, dt_min, dt: float, latest: float) -> tuple[bool, float]:
+    """(time.adaptive, time.dt_min): whether failed steps are retried smaller, and down to which dt.
+
+    ``latest`` is the largest |t| of the run: a try shorter than 2^-40 of it barely moves t (at 2^-53, not at
+    all), so a failing step was halved a thousand times for dt_min = 1e-300.  The default, dt / 2^10, stays
+    allowed (it is written in config.toml, which a restart reads).
+    """
     flag(adaptive, "time.adaptive")
+    default = dt / 2 ** DEFAULT_HALVINGS
     if dt_min is None:
-        return adaptive, dt / 2 ** DEFAULT_HALVINGS
-    return adaptive, float(number(dt_min, "time.dt_min", above=0, at_most=dt, hint=f"at most time.dt = {dt:g}"))
+        return adaptive, default
+    dt_min = float(number(dt_min, "time.dt_min", above=0, at_most=dt, hint=f"at most time.dt = {dt:g}"))
+    resolution = 2.0 ** -40 * latest
+    if dt_min < min(resolution, default):
+        raise ConfigError(f"time.dt_min = {dt_min:g} is below what the run's time can tell apart (2^-40 |t| = "
+                          f"{resolution:.3g} at t = {latest:g}): a step that short leaves t unchanged")
+    return adaptive, dt_min
 
 
 def _checkpoint(table) -> dict:
