@@ -511,15 +511,19 @@ def _growth_law_table(growth_law, physics_classes) -> dict | None:
 
 
 def _time(t_start, dt, t_final) -> tuple[float, float, float]:
+    from primordia.core.outputs import time_label  # %g: "t_final - t_start = 520" for t_final = 520.0001
+
     t_start, dt = number(t_start, "time.t_start"), number(dt, "time.dt", above=0)
     t_final = number(t_final, "time.t_final")
     if t_final <= t_start:
-        raise ConfigError(f"time.t_final ({t_final:g}) must be greater than time.t_start ({t_start:g})")
+        raise ConfigError(f"time.t_final ({time_label(t_final)}) must be greater than time.t_start "
+                          f"({time_label(t_start)})")
     steps = (t_final - t_start) / dt
     if not math.isfinite(steps) or steps > MAX_STEPS:
         raise ConfigError(f"time.dt = {dt:g} gives {steps:.3g} steps from t_start = {t_start:g} to t_final = "
                           f"{t_final:g}, more than {MAX_STEPS:,}: is dt in the model's (dimensionless) time units?")
     # a span of less than half a step is within the tolerance of 0 steps: such a run "completed" at t_start
     if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
-        raise ConfigError(f"time.t_final - time.t_start = {t_final - t_start:g} is not a multiple of dt = {dt:g}")
+        span = time_label(t_final) if t_start == 0 else f"{time_label(t_final)} - {time_label(t_start)}"
+        raise ConfigError(f"time.t_final - time.t_start = {span} is not a multiple of dt = {time_label(dt)}")
     return float(t_start), float(dt), float(t_final)

@@ -148,11 +148,17 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"dt": True}, ("time.dt must be a number", "got True")),
     ({"dt": float("nan")}, ("time.dt must be a number", "got nan")),
     ({"dt": 0.3}, "time.t_final - time.t_start = 1 is not a multiple of dt = 0.3"),
+    # %g printed "time.t_final - time.t_start = 520 is not a multiple of dt = 0.2"
+    ({"t_final": 520.0001}, "time.t_final - time.t_start = 520.0001 is not a multiple of dt = 0.2"),
+    ({"t_final": 3.0, "t_start": 1.0000001}, "time.t_final - time.t_start = 3 - 1.0000001 is not a multiple of "
+                                             "dt = 0.2"),
     # 1e-10 is 1e-10 steps of dt = 1, within the tolerance of 0 steps: the run "completed" 0 steps at t = 0
     ({"dt": 1.0, "t_final": 1e-10, "output": {"times": [1e-10]}},
      "time.t_final - time.t_start = 1e-10 is not a multiple of dt = 1"),
     ({"dt": 1e-9}, "more than 10,000,000: is dt in the model's (dimensionless) time units?"),
     ({"t_final": 0.0}, "time.t_final (0) must be greater than time.t_start (0)"),
+    ({"t_final": 1.0000001, "t_start": 1.0000002}, "time.t_final (1.0000001) must be greater than time.t_start "
+                                                   "(1.0000002)"),
     ({"adaptive": 1}, "time.adaptive must be true or false, got 1"),
     ({"dt_min": 0.5}, ("time.dt_min must be a number in (0, ", "0.2]", "got 0.5")),
     ({"dt_min": 0.0}, ("time.dt_min must be a number in (0, ", "got 0")),
