@@ -416,7 +416,10 @@ def test_ctrl_c_in_a_terminal_is_one_line(small_config, tmp_path):
     out = tmp_path / "sweep"
     sweep = subprocess.Popen([sys.executable, "-m", "primordia", "sweep", str(config), "--vary",
                               "parameters.alpha=2:4:2", "--workers", "2", "--out", str(out), "--no-progress"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                             # as a terminal's shell starts it: a SIGINT ignored by this process is inherited,
+                             # and the sweep then kept ignoring it (as a background job does) and exited 0
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 25
         while len(list(out.glob("runs/*/summary.json"))) < 2 and time.monotonic() < deadline:
