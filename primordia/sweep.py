@@ -582,9 +582,6 @@ def _only_sweep_into(out: Path):
 def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
     from dask.distributed import as_completed
 
-    from primordia.core.errors import InterruptedRun
-    from primordia.core.signals import INTERRUPTS
-
     points = sweep.points()
     done = [is_done(p) for p in points]
     todo = [p for p, finished in zip(points, done) if not finished]
@@ -595,7 +592,6 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
         with dask_client(scheduler, workers) as client, \
                 _progress_bar(len(points), len(points) - len(todo), progress) as bar:
             token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
-            signals_before = INTERRUPTS.count
             futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
                                      str(p.directory.resolve()), p.fingerprint, timeout, token, pure=False): p
                        for p in todo}
@@ -608,8 +604,6 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
                         records[point.directory] = {"status": "failed",
                                                     "reason": f"{type(error).__name__}: {error}"}
                     bar.update(1)
-                if INTERRUPTS.count > signals_before:  # a Ctrl-C whose KeyboardInterrupt something swallowed: the
-                    raise InterruptedRun(INTERRUPTS.received)  # runs saw it too (the sweep exited 0, rarely)
             except KeyboardInterrupt:  # the runs going on stop with a checkpoint, and go on from it next time
                 _stop_the_runs(client, list(futures), token)
                 raise
