@@ -25,7 +25,7 @@ import traceback
 from pathlib import Path
 
 from primordia.core import compiled
-from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, is_root_process
+from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, is_root_process, mpi_world
 from primordia.core.signals import HANDLED, INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
@@ -251,9 +251,7 @@ def main(argv: list[str] | None = None) -> int:
 def _refuse_ranks_for_a_serial_command(command: str) -> None:
     """Only ``run`` shares its work over MPI ranks: any other command ran whole on every rank of an ``mpirun``
     (its report printed once per rank, interleaved, and its files written by every rank at once)."""
-    mpi = sys.modules.get("mpi4py.MPI")  # started with PETSc, when petsc4py is installed
-    ranks = (mpi.COMM_WORLD.size if mpi is not None
-             else int(os.environ.get("OMPI_COMM_WORLD_SIZE") or os.environ.get("PMI_SIZE") or "1"))
+    ranks = mpi_world()[1]
     if command != "run" and ranks > 1:
         raise ConfigError(f"primordia {command} is serial: run it without mpirun (only primordia run uses "
                           f"several ranks; this is one of {ranks})")

@@ -97,19 +97,26 @@ class InterruptedRun(KeyboardInterrupt):
         self.signum = signum
 
 
-def is_root_process() -> bool:
-    """Whether this is MPI rank 0 (messages are printed once, not once per rank).
+def mpi_world() -> tuple[int, int]:
+    """(this process's MPI rank, the number of ranks) of the job.
 
-    Read from mpi4py when it is imported, else from the launcher's environment, so
-    that asking never initialises MPI.
+    Read from mpi4py when it is imported, else from the launcher's environment (OpenMPI's or
+    a PMI launcher's), so that asking never initialises MPI.
     """
     import os
     import sys
 
     if "mpi4py.MPI" in sys.modules:
-        return sys.modules["mpi4py.MPI"].COMM_WORLD.rank == 0
+        world = sys.modules["mpi4py.MPI"].COMM_WORLD
+        return world.rank, world.size
     rank = os.environ.get("OMPI_COMM_WORLD_RANK") or os.environ.get("PMI_RANK") or "0"
-    return rank == "0"
+    size = os.environ.get("OMPI_COMM_WORLD_SIZE") or os.environ.get("PMI_SIZE") or "1"
+    return int(rank), int(size)
+
+
+def is_root_process() -> bool:
+    """Whether this is MPI rank 0 (messages are printed once, not once per rank)."""
+    return mpi_world()[0] == 0
 
 
 def warn(message: str) -> None:
