@@ -365,13 +365,8 @@ def read_mesh(path: str | Path) -> MeshData:
     _check_vertex_indices(cells, boundaries, len(points), path)
     what = f"mesh file {path}"
     points, cells, boundaries = _drop_unused_points(points, cells, boundaries, what)
-    _check_coordinate_range(points, what)
-    _check_no_coincident_vertices(points, cells, what)
-    _check_not_degenerate(points, cells, what)
-    cells = orient_cells(points, cells)
-    _check_not_overlapping(cells, what)
-    _check_boundary_facets(cells, boundaries, what)
-    return MeshData(points, cells, boundaries, description=f"read from {path}").remember_source(
+    check_mesh(MeshData(points, cells, boundaries), what)
+    return MeshData(points, orient_cells(points, cells), boundaries, description=f"read from {path}").remember_source(
         {"type": "file", "path": str(path.expanduser().resolve())})
 
 
@@ -610,7 +605,7 @@ def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarra
 
 
 def check_mesh(mesh: MeshData, what: str = "the model's MeshData") -> None:
-    """The checks :func:`read_mesh` makes of a file, for a mesh built by hand (one MeshError line).
+    """The checks of a mesh file (:func:`read_mesh`) and of a mesh built by hand: one MeshError line.
 
     Finite coordinates of a sensible range, no duplicated vertices, no degenerate or overlapping cells, and named
     facets that are exterior facets of the cells, each in one boundary.
