@@ -180,8 +180,7 @@ class Model:
                                   f"({time_label(self.t_start)}, {time_label(self.t_final)}]")
             # in steps, as t_final is: 1e-9 in time was half a step of dt = 1e-12, and a time within it of
             # t_start fell on step 0, which no run writes
-            steps = (t - self.t_start) / self.dt
-            if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+            if not _on_the_step_grid((t - self.t_start) / self.dt):
                 raise ConfigError(f"output time {time_label(t)} is not a multiple of dt = {time_label(self.dt)} "
                                   f"after t_start")
         output["times"] = sorted(float(t) for t in times)
@@ -510,6 +509,12 @@ def _growth_law_table(growth_law, physics_classes) -> dict | None:
     return dict(growth_law)
 
 
+def _on_the_step_grid(steps: float) -> bool:
+    """Whether a span of ``steps`` time steps ends on step 1 or later, to round-off (1e-9 of the steps): a span
+    of less than half a step was within the tolerance of 0 steps (such a run "completed" at t_start)."""
+    return round(steps) >= 1 and abs(steps - round(steps)) <= 1e-9 * max(1.0, steps)
+
+
 def _time(t_start, dt, t_final) -> tuple[float, float, float]:
     from primordia.core.outputs import time_label  # %g: "t_final - t_start = 520" for t_final = 520.0001
 
@@ -522,8 +527,7 @@ def _time(t_start, dt, t_final) -> tuple[float, float, float]:
     if not math.isfinite(steps) or steps > MAX_STEPS:
         raise ConfigError(f"time.dt = {dt:g} gives {steps:.3g} steps from t_start = {t_start:g} to t_final = "
                           f"{t_final:g}, more than {MAX_STEPS:,}: is dt in the model's (dimensionless) time units?")
-    # a span of less than half a step is within the tolerance of 0 steps: such a run "completed" at t_start
-    if round(steps) < 1 or abs(steps - round(steps)) > 1e-9 * max(1.0, steps):
+    if not _on_the_step_grid(steps):
         span = time_label(t_final) if t_start == 0 else f"{time_label(t_final)} - {time_label(t_start)}"
         raise ConfigError(f"time.t_final - time.t_start = {span} is not a multiple of dt = {time_label(dt)}")
     return float(t_start), float(dt), float(t_final)

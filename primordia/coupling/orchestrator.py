@@ -419,7 +419,7 @@ class Simulation:
         written = {self._step_of(t) for t in tree["run"].get("snapshot_times", self.model.output["times"])}
         behind = [t for t in self.model.output["times"]
                   if self._step_of(t) not in written and self._step_of(t) <= tree["run"]["step"]]
-        if behind and (self._step_of(behind[0]) < tree["run"]["step"] or tree["run"].get("step_done", 0.0) > 0.0):
+        if behind and (self._step_of(behind[0]) < tree["run"]["step"] or inside_a_step):
             return (f"{where}: output time {time_label(behind[0])} is before its t = {tree['run']['time']:g}, and "
                     f"the run did not write the fields there (a restart writes later times, and the time it is at)")
         return None
