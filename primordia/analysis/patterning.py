@@ -340,7 +340,8 @@ def model_dispersion_relation(linear, k=None, d: int = 2, nk: int = 241) -> xr.D
     the norms of its rows, in place of a_0 and d_0 (negative: a real positive root);
     attributes also name the physics, the kinetics and the steady state.  By Hadamard's
     inequality the scaled term lies in [-1, 1]; scaled by the product of the diagonal
-    entries, as it was, it spiked wherever one of them crossed zero (Schnakenberg's at k = 4).
+    entries, as it was, it spiked wherever one of them crossed zero (Schnakenberg's activator at
+    k = 0.894 for a = 0.1, b = 0.9, gamma = 1).
     """
     k = linear.wavenumbers(nk) if k is None else np.asarray(k, dtype=float)
     M0 = linear.pencil(wave_vectors(k, d))[0]

@@ -279,8 +279,9 @@ class Chemotaxis(Physics):
     def nonnegative_fields(self):
         """The chemotactic species whose balance law only this module states: the fitted flux makes their matrix
         an M-matrix at small strain (module docstring).  A term another module adds can break that (the solid's
-        explicit advection of m in example 1b, :mod:`~primordia.physics.mechanochemical`): there m may dip below
-        zero by round-off-sized amounts (-2.9e-8 at t = 239 on a 16 x 16 mesh), which series.nc records."""
+        explicit advection of m in example 1b, :mod:`~primordia.physics.mechanochemical`): there m dips below zero
+        on coarse meshes (min m -0.011, -0.005, -0.0025 on 16^2, 32^2, 64^2 over 2,600 steps; 4e-8 on the seed's
+        171^2), a spatial artefact a smaller dt does not remove, which series.nc records."""
         if self.disc.kinematics.metric is not None:
             return ()
         return tuple(species.name for species in self.species

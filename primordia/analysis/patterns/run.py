@@ -116,8 +116,8 @@ def predicted_mode(config: Mapping | str | Path) -> PredictedMode:
             if growing else linear.describe())
     if not mode.unstable:  # no wavelength is selected; the largest (negative) rate still says how stable
         return PredictedMode(np.nan, np.nan, mode.growth_rate, f"{note}, stable: no Turing mode grows")
-    if mode.k_max == 0:  # the well-mixed kinetics run away: no wavelength is selected
-        return PredictedMode(0.0, np.inf, mode.growth_rate, f"{note}, the homogeneous state itself is unstable (k = 0)")
+    if mode.k_max == 0:  # the well-mixed kinetics run away: no wavelength is selected (mode.wavelength is inf)
+        note += ", the homogeneous state itself is unstable (k = 0)"
     return PredictedMode(mode.k_max, mode.wavelength, mode.growth_rate, note)
 
 
