@@ -150,7 +150,11 @@ def _checkpointed_config(out: Path) -> dict:
         found = existing_run(out)
         raise ConfigError(f"{out} holds no checkpoint to restart from" + (f" ({found})" if found else
                                                                           " (it holds no run)"))
-    return checkpoint.read_meta(path)["config"]
+    tree = checkpoint.read_meta(path)
+    config = tree["config"]
+    if tree.get("output_times_default"):  # [t_final] by default: at the t_final of this restart, unless --set
+        config["output"].pop("times", None)
+    return config
 
 
 def _report_dry_run(model, out: Path) -> int:

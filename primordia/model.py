@@ -83,6 +83,8 @@ class Model:
         self.t_start, self.dt, self.t_final = _time(t_start, dt, t_final)
         self.adaptive, self.dt_min = _adaptivity(adaptive, dt_min, self.dt, max(abs(self.t_start), abs(self.t_final)))
         self.output = self._output(output or {})
+        #: output.times not given: the fields are written at t_final, which a restart that moves t_final follows
+        self.output_times_default = output is None or output.get("times") is None
         self.checkpoint = _checkpoint(checkpoint)
         self._instantiate_physics()  # validates kinetics and physics options now
         self.mesh_data = self._mesh()

@@ -358,7 +358,8 @@ class Simulation:
         if not self.is_root:
             return
         tree = {
-            "config": self.model.resolved_config(), "backend": self.backend.name, "mpi_ranks": self.comm.size,
+            "config": self.model.resolved_config(), "output_times_default": self.model.output_times_default,
+            "backend": self.backend.name, "mpi_ranks": self.comm.size,
             "mesh": self.model.mesh_data.fingerprint(),
             "run": {"step": self.step_index, "time": self.time, "last_dt": self.last_dt,
                     "step_begin": self.step_begin, "step_done": self.step_done,

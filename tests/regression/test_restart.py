@@ -14,6 +14,7 @@ import random
 import signal
 import time
 
+import meshio
 import numpy as np
 import pytest
 import xarray as xr
@@ -241,6 +242,35 @@ def test_a_folder_holding_a_run_is_refused_unless_overwritten_or_restarted(primo
     longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.0")
     assert longer.returncode == 0, longer.stderr
     assert rc.summary(out)["steps"] == 5 and rc.summary(out)["restarts"] == 1
+
+
+def _written_times(out) -> list[float]:
+    with meshio.xdmf.TimeSeriesReader(out / "fields.xdmf") as reader:
+        reader.read_points_cells()
+        return [reader.read_data(k)[0] for k in range(reader.num_steps)]
+
+
+def test_a_restart_that_moves_t_final_writes_the_fields_there_when_output_times_were_the_default(
+        primordia_cli, small_config, tmp_path):
+    # config.toml froze the default output.times = [t_final]: a longer restart wrote no fields at its own end
+    out, given = tmp_path / "default", tmp_path / "given"
+    assert primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set", "time.t_final=0.6"
+                         ).returncode == 0
+    longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.0")
+    assert longer.returncode == 0, longer.stderr
+    assert _written_times(out) == pytest.approx([0.6, 1.0])
+
+    # times the user gave stay as given; --set output.times on the restart is the user's again
+    assert primordia_cli("run", small_config(), "--out", given, "--no-progress", "--set", "time.t_final=0.6",
+                         "--set", "output.times=[0.4, 0.6]").returncode == 0
+    assert primordia_cli("run", "--restart", given, "--no-progress", "--set", "time.t_final=1.0").returncode == 0
+    assert _written_times(given) == pytest.approx([0.4, 0.6])
+    assert primordia_cli("run", "--restart", given, "--no-progress", "--set", "time.t_final=1.4",
+                         "--set", "output.times=[0.4, 0.6, 1.2]").returncode == 0
+    assert _written_times(given) == pytest.approx([0.4, 0.6, 1.2])
+    assert primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.4",
+                         "--set", "output.times=[1.2]").returncode == 0
+    assert _written_times(out) == pytest.approx([0.6, 1.0, 1.2])
 
 
 def test_a_killed_run_is_named_killed_and_a_restart_refuses_another_model(primordia_cli, small_config, tmp_path):
