@@ -185,7 +185,9 @@ class Model:
             if not _on_the_step_grid((t - self.t_start) / self.dt):
                 raise ConfigError(f"output time {time_label(t)} is not a multiple of dt = {time_label(self.dt)} "
                                   f"after t_start")
-        output["times"] = sorted(float(t) for t in times)
+        # one time per step (a time given twice, or as 0.3 and 0.1 + 0.2, is one output and one entry in config.toml)
+        on_steps = {int(round((float(t) - self.t_start) / self.dt)): float(t) for t in reversed(times)}
+        output["times"] = sorted(on_steps.values())
         number(output["series_every"], "output.series_every", integer=True, at_least=1, hint="steps")
         return output
 

@@ -228,6 +228,12 @@ def test_a_config_missing_or_adding_a_table_is_refused(small_config, text, fragm
     assert fragment in str(caught.value)
 
 
+def test_an_output_time_given_twice_is_one_output_time():
+    """config.toml kept [0.4, 0.4, 1.0], and [0.3, 0.1 + 0.2] as two times on one step."""
+    assert small(output={"times": [1.0, 0.4, 0.4]}).output["times"] == [0.4, 1.0]
+    assert small(output={"times": [0.6, 0.2 + 0.4, 1.0]}).output["times"] == [0.6, 1.0]
+
+
 def test_snapshot_fields_may_be_a_tuple_as_output_times_may():
     assert small(output={"times": (0.4, 1.0), "snapshot_fields": ("f", "m")}).output["snapshot_fields"] == ["f", "m"]
 
