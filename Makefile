@@ -1,20 +1,23 @@
 # The two commands of the README. Each sets everything up (idempotently) first.
-.PHONY: demo test setup benchmark clean
+.PHONY: demo test setup benchmark clean help
 
-setup:
+setup: ## make the venv (.venv) with dolfinx from Debian, install primordia and its plugins
 	@tools/setup.sh
 
 # Seed example 1a on the seed's mesh (58,482 triangles, 2,600 steps, about a minute):
 # fields, series and pictures in out/ex01a/ (m_snapshots.png: rows of spots behind the wave).
 # --overwrite: a second `make demo` replaces the first one's run instead of being refused.
-demo: setup
+demo: setup ## the main job: seed example 1a on the seed's mesh, into out/ex01a (about a minute)
 	.venv/bin/primordia run examples/ex01a.toml --out out/ex01a --overwrite
 
-test: setup
+test: setup ## the test suite, both backends and MPI (about 13 minutes on 2 cores)
 	.venv/bin/python -m pytest -q -p no:cacheprovider
 
-benchmark: setup
+benchmark: setup ## the seed examples' cost per step (benchmarks/bench_examples.py)
 	.venv/bin/python benchmarks/bench_examples.py
 
-clean:
+clean: ## remove out/ (every run's results) and pytest's cache
 	rm -rf out .pytest_cache
+
+help: ## this list
+	@sed -n 's/^\([a-z]*\):.*## \(.*\)/  make \1\t\2/p' $(MAKEFILE_LIST) | expand -t 18

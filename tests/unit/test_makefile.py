@@ -32,3 +32,12 @@ def test_make_demo_runs_again_into_the_folder_its_last_run_filled(primordia_cli,
         result = primordia_cli(*args, *coarse, cwd=tmp_path)
         assert result.returncode == 0, (attempt, result.stderr)
     assert (tmp_path / "out" / "ex01a" / "summary.json").is_file()
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make on this machine")
+def test_make_help_lists_every_target_with_what_it_does():
+    phony = next(line for line in (ROOT / "Makefile").read_text().splitlines() if line.startswith(".PHONY:"))
+    listed = subprocess.run(["make", "-s", "help"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    described = {line.split()[1]: line.split(None, 2)[2] for line in listed.splitlines()}
+    assert set(described) == set(phony.split()[1:]), listed
+    assert all(text.strip() for text in described.values()), listed
