@@ -385,7 +385,23 @@ def _read_with_meshio(path: Path):
         if mesh is not None:
             return mesh
         reasons.append(f"as {file_format}: {reason}")
+    if _vtk_xml_without_cells(path):  # meshio's reason for it was "need at least one array to concatenate"
+        raise MeshError(f"mesh file {path} is empty (no points or no cells)")
     raise MeshError(f"cannot read mesh file {path} ({'; '.join(reasons)})")
+
+
+def _vtk_xml_without_cells(path: Path) -> bool:
+    """Whether ``path`` is a VTK XML file whose pieces all declare no points or no cells."""
+    import xml.etree.ElementTree as ET
+
+    pieces = []
+    try:
+        for _, element in ET.iterparse(path, events=("start",)):
+            if element.tag == "Piece":
+                pieces.append(element.get("NumberOfPoints", "0") == "0" or element.get("NumberOfCells", "0") == "0")
+    except (ET.ParseError, OSError):
+        return False
+    return bool(pieces) and all(pieces)
 
 
 def _candidate_formats(path: Path) -> list[str]:

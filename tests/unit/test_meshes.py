@@ -494,6 +494,8 @@ UNIT_SQUARE = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
             "1 degenerate",
         ),
         (lambda d: (d / "empty.msh").write_text(GMSH22_NO_ELEMENTS) and d / "empty.msh", "is empty"),
+        # meshio's reason was "need at least one array to concatenate" ("Inconsistent data!" in some layouts)
+        (lambda d: write_vtu(d / "empty.vtu", UNIT_SQUARE, [("triangle", np.zeros((0, 3), int))]), "is empty"),
         (
             lambda d: write_vtu(d / "surface.vtu", [[0, 0, 0], [1, 0, 0], [0, 1, 1]], [("triangle", [[0, 1, 2]])]),
             "not in a z = constant plane",
@@ -507,7 +509,7 @@ UNIT_SQUARE = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
             r"2 vertices at the coordinates of another \(duplicated nodes, e.g. vertex 4 at \(0, 0\), as vertex 0\)",
         ),
     ],
-    ids=["missing", "directory", "unreadable", "unknown-format", "quads", "mixed", "degenerate", "empty", "surface",
+    ids=["missing", "directory", "unreadable", "unknown-format", "quads", "mixed", "degenerate", "empty", "empty-vtu", "surface",
          "duplicated-nodes"],
 )
 def test_read_mesh_errors_are_one_line(tmp_path, make_file, message):
