@@ -182,7 +182,7 @@ class Model:
                                   f"({time_label(self.t_start)}, {time_label(self.t_final)}]")
             # in steps, as t_final is: 1e-9 in time was half a step of dt = 1e-12, and a time within it of
             # t_start fell on step 0, which no run writes
-            if not _on_the_step_grid((t - self.t_start) / self.dt):
+            if not _on_the_step_grid(self.t_start, t, self.dt):
                 raise ConfigError(f"output time {time_label(t)} is not a multiple of dt = {time_label(self.dt)} "
                                   f"after t_start")
         # one time per step (a time given twice, or as 0.3 and 0.1 + 0.2, is one output and one entry in config.toml)
@@ -513,10 +513,16 @@ def _growth_law_table(growth_law, physics_classes) -> dict | None:
     return dict(growth_law)
 
 
-def _on_the_step_grid(steps: float) -> bool:
-    """Whether a span of ``steps`` time steps ends on step 1 or later, to round-off (1e-9 of the steps): a span
-    of less than half a step was within the tolerance of 0 steps (such a run "completed" at t_start)."""
-    return round(steps) >= 1 and abs(steps - round(steps)) <= 1e-9 * max(1.0, steps)
+def _on_the_step_grid(start: float, end: float, dt: float) -> bool:
+    """Whether the span from ``start`` to ``end`` is a whole number of steps of ``dt``, at least one, to round-off.
+
+    A span of less than half a step was within the tolerance of 0 steps (such a run "completed" at t_start);
+    the tolerance was 1e-9 of the steps, which let t_final = 520.0000001 with dt = 0.2 through (5e-7 of a
+    step, the last step solved with dt). It is now 1e-12 of the steps and of the times' size in steps (the
+    subtraction's round-off: t_start = 1e6, dt = 0.1).
+    """
+    steps = (end - start) / dt
+    return round(steps) >= 1 and abs(steps - round(steps)) <= 1e-12 * (abs(steps) + max(abs(start), abs(end)) / dt)
 
 
 def _time(t_start, dt, t_final) -> tuple[float, float, float]:
@@ -531,7 +537,7 @@ def _time(t_start, dt, t_final) -> tuple[float, float, float]:
     if not math.isfinite(steps) or steps > MAX_STEPS:
         raise ConfigError(f"time.dt = {dt:g} gives {steps:.3g} steps from t_start = {t_start:g} to t_final = "
                           f"{t_final:g}, more than {MAX_STEPS:,}: is dt in the model's (dimensionless) time units?")
-    if not _on_the_step_grid(steps):
+    if not _on_the_step_grid(t_start, t_final, dt):
         span = time_label(t_final) if t_start == 0 else f"{time_label(t_final)} - {time_label(t_start)}"
         raise ConfigError(f"time.t_final - time.t_start = {span} is not a multiple of dt = {time_label(dt)}")
     return float(t_start), float(dt), float(t_final)

@@ -150,6 +150,9 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     ({"dt": 0.3}, "time.t_final - time.t_start = 1 is not a multiple of dt = 0.3"),
     # %g printed "time.t_final - time.t_start = 520 is not a multiple of dt = 0.2"
     ({"t_final": 520.0001}, "time.t_final - time.t_start = 520.0001 is not a multiple of dt = 0.2"),
+    # 5e-7 of a step: within the tolerance of 1e-9 steps, the last step solved with dt and ending at 520.0000001
+    ({"t_final": 520.0000001}, "time.t_final - time.t_start = 520.0000001 is not a multiple of dt = 0.2"),
+    ({"output": {"times": [0.4000000001]}}, "output time 0.4000000001 is not a multiple of dt = 0.2"),
     ({"t_final": 3.0, "t_start": 1.0000001}, "time.t_final - time.t_start = 3 - 1.0000001 is not a multiple of "
                                              "dt = 0.2"),
     # 1e-10 is 1e-10 steps of dt = 1, within the tolerance of 0 steps: the run "completed" 0 steps at t = 0
@@ -251,3 +254,14 @@ def test_a_model_its_mesh_and_its_simulation_say_what_they_are_in_one_line(tmp_p
                            f"dt=0.2, t=0..2, coupling='sequential', backend='fenicsx')")
     sim = Simulation(model, backend="skfem", out_dir=tmp_path)
     assert repr(sim) == f"Simulation('quick' on skfem, setting up, t = 0 after 0 steps, out_dir='{tmp_path}')"
+
+
+@pytest.mark.parametrize("t_start, dt, t_final, steps", [
+    (0.0, 0.1, 0.1 * 7, 7),  # 0.7000000000000001
+    (0.0, 0.2, 520.0, 2600),
+    (1e6 + 0.1, 0.1, 1e6 + 0.7, 6),  # the subtraction's round-off: 6.000000001 steps
+    (0.0, 0.2 / 3, 520.0, 7800),
+])
+def test_times_off_the_step_grid_by_round_off_only_are_accepted(t_start, dt, t_final, steps):
+    model = small(t_start=t_start, dt=dt, t_final=t_final, output={"times": [t_final]})
+    assert model.num_steps == steps
