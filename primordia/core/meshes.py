@@ -361,7 +361,7 @@ def read_mesh(path: str | Path) -> MeshData:
     cells = _cells_of_type(raw, CELL_TYPES[tdim])
     check_affordable(len(cells), tdim)  # before the checks and the run allocate more, as for a generated mesh
     points = _points_in_dimension(np.asarray(raw.points, dtype=np.float64), tdim, path)
-    boundaries = _tagged_facets(raw, tdim)
+    boundaries = _tagged_facets(raw, tdim, path)
     _check_vertex_indices(cells, boundaries, len(points), path)
     what = f"mesh file {path}"
     points, cells, boundaries = _drop_unused_points(points, cells, boundaries, what)
@@ -529,7 +529,7 @@ def _points_in_dimension(points: np.ndarray, tdim: int, path: Path) -> np.ndarra
     return points
 
 
-def _tagged_facets(raw, tdim: int) -> dict[str, np.ndarray]:
+def _tagged_facets(raw, tdim: int, path: Path) -> dict[str, np.ndarray]:
     """Boundary name -> facets, from facet blocks tagged by ``gmsh:physical``, in tag order (0, no group, aside)."""
     tags = raw.cell_data.get("gmsh:physical")
     if tags is None:
@@ -543,10 +543,29 @@ def _tagged_facets(raw, tdim: int) -> dict[str, np.ndarray]:
         for tag in np.unique(block_tags[block_tags != 0]):
             facets_by_tag.setdefault(int(tag), []).append(block.data[block_tags == tag])
     names = _physical_names(raw.field_data, dim=tdim - 1)
+    _warn_of_shared_groups(raw, tdim, names, facets_by_tag, path)
     return {
         names.get(tag, f"boundary_{tag}"): np.vstack(facets_by_tag[tag]).astype(np.int64)
         for tag in sorted(facets_by_tag)
     }
+
+
+def _warn_of_shared_groups(raw, tdim: int, names: dict, facets_by_tag: dict, path: Path) -> None:
+    """One warning per named group whose facets are also in another: Gmsh 4.1 lets an entity be in several
+    physical groups, a facet carries one boundary name here, and meshio keeps the entity's first group
+    (a curve in "left" and "walls" was "left" only, and "walls" went missing without a word)."""
+    from primordia.core.errors import warn
+
+    for tag, name in sorted(names.items()):
+        sets = raw.cell_sets.get(name)
+        if sets is None or len(sets) != len(raw.cells):
+            continue
+        members = sum(len(indices) for block, indices in zip(raw.cells, sets) if block.type == FACET_TYPES[tdim])
+        kept = sum(len(facets) for facets in facets_by_tag.get(tag, []))
+        if members > kept:
+            left = "is left out" if kept == 0 else f"keeps {kept}"
+            warn(f"mesh file {path}: physical group '{name}' shares {members - kept} of its {members} facets with "
+                 f"other groups; a facet carries one boundary name, its entity's first group's, so '{name}' {left}")
 
 
 def _physical_names(field_data: Mapping, dim: int) -> dict[int, str]:

@@ -473,6 +473,22 @@ def write_vtu(path, points, cells):
 UNIT_SQUARE = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
 
 
+def test_a_gmsh_group_that_shares_its_facets_with_another_is_named_in_a_warning(tmp_path, capsys):
+    """Gmsh 4.1 puts an entity in several physical groups; meshio keeps the first, and a facet carries one
+    name here: "walls" (both curves, also "left" and "right") went missing without a word."""
+    path = tmp_path / "walls.msh"
+    path.write_text(GMSH41_SQUARE.replace("$PhysicalNames\n3\n", '$PhysicalNames\n4\n1 4 "walls"\n').replace(
+        "1 0 0 0 0 1 0 1 1 0\n2 1 0 0 1 1 0 1 2 0\n", "1 0 0 0 0 1 0 2 1 4 0\n2 1 0 0 1 1 0 2 2 4 0\n"))
+    mesh = read_mesh(path)
+    assert sorted(mesh.boundaries) == ["left", "right"]
+    warning = capsys.readouterr().err
+    assert warning.count("\n") == 1 and "physical group 'walls' shares 2 of its 2 facets" in warning, warning
+    assert "'walls' is left out" in warning
+    path.write_text(GMSH41_SQUARE)
+    read_mesh(path)
+    assert capsys.readouterr().err == ""
+
+
 @pytest.mark.parametrize(
     "make_file, message",
     [
