@@ -80,8 +80,9 @@ class GrowthLaw(Configured, ABC):
         self.params = params
         self.settings: dict[str, Any] = merge_options(f"growth law {self.name}", self.options, given)
         directions = self.settings["directions"]
-        if directions is not None:  # validate now, one line; the mesh's dimension is checked by frame()
-            self.frame(_dimension_meant(directions))
+        dimension = _dimension_meant(directions, self.dimensions)
+        if directions is not None and dimension is not None:  # validate now, one line; else frame(the mesh's)
+            self.frame(dimension)
 
     @abstractmethod
     def factors(self, fields: Mapping[str, Any], t, X, dimension: int) -> list:
@@ -129,14 +130,16 @@ class GrowthLaw(Configured, ABC):
         return tensor
 
 
-def _dimension_meant(directions) -> int:
-    """The dimension a ``directions`` list is written for: the length of its vectors (3 when unclear), so that
-    [[1, 0, 0], [0, 1, 0]] is told it needs 3 vectors of 3 numbers, not 2 of 2."""
-    if isinstance(directions, (list, tuple)) and directions:
-        first = directions[0]
-        size = len(first) if isinstance(first, (list, tuple)) else len(directions)
-        return size if size in (2, 3) else 3
-    return 3
+def _dimension_meant(directions, dimensions: Sequence[int]) -> int | None:
+    """The dimension a ``directions`` list is for: the law's, if it is written for one only, else the length
+    of the first vector (so that [[1, 0, 0], [0, 1, 0]] is told it needs 3 vectors of 3 numbers, not 2 of 2).
+    None when neither tells: the mesh's dimension decides, when the model is composed or set up (a 2D run
+    was told "3 vectors of 3 numbers (in 3D)" for directions = [])."""
+    if len(dimensions) == 1:
+        return dimensions[0]
+    first = directions[0] if isinstance(directions, (list, tuple)) and directions else None
+    size = len(first) if isinstance(first, (list, tuple)) else None
+    return size if size in (2, 3) else None
 
 
 def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: int) -> list:

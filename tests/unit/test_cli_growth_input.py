@@ -30,6 +30,8 @@ COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "ou
      ["unknown boundary condition type 'springs'", "robin"]),
     (["--set", "physics.chemotaxis.accumulation=lagrangian"], ["accumulation must be one of material, conservative"]),
     (["--set", "growth_law.directions=[[1.0, 1.0], [0.0, 1.0]]"], ["growth_law.directions must be orthonormal"]),
+    # no vectors to read a dimension from: example 2a (seed2d, 2D) was told "3 vectors of 3 numbers (in 3D)"
+    (["--set", "growth_law.directions=[]"], ["growth_law.directions must be 2 vectors of 2 numbers", "in 2D"]),
     (["--set", "physics.poroelastic_growth.stabilisation=[-1.0, 0.1]"],
      ["physics.poroelastic_growth.stabilisation[0] (beta_s) must be a number > 0, got -1.0"]),
     (["--set", "physics.poroelastic_growth.stabilisation=[1.0, -0.1]"], ["stabilisation[1] (beta_f) must be a number >= 0"]),
@@ -37,7 +39,7 @@ COARSE = ["--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "ou
      ["solver.poroelastic_growth.splits names the splits of pc_type = \"fieldsplit\"", "pc_type is 'lu'"]),
 ], ids=["unknown-law", "law-of-the-wrong-dimension", "active-stress-with-growth", "negative-growth-rate",
         "a-sliding-tissue", "another-law-s-parameter",
-        "zero-shear-modulus", "unknown-condition-kind", "unknown-accumulation", "skewed-directions",
+        "zero-shear-modulus", "unknown-condition-kind", "unknown-accumulation", "skewed-directions", "no-directions",
         "negative-psi-stabilisation", "negative-p-stabilisation", "splits-without-fieldsplit"])
 def test_a_bad_growth_config_is_one_line(primordia_cli, tmp_path, overrides, fragments):
     result = primordia_cli("run", EX02A, *COARSE, *overrides, "--out", tmp_path / "out")

@@ -65,10 +65,22 @@ def test_growth_directions_rotate_the_frame_and_must_be_orthonormal():
     np.testing.assert_allclose(F_g, F_g[0, 0] * np.eye(2), atol=1e-14)  # isotropic in-plane: frame-free
     with pytest.raises(ConfigError, match="orthonormal"):
         Seed2D(ParameterSet(Seed2D.parameters), directions=[[1.0, 0.0], [1.0, 1.0]])
-    with pytest.raises(ConfigError, match="3 vectors of 3 numbers"):
+    with pytest.raises(ConfigError, match="2 vectors of 2 numbers"):  # seed2d is a 2D law, whatever was given
         Seed2D(ParameterSet(Seed2D.parameters), directions=[[1.0, 0.0, 0.0]])
     with pytest.raises(ConfigError, match="2 vectors of 2 numbers"):  # 3D directions on a 2D mesh
         Seed2D(ParameterSet(Seed2D.parameters), directions=np.eye(3).tolist()).frame(2)
+
+
+@pytest.mark.parametrize("directions", [[], "x", [1.0, 0.0, 0.0]], ids=["none", "a-word", "one-flat-vector"])
+def test_directions_without_a_dimension_are_checked_against_the_mesh(directions):
+    """A law written for 2D and 3D cannot tell from these which the frame is for: the mesh's dimension says it."""
+    import growth_test_laws
+
+    with growth_test_laws.registered(), pytest.raises(ConfigError) as failure:
+        Model(physics=["poroelastic_growth"], growth_law={"name": "test_uniform", "directions": directions},
+              mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2, output={"pictures": False})
+    assert "growth_law.directions must be 2 vectors of 2 numbers" in str(failure.value), failure.value
+    assert "in 2D" in str(failure.value) and "\n" not in str(failure.value)
 
 
 def _rate(seed, dimension, m, m_dot, t):
