@@ -508,8 +508,10 @@ def _growth_law_table(growth_law, physics_classes) -> dict | None:
                           f"(registered: {known})")
     if isinstance(growth_law, str):
         return {"name": growth_law}
-    if not isinstance(growth_law, dict) or not isinstance(growth_law.get("name"), str):
+    if not isinstance(growth_law, dict) or "name" not in growth_law:
         raise ConfigError("[growth_law] must be a table with a name (e.g. name = \"seed2d\")")
+    if not isinstance(growth_law["name"], str):
+        raise ConfigError(f"growth_law.name must be the name of a growth law, got {growth_law['name']!r}")
     return dict(growth_law)
 
 

@@ -132,6 +132,7 @@ GROWTH_MODEL = dict(physics=["poroelastic_growth"], mesh=box((0, 0, 0), (1, 1, 1
     ("seed4d", PluginError, "unknown growth law 'seed4d' (registered: "),  # installed plugins add theirs
     ({"name": "seed2d", "rate": 2.0}, ConfigError, "growth law seed2d: unknown option 'rate'"),
     ({"directions": [[1, 0], [0, 1]]}, ConfigError, "[growth_law] must be a table with a name"),
+    ({"name": 5}, ConfigError, "growth_law.name must be the name of a growth law, got 5"),  # was "a table with a name"
 ])
 def test_a_bad_growth_law_table_is_one_line(growth_law, error, message):
     with pytest.raises(error) as failure:
