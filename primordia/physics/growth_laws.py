@@ -34,8 +34,9 @@ an oscillating scheme took below zero) and an infinite derivative at 0 (the
 
     sqrt+(gamma) = sqrt( (gamma + sqrt(gamma^2 + eps^2)) / 2 ),   eps = 1e-12,
 
-which equals sqrt(gamma) to round-off for gamma >> eps, tends to 0 (no growth)
-for gamma <= 0, is never NaN, and has finite derivatives everywhere, so Newton
+which equals sqrt(gamma) to round-off for gamma >> eps, is sqrt(eps/2) = 7.1e-7 at
+gamma = 0 (the 3D law's F_g(0) is I + 7.1e-7 (k_1 (x) k_1 + k_2 (x) k_2)), falls to 0
+(no growth) for gamma < 0, is never NaN, and has finite derivatives everywhere, so Newton
 tangents (also with respect to m, in a monolithic solve) stay finite.
 """
 
