@@ -378,8 +378,8 @@ def test_strang_conserves_the_cells_whose_half_steps_straddle_the_growth(inner_s
 
 def test_sequential_inner_steps_count_each_volume_change_once(tmp_path):
     """Lie splitting with the species first lags the mechanics by one step (int J m dX at the output reads the
-    J the species have not balanced yet: 5.5% here, converging with dt); inner steps of the species counted
-    the last change again (6.0% against 3.5% at dt = 0.2 on 6 x 6) and now leave the lag as it is."""
+    J the species have not balanced yet: 7.5% here at t = 2, converging with dt); inner steps of the species
+    counted the last change again (6.0% against 3.5% at dt = 0.2 on 6 x 6) and now leave the lag as it is."""
     _, one = _cell_amounts(tmp_path / "1", 'coupling.scheme="sequential"')
     _, two = _cell_amounts(tmp_path / "2", 'coupling.scheme="sequential"', "coupling.inner_steps=2")
     assert np.abs(two / one - 1.0).max() < 1e-4, (one, two)
