@@ -132,15 +132,15 @@ class GrowthLaw(Configured, ABC):
 
 
 def _dimension_meant(directions, dimensions: Sequence[int]) -> int | None:
-    """The dimension a ``directions`` list is for: the law's, if it is written for one only, else the length
-    of the first vector (so that [[1, 0, 0], [0, 1, 0]] is told it needs 3 vectors of 3 numbers, not 2 of 2).
-    None when neither tells: the mesh's dimension decides, when the model is composed or set up (a 2D run
-    was told "3 vectors of 3 numbers (in 3D)" for directions = [])."""
+    """The dimension a ``directions`` list is for: the law's, if it is written for one only, else d when the
+    list holds d vectors of d numbers.  None otherwise: the mesh's dimension decides, when the model is
+    composed or set up (a 2D run was told "3 vectors of 3 numbers (in 3D)" for directions = [])."""
     if len(dimensions) == 1:
         return dimensions[0]
-    first = directions[0] if isinstance(directions, (list, tuple)) and directions else None
-    size = len(first) if isinstance(first, (list, tuple)) else None
-    return size if size in (2, 3) else None
+    if isinstance(directions, (list, tuple)) and len(directions) in (2, 3) and all(
+            isinstance(k, (list, tuple)) and len(k) == len(directions) for k in directions):
+        return len(directions)
+    return None
 
 
 def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: int) -> list:

@@ -71,7 +71,8 @@ def test_growth_directions_rotate_the_frame_and_must_be_orthonormal():
         Seed2D(ParameterSet(Seed2D.parameters), directions=np.eye(3).tolist()).frame(2)
 
 
-@pytest.mark.parametrize("directions", [[], "x", [1.0, 0.0, 0.0]], ids=["none", "a-word", "one-flat-vector"])
+@pytest.mark.parametrize("directions", [[], "x", [1.0, 0.0, 0.0], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]],
+                         ids=["none", "a-word", "one-flat-vector", "two-3d-vectors"])
 def test_directions_without_a_dimension_are_checked_against_the_mesh(directions):
     """A law written for 2D and 3D cannot tell from these which the frame is for: the mesh's dimension says it."""
     import growth_test_laws
