@@ -117,6 +117,9 @@ def test_a_species_named_like_another_modules_field_names_both():
                                                                    "(production, loss_rate)} for its species q, got z"),
     ({"split_rates": lambda self, c, t, ops: None}, "split_rates must return"),
     ({"split_rates": lambda self, c, t, ops: {"q": 1.0}}, "split_rates must give species q a pair"),
+    ({"split_rates": lambda self, c, t, ops: {"q": ("1.0", 1.0)}}, "give species q a real production, got '1.0'"),
+    ({"split_rates": lambda self, c, t, ops: {"q": (1.0, None)}}, "give species q a real loss_rate, got None"),
+    ({"initial_state": lambda self, t0, ops: {"q": "1"}}, "initial_state must give species q a real number"),
     ({"split_rates": lambda self, c, t, ops: {"q": (c["h"], 1.0)}}, "split_rates failed: KeyError: 'h'"),
     ({"__init__": lambda self, params, **given: 1 / 0}, "could not be set up: ZeroDivisionError"),
 ])

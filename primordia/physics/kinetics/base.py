@@ -36,6 +36,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numpy as np
+
 from primordia.core.config import Configured, merge_options
 from primordia.core.errors import PluginError, plugin_code
 from primordia.core.parameters import Parameter
@@ -164,8 +166,9 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
     """``(initial_state(t0, ops), split_rates(state, t0, ops))``, checked against the contract.
 
     Each must be a table with a value for every declared species (the rates: a pair production, loss rate,
-    and no other species).  A kinetics that breaks the contract, or whose code fails on numbers
-    (``ops = NUMPY``) in another way than arithmetic, is one line naming it (:class:`PluginError`);
+    and no other species), each value a real number or an array of them.  A kinetics that breaks the contract,
+    or whose code fails on numbers (``ops = NUMPY``) in another way than arithmetic, is one line naming it
+    (:class:`PluginError`);
     arithmetic that fails (an overflow, a math domain error) propagates, for the caller to blame the parameters.
     """
     where = f"kinetics {kinetics.name}"
@@ -176,6 +179,8 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
         raise PluginError(f"{where}: initial_state must return a value for every species, got {state!r} "
                           f"(missing: {', '.join(missing)})")
     state = {name: state[name] for name in names}
+    for name in names:
+        _check_real(state[name], f"{where}: initial_state must give species {name} a real number")
     rates = _call(kinetics, "split_rates", state, t0, ops)
     if not isinstance(rates, Mapping) or set(rates) != set(names):
         got = ", ".join(map(str, rates)) if isinstance(rates, Mapping) else repr(rates)
@@ -186,7 +191,16 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
             raise PluginError(f"{where}: split_rates must give species {name} a pair (production, loss_rate), "
                               f"got {pair!r}")
+        for part, value in zip(("production", "loss_rate"), pair):
+            _check_real(value, f"{where}: split_rates must give species {name} a real {part}")
     return state, dict(rates)
+
+
+def _check_real(value, refusal: str) -> None:
+    """One line (``refusal``, then the value) unless ``value`` is a real number or an array of them: a string or
+    None would otherwise fail as a traceback deep in the weak forms."""
+    if not isinstance(value, (int, float, np.ndarray, np.number)) or np.asarray(value).dtype.kind not in "biuf":
+        raise PluginError(f"{refusal}, got {value!r}")
 
 
 def _call(kinetics: Kinetics, method: str, *args):
