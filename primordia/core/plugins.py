@@ -6,17 +6,18 @@ the plugins the environment variable ``PRIMORDIA_PLUGINS`` names, installed or n
 (as pytest's ``PYTEST_PLUGINS``: module names or paths of ``.py`` files, separated
 by commas; ``primordia -p`` adds to it).  An installed plugin that fails to import or
 register produces one warning naming it and is skipped; the rest keeps working.  A
-plugin named in the variable was asked for: one that fails stops the program in one
-line.  :func:`registry` turns the contribute hooks into name -> class tables and
-reports where each piece came from.
+plugin named in the variable was asked for: one that fails, to load or in a contribute
+hook, stops the program in one line.  :func:`registry` turns the contribute hooks into
+name -> class tables and reports where each piece came from.
 
 A plugin is trusted with nothing: a contribute hook that raises, returns
 something other than a list of named pieces of the right kind, or reuses a name
 already taken (a built-in's, or another plugin's) is named in one warning and
-its contribution skipped; a choosing hook (:func:`choose`) that raises or returns
-something of the wrong kind is skipped the same way.  Every such plugin is listed
-as broken by ``primordia plugins`` (:attr:`LoadReport.broken`), which asks the
-backend choosers itself (:func:`ask_backend_choosers`); a splitting-scheme chooser
+its contribution skipped (a PluginError if the plugin was asked for); a choosing
+hook (:func:`choose`) that raises or returns something of the wrong kind is skipped
+the same way.  Every such plugin is listed as broken by ``primordia plugins``
+(:attr:`LoadReport.broken`), which asks the backend choosers itself
+(:func:`ask_backend_choosers`); a splitting-scheme chooser
 needs a model's physics, so only a run finds it broken.
 """
 
@@ -106,6 +107,7 @@ class LoadReport:
     failures: list[str] = field(default_factory=list)  # one message per broken plugin and hook
     broken: dict[str, list[str]] = field(default_factory=dict)  # plugin name -> what is wrong with it
     skipped: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, piece name) -> why it was skipped
+    asked: set[str] = field(default_factory=set)  # plugins named in PRIMORDIA_PLUGINS: their failures stop the program
 
     def report(self, plugin: str, message: str) -> None:
         """Record (and warn, the first time) that ``plugin`` is broken."""
@@ -189,6 +191,7 @@ def _register_named(pm: pluggy.PluginManager, item: str) -> None:
                           f"{place}") from exc
     where = str(Path(item).resolve()) if is_file else f"module {item}"
     pm.load_report.sources[name] = f"{where} ({PLUGINS_VARIABLE})"
+    pm.load_report.asked.add(name)
 
 
 def _load_file(path: str, name: str):
@@ -263,17 +266,22 @@ def registry(kind: str, pm: pluggy.PluginManager | None = None) -> dict[str, tup
 
 
 def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
-    """The named pieces one plugin's hook contributes; all of them or, if anything is wrong, none."""
+    """The named pieces one plugin's hook contributes; all of them or, if anything is wrong, none (or, for a
+    plugin asked for in ``PRIMORDIA_PLUGINS``, a PluginError: it was asked for, so it stops the program)."""
     plugin, origin = impl.plugin_name, _origin(pm, impl.plugin_name)
     where = f"plugin '{plugin}' ({origin}): hook {HOOK_BY_KIND[kind]}"
     try:
         pieces = impl.function()
     except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the rest
+        if plugin in pm.load_report.asked:
+            raise PluginError(f"{where} raised {one_line(exc)}") from exc
         pm.load_report.report(plugin, f"{where} raised {one_line(exc)}; its {kind.replace('_', ' ')} are skipped")
         return {}
     if pieces is None:
         return {}
     problem = _junk(kind, pieces, taken)
+    if problem and plugin in pm.load_report.asked:
+        raise PluginError(f"{where} {problem}")
     if problem:
         message = f"{where} {problem}; its {kind.replace('_', ' ')} are skipped"
         pm.load_report.report(plugin, message)

@@ -188,6 +188,26 @@ def test_a_named_plugin_that_cannot_be_loaded_is_one_line_and_exit_2(primordia_c
     assert expected.format(path=item) in lines[0]
 
 
+@pytest.mark.parametrize("source, expected", [
+    (FROZEN_KINETICS.replace('"frozen"', '"painter2018"'),
+     "hook primordia_kinetics reuses the name 'painter2018', taken by primordia (built-in)"),
+    (FROZEN_KINETICS.replace("return [Frozen]", "raise RuntimeError('broken on purpose')"),
+     "hook primordia_kinetics raised RuntimeError: broken on purpose"),
+    (FROZEN_KINETICS.replace("return [Frozen]", "return Frozen"), "hook primordia_kinetics returned <class "),
+], ids=["a name taken", "a hook that raises", "not a list"])
+def test_a_named_plugin_whose_hook_is_broken_stops_in_one_line(primordia_cli, small_config, tmp_path, source,
+                                                               expected):
+    """Before, it was one warning, its kinetics skipped, and the run went on: with the built-in painter2018 when
+    the file's kinetics reused that name, which the author asked for by ``-p`` and did not get."""
+    plugin = _written(tmp_path / "mine.py", source)
+    for args in (["plugins"], ["run", small_config(), "--out", tmp_path / "out", "--dry-run"]):
+        result = primordia_cli("-p", plugin, *args)
+        assert result.returncode == 2, result.stderr
+        lines = result.stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"primordia: error: plugin 'mine' ({plugin} "), result.stderr
+        assert expected in lines[0]
+
+
 def test_p_with_a_comma_or_nothing_is_refused(primordia_cli):
     for item in ["a.py,b.py", " "]:
         result = primordia_cli("-p", item, "plugins")
