@@ -147,7 +147,7 @@ def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: 
     """``law.factors(...)``, checked: one scalar (a number or a UFL expression) per direction, ``dimension`` of
     them.  A law that breaks this, or whose code fails, is one line naming it (:class:`PluginError`)."""
     where = f"growth law {law.name}"
-    with plugin_code(f"{where}: factors failed"):
+    with plugin_code(f"{where}: factors failed", passes=(PluginError,)):  # a ConfigError too: name the law
         try:
             gammas = law.factors(fields, t, X, dimension)
         except KeyError as error:

@@ -150,6 +150,16 @@ def test_a_growth_law_breaking_its_contract_is_one_line_naming_it(factors, requi
     assert str(error.value).startswith("growth law qa_broken_law: ") and message in str(error.value)
 
 
+def test_a_growth_law_reading_an_undeclared_parameter_is_one_line_naming_it():
+    """It was "unknown parameter 'rate'", naming no law (a kinetics' split_rates is named)."""
+    law = _law("qa_undeclared", lambda fields, t: [t, t])
+    law.factors = lambda self, fields, t, X, dimension: [t, self.params["rate"] * t]
+    with pytest.raises(PluginError) as error:
+        law(ParameterSet(())).growth_tensor({}, 1.0, None, 2)
+    assert str(error.value).startswith("growth law qa_undeclared: factors failed: ConfigError: unknown parameter "
+                                       "'rate'"), str(error.value)
+
+
 MISSPELT = """\
 from primordia.core.plugins import hookimpl
 
