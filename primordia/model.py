@@ -165,7 +165,7 @@ class Model:
 
         if not isinstance(table, dict):
             raise ConfigError(f"[output] must be a table, got {table!r}")
-        declared = declared_options(output for output, _ in registry("outputs").values())
+        declared = declared_options((output for output, _ in registry("outputs").values()), OUTPUT_SCHEDULE)
         unknown = set(table) - set(OUTPUT_SCHEDULE) - set(declared)
         if unknown:
             raise ConfigError(f"unknown key output.{sorted(unknown)[0]} "

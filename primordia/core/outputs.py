@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from primordia.core.checkpoint import CHECKPOINT_FILE
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError
 from primordia.core.json_toml import write_json, write_toml
 from primordia.core.pictures import plot_field, plot_fields_grid
 from primordia.core.plugins import hookimpl
@@ -447,12 +447,24 @@ def primordia_outputs():
     return [ResolvedConfig, FieldsXdmf, ScalarSeriesNetcdf, Pictures, Summary]
 
 
-def declared_options(outputs: Iterable[type[Output]]) -> dict[str, OutputOption]:
-    """Every ``[output]`` key the ``outputs`` declare; a key declared by two of them is one ConfigError."""
+def declared_options(outputs: Iterable[type[Output]], reserved: Iterable[str] = ()) -> dict[str, OutputOption]:
+    """Every ``[output]`` key the ``outputs`` declare; a key declared by two of them is one ConfigError.
+
+    An output whose options are not a table of :class:`OutputOption`, or that declares one of the ``reserved``
+    keys (the schedule's, which the model checks itself), is one :class:`PluginError` naming it.
+    """
     declared: dict[str, OutputOption] = {}
     owner: dict[str, str] = {}
+    reserved = set(reserved)
     for output in outputs:
+        if not isinstance(output.options, Mapping) or not all(isinstance(option, OutputOption)
+                                                               for option in output.options.values()):
+            raise PluginError(f"output {output.name}: its options must be a table of "
+                              f"primordia.core.outputs.OutputOption, got {output.options!r}")
         for key, option in output.options.items():
+            if key in reserved:
+                raise PluginError(f"output {output.name} declares output.{key}, a key of the output schedule "
+                                  f"({', '.join(sorted(reserved))}): it must rename its option")
             if key in owner:
                 raise ConfigError(f"output option {key!r} is declared by two outputs, {owner[key]!r} and "
                                   f"{output.name!r}: one of them must rename it")

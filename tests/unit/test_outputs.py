@@ -12,7 +12,7 @@ import pytest
 import xarray as xr
 
 from file_writers import WriterDied, leftovers
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError
 from primordia.core.meshes import rectangle
 from primordia.core.outputs import (
     FieldsXdmf,
@@ -107,6 +107,22 @@ def test_a_key_two_outputs_declare_is_refused():
 
     with pytest.raises(ConfigError, match="'pictures' is declared by two outputs, 'pictures' and 'thumbnails'"):
         declared_options([Pictures, Thumbnails])
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"times": OutputOption(3, flag)}, "output thumbnails declares output.times, a key of the output schedule "
+                                       "(series_every, times): it must rename its option"),
+    ({"size": 5}, "output thumbnails: its options must be a table of primordia.core.outputs.OutputOption, "
+                  "got {'size': 5}"),
+])
+def test_an_output_declaring_options_wrongly_is_one_line_naming_it(options, message):
+    """Before, a key of the schedule was checked by the output's check ("output.times must be true or false,
+    got [0.6]", the user blamed), and a plain value was an AttributeError traceback at the model's set-up."""
+    thumbnails = type("Thumbnails", (Output,), {"name": "thumbnails", "options": options})
+    plugin = SimpleNamespace(primordia_outputs=hookimpl(lambda: [thumbnails]))
+    with registered(plugin), pytest.raises(PluginError) as caught:
+        small_model()
+    assert str(caught.value) == message
 
 
 @pytest.mark.parametrize("output, message", [
