@@ -67,7 +67,7 @@ from primordia.core.ops import NUMPY, UFL
 from primordia.core.validation import number, numbers
 from primordia.physics.base import GATHERED_RANKS, Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
 from primordia.physics.edge_flux import ExponentiallyFittedFlux
-from primordia.physics.kinetics.base import Species, checked_evaluation
+from primordia.physics.kinetics.base import Species, checked_evaluation, kinetics_code
 
 FLUX_SCHEMES = ("exponential_fitting", "galerkin")
 EDGE_OPS = compiled.numpy_ops()  # the sensitivity at every edge at every step: exp by the compiled loop
@@ -193,7 +193,8 @@ class Chemotaxis(Physics):
 
     def sensitivity(self, species: Species, density, ops):
         """chi(c): the chemotactic flux of ``species`` is chi(c) c grad a (seed eq. (2.3a)), from the kinetics."""
-        return self.kinetics.sensitivity(species.name, density, ops)
+        with kinetics_code(self.kinetics, "sensitivity"):
+            return self.kinetics.sensitivity(species.name, density, ops)
 
     def setup(self, disc):
         self.disc = disc  # the fitted flux's separate fields are checked when the scheme is made (check_scheme)
@@ -222,7 +223,8 @@ class Chemotaxis(Physics):
 
     def _reactions(self):
         state = {s.name: self.disc.field(s.name) for s in self.species}
-        return self.kinetics.split_rates(state, self.disc.t, UFL.at(self.disc.x))
+        with kinetics_code(self.kinetics, "split_rates"):
+            return self.kinetics.split_rates(state, self.disc.t, UFL.at(self.disc.x))
 
     def _balanced_volume_ratio(self, species: Species):
         """J where ``species`` was last balanced (J_b of the conservative accumulation J c - J_b c^n): J of the

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from primordia.core.errors import ConfigError, PluginError
@@ -128,6 +129,30 @@ def test_a_kinetics_breaking_its_contract_is_one_line_naming_it(attributes, mess
     with registered(Plugin([broken])), pytest.raises(PluginError) as error:
         _model("qa_broken_kinetics")
     assert "qa_broken_kinetics" in str(error.value) and message in str(error.value)
+    assert "\n" not in str(error.value)
+
+
+ATTRACTED = (Species("q", "climbs r", diffusivity="D_q", attractant="r", perturbed=True),
+             Species("r", "the attractant", diffusivity="D_q"))
+
+
+@pytest.mark.parametrize("attributes, message", [
+    ({"split_rates": lambda self, c, t, ops: {"q": (np.exp(-c["q"]), 1.0)}},
+     "split_rates failed: TypeError: loop of ufunc does not support argument 0 of type "),
+    ({"split_rates": lambda self, c, t, ops: {"q": (1.0 if c["q"] > 0 else 0.0, 1.0)}},
+     "split_rates failed: UFLException: UFL conditions cannot be evaluated as bool in a Python context."),
+    ({"initial_state": lambda self, t0, ops: {"q": np.ones(3)}},
+     "initial_state must give species q a real number or one per vertex (25,), got an array of shape (3,)"),
+    ({"species": ATTRACTED, "split_rates": lambda self, c, t, ops: {"q": (0, 0), "r": (0, 0)},
+      "initial_state": lambda self, t0, ops: {"q": 1.0, "r": 1.0},
+      "sensitivity": lambda self, species, density, ops: "chi"}, "sensitivity must give species q a real chi"),
+])
+def test_a_kinetics_numbers_take_and_the_weak_forms_do_not_is_one_line_naming_it(attributes, message, tmp_path):
+    """Each was a traceback at set-up (np.exp or an `if` on a UFL field, a chi the fitted flux cannot make a float
+    of) or at the first field set (an array of the wrong length): numpy's checks at the vertices passed them."""
+    with registered(Plugin([_kinetics("qa_numbers_only", **attributes)])), pytest.raises(PluginError) as error:
+        _model("qa_numbers_only").run(backend="skfem", out=tmp_path)
+    assert str(error.value).startswith("kinetics qa_numbers_only") and message in str(error.value), str(error.value)
     assert "\n" not in str(error.value)
 
 

@@ -39,7 +39,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import PluginError, plugin_code
+from primordia.core.errors import PluginError, plugin_code, third_party_code
 from primordia.core.parameters import Parameter
 from primordia.core.validation import field_name
 
@@ -166,7 +166,8 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
     """``(initial_state(t0, ops), split_rates(state, t0, ops))``, checked against the contract.
 
     Each must be a table with a value for every declared species (the rates: a pair production, loss rate,
-    and no other species), each value a real number or an array of them.  A kinetics that breaks the contract,
+    and no other species; the sensitivity of each species that climbs a gradient), each value a real number or
+    an array of them, one per vertex.  A kinetics that breaks the contract,
     or whose code fails on numbers (``ops = NUMPY``) in another way than arithmetic, is one line naming it
     (:class:`PluginError`);
     arithmetic that fails (an overflow, a math domain error) propagates, for the caller to blame the parameters.
@@ -179,8 +180,9 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
         raise PluginError(f"{where}: initial_state must return a value for every species, got {state!r} "
                           f"(missing: {', '.join(missing)})")
     state = {name: state[name] for name in names}
+    vertices = np.shape(ops.x[0]) if ops.x is not None else ()
     for name in names:
-        _check_real(state[name], f"{where}: initial_state must give species {name} a real number")
+        _check_real(state[name], f"{where}: initial_state must give species {name} a real number", vertices)
     rates = _call(kinetics, "split_rates", state, t0, ops)
     if not isinstance(rates, Mapping) or set(rates) != set(names):
         got = ", ".join(map(str, rates)) if isinstance(rates, Mapping) else repr(rates)
@@ -192,15 +194,30 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
             raise PluginError(f"{where}: split_rates must give species {name} a pair (production, loss_rate), "
                               f"got {pair!r}")
         for part, value in zip(("production", "loss_rate"), pair):
-            _check_real(value, f"{where}: split_rates must give species {name} a real {part}")
+            _check_real(value, f"{where}: split_rates must give species {name} a real {part}", vertices)
+    for species in kinetics.species:
+        if species.attractant is not None:
+            chi = _call(kinetics, "sensitivity", species.name, state[species.name], ops)
+            _check_real(chi, f"{where}: sensitivity must give species {species.name} a real chi", vertices)
     return state, dict(rates)
 
 
-def _check_real(value, refusal: str) -> None:
-    """One line (``refusal``, then the value) unless ``value`` is a real number or an array of them: a string or
-    None would otherwise fail as a traceback deep in the weak forms."""
+def _check_real(value, refusal: str, vertices: tuple[int, ...]) -> None:
+    """One line (``refusal``, then the value) unless ``value`` is a real number or an array of them, one per vertex
+    (``vertices``: the shape of a coordinate): a string or None would otherwise fail as a traceback deep in the weak
+    forms, an array of another length as one where the fields are set."""
     if not isinstance(value, (int, float, np.ndarray, np.number)) or np.asarray(value).dtype.kind not in "biuf":
         raise PluginError(f"{refusal}, got {value!r}")
+    if np.ndim(value) and np.shape(value) != vertices:
+        raise PluginError(f"{refusal} or one per vertex {vertices}, got an array of shape {np.shape(value)}")
+
+
+def kinetics_code(kinetics: Kinetics, method: str):
+    """Run ``method`` of a kinetics where the weak forms are built or assembled (``ops`` UFL, or numbers at the
+    edges): a third party's bug there (``np.exp`` or ``if`` on a field, which numbers take and UFL does not) is
+    one line naming the kinetics and where in its files it happened, not a traceback; primordia's own keep theirs."""
+    cls = type(kinetics)
+    return third_party_code(f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls)
 
 
 def _call(kinetics: Kinetics, method: str, *args):
