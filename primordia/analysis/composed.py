@@ -75,7 +75,8 @@ from primordia.analysis.dispersion import (
     split_transverse,
 )
 from primordia.analysis.linearisation import made_real, wave_vectors
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PrimordiaError
+from primordia.physics.kinetics.base import kinetics_code
 
 #: Largest number of pseudo-transient steps towards the steady state.
 STEADY_STATE_STEPS = 200
@@ -84,10 +85,16 @@ STEADY_STATE_TOLERANCE = 1e-13
 
 
 # -- the steady state and the reaction Jacobian -------------------------------------------------------
+#: What the analysis tells of a kinetics' code itself: primordia's one-line errors, and arithmetic that fails with
+#: the parameters (:func:`homogeneous_steady_state` blames them); anything else is the kinetics' bug, in one line.
+ANALYSED_ERRORS = (PrimordiaError, ArithmeticError)
+
+
 def reaction_jacobian(kinetics, state: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """(R, dR/dc) at ``state``: the kinetics' own ``rates`` on dual numbers (species order, t = 0)."""
     names = kinetics.species_names
-    rates = kinetics.rates(seeded(state, names), 0.0, DUAL)
+    with kinetics_code(kinetics, "split_rates on dual numbers", ANALYSED_ERRORS):
+        rates = kinetics.rates(seeded(state, names), 0.0, DUAL)
     R, J = np.empty(len(names)), np.empty((len(names), len(names)))
     for i, name in enumerate(names):
         R[i], J[i] = value_and_gradient(rates[name], (), len(names))
@@ -97,7 +104,8 @@ def reaction_jacobian(kinetics, state: Mapping[str, float]) -> tuple[np.ndarray,
 def conserved_species(kinetics, state: Mapping[str, float]) -> tuple[str, ...]:
     """Species whose split rate is the plain (0, 0): no reaction, conserved."""
     names = kinetics.species_names
-    split = kinetics.split_rates(seeded(state, names), 0.0, DUAL)
+    with kinetics_code(kinetics, "split_rates on dual numbers", ANALYSED_ERRORS):
+        split = kinetics.split_rates(seeded(state, names), 0.0, DUAL)
     return tuple(name for name in names
                  if not any(isinstance(part, Dual) or part != 0 for part in split[name]))
 
@@ -130,7 +138,8 @@ def homogeneous_steady_state(kinetics) -> SteadyState:
 
 def _homogeneous_steady_state(kinetics) -> SteadyState:
     names = kinetics.species_names
-    start = kinetics.initial_state(0.0, DUAL)
+    with kinetics_code(kinetics, "initial_state on dual numbers", ANALYSED_ERRORS):
+        start = kinetics.initial_state(0.0, DUAL)
     state = np.array([float(np.asarray(start[name])) for name in names])
     conserved = conserved_species(kinetics, dict(zip(names, state)))
     free = np.array([name not in conserved for name in names])
@@ -257,9 +266,10 @@ class _Context:
 
 def _transport(module, context: _Context) -> SpeciesTransport:
     kinetics, rest = context.kinetics, context.steady_state.values
-    chemotactic = tuple(
-        (s.name, s.attractant, float(kinetics.sensitivity(s.name, rest[s.name], DUAL)) * rest[s.name])
-        for s in kinetics.species if s.attractant is not None)
+    with kinetics_code(kinetics, "sensitivity on dual numbers"):
+        chemotactic = tuple(
+            (s.name, s.attractant, float(kinetics.sensitivity(s.name, rest[s.name], DUAL)) * rest[s.name])
+            for s in kinetics.species if s.attractant is not None)
     return SpeciesTransport(
         species=kinetics.species_names,
         diffusivity={s.name: float(context.params[s.diffusivity]) if s.mobile else 0.0 for s in kinetics.species},

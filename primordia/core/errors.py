@@ -54,13 +54,13 @@ def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaE
         raise PluginError(f"{what}: {one_line(error)}{_place_in(error, source)}") from error
 
 
-def third_party_code(what: str, source):
+def third_party_code(what: str, source, passes: tuple[type[BaseException], ...] = (PrimordiaError,)):
     """:func:`plugin_code` for code that may be primordia's own or a plugin's (a physics module's method, a term
     it contributes): a plugin's bug is one line; primordia's own (``source`` defined in ``primordia.``) keeps
     its traceback, since it is primordia's bug."""
     if getattr(source, "__module__", "").startswith("primordia."):
         return contextlib.nullcontext()
-    return plugin_code(what, source=source)
+    return plugin_code(what, passes, source=source)
 
 
 def _place_in(error: BaseException, source: type | None) -> str:

@@ -15,6 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from primordia.analysis.composed import linearise_model
 from primordia.core.errors import ConfigError, PluginError
 from primordia.core.meshes import rectangle
 from primordia.core.parameters import Parameter, ParameterSet
@@ -154,6 +155,19 @@ def test_a_kinetics_numbers_take_and_the_weak_forms_do_not_is_one_line_naming_it
         _model("qa_numbers_only").run(backend="skfem", out=tmp_path)
     assert str(error.value).startswith("kinetics qa_numbers_only") and message in str(error.value), str(error.value)
     assert "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize("split_rates, message", [
+    (lambda self, c, t, ops: {"q": (np.exp(-c["q"]) + 1.0, 1.0)},
+     "split_rates on dual numbers failed: TypeError: operand 'Dual' does not support ufuncs"),
+    (lambda self, c, t, ops: {"q": (1.0 if c["q"] > 0 else 0.0, 1.0)},
+     "split_rates on dual numbers failed: TypeError: '>' not supported between instances of 'Dual' and 'int'"),
+])
+def test_a_kinetics_dual_numbers_do_not_take_is_one_line_in_the_stability_analysis(split_rates, message):
+    """Each was a traceback of primordia.analysis.composed under `primordia stability`."""
+    with registered(Plugin([_kinetics("qa_not_dual", split_rates=split_rates)])), pytest.raises(PluginError) as error:
+        linearise_model(_model("qa_not_dual"))
+    assert str(error.value).startswith("kinetics qa_not_dual") and message in str(error.value), str(error.value)
 
 
 def _law(name, factors, requires=()):

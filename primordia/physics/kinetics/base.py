@@ -39,7 +39,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import PluginError, plugin_code, third_party_code
+from primordia.core.errors import PluginError, PrimordiaError, plugin_code, third_party_code
 from primordia.core.parameters import Parameter
 from primordia.core.validation import field_name
 
@@ -212,12 +212,15 @@ def _check_real(value, refusal: str, vertices: tuple[int, ...]) -> None:
         raise PluginError(f"{refusal} or one per vertex {vertices}, got an array of shape {np.shape(value)}")
 
 
-def kinetics_code(kinetics: Kinetics, method: str):
+def kinetics_code(kinetics: Kinetics, method: str, passes: tuple[type[BaseException], ...] = (PrimordiaError,)):
     """Run ``method`` of a kinetics where the weak forms are built or assembled (``ops`` UFL, or numbers at the
-    edges): a third party's bug there (``np.exp`` or ``if`` on a field, which numbers take and UFL does not) is
-    one line naming the kinetics and where in its files it happened, not a traceback; primordia's own keep theirs."""
+    edges) or the stability analysis differentiates it (dual numbers): a third party's bug there (``np.exp`` or
+    ``if`` on a species, which numbers take and UFL and dual numbers do not) is one line naming the kinetics and
+    where in its files it happened, not a traceback; primordia's own keep theirs.  ``passes``: what the caller
+    handles itself."""
     cls = type(kinetics)
-    return third_party_code(f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls)
+    return third_party_code(f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls,
+                            passes)
 
 
 def _call(kinetics: Kinetics, method: str, *args):
