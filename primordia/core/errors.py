@@ -9,6 +9,7 @@ it is reported as interrupted, never as a mistake in the input.
 """
 
 import contextlib
+import logging
 import os
 import sys
 import traceback
@@ -45,13 +46,24 @@ def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaE
 
     ``source``: the plugin's class; the line then ends with the last place in the plugin's own
     files the exception passed through (``(at FILE:LINE)``), which the one line would otherwise hide.
+    UFL, which logs each error it raises to stdout before raising it, is kept from printing a second line.
     """
+    ufl_log = logging.getLogger("UFL")
+    outermost = _below_error not in ufl_log.filters  # plugin code may run plugin code: the outermost removes it
+    ufl_log.addFilter(_below_error)
     try:
         yield
     except passes:
         raise
     except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
         raise PluginError(f"{what}: {one_line(error)}{_place_in(error, source)}") from error
+    finally:
+        if outermost:
+            ufl_log.removeFilter(_below_error)
+
+
+def _below_error(record: logging.LogRecord) -> bool:
+    return record.levelno < logging.ERROR
 
 
 def third_party_code(what: str, source, passes: tuple[type[BaseException], ...] = (PrimordiaError,)):

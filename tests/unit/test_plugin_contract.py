@@ -26,6 +26,8 @@ from primordia.physics.growth_laws import GrowthLaw
 from primordia.physics.kinetics.base import Kinetics, Species
 from primordia.testing import registered
 
+from plugin_sources import FROZEN_KINETICS
+
 
 class Decay(Kinetics):
     """dq/dt = k - q + D_q lap q: a well-behaved kinetics the broken ones below vary."""
@@ -155,6 +157,17 @@ def test_a_kinetics_numbers_take_and_the_weak_forms_do_not_is_one_line_naming_it
         _model("qa_numbers_only").run(backend="skfem", out=tmp_path)
     assert str(error.value).startswith("kinetics qa_numbers_only") and message in str(error.value), str(error.value)
     assert "\n" not in str(error.value)
+
+
+def test_a_ufl_error_in_a_kinetics_is_not_printed_besides_its_one_line(primordia_cli, small_config, tmp_path):
+    """UFL logs each error to stdout before raising it: "UFL conditions cannot be evaluated as bool in a Python
+    context." stood on a line of its own above primordia's."""
+    plugin = tmp_path / "branching.py"
+    plugin.write_text(FROZEN_KINETICS.replace("(0.0, 0.0) for", "(1.0 if c['m'] > 0 else 0.0, 0.0) for"))
+    result = primordia_cli("-p", plugin, "run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                           "--set", "kinetics.name=frozen")
+    assert result.returncode == 2 and "UFL conditions" not in result.stdout, result.stdout
+    assert len(result.stderr.splitlines()) == 1 and "split_rates failed: UFLException" in result.stderr
 
 
 @pytest.mark.parametrize("split_rates, message", [
