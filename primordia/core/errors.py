@@ -132,8 +132,12 @@ def is_root_process() -> bool:
 
 
 def warn(message: str) -> None:
-    """One line ``primordia: warning: ...`` on stderr, from rank 0 only."""
+    """One line ``primordia: warning: ...`` on stderr, from rank 0 only; a run's progress bar is cleared first and
+    drawn again after it, or the warning would continue the bar's line."""
     import sys
 
-    if is_root_process():
+    if not is_root_process():
+        return
+    bars = sys.modules.get("tqdm")  # imported by the progress bars: a bar may be on the screen
+    with bars.tqdm.external_write_mode(file=sys.stderr) if bars else contextlib.nullcontext():
         print(f"primordia: warning: {message}", file=sys.stderr, flush=True)

@@ -125,6 +125,22 @@ def test_an_output_declaring_options_wrongly_is_one_line_naming_it(options, mess
     assert str(caught.value) == message
 
 
+def test_an_output_that_fails_mid_run_warns_on_a_line_of_its_own(capsys, tmp_path):
+    """The warning continued the progress bar's line: "  0%|   | step 0/3  [00:00<?]primordia: warning: ..."."""
+    class Failing(Output):
+        name = "failing"
+
+        def snapshot(self, run):
+            raise OSError("disk full")
+
+    plugin = SimpleNamespace(primordia_outputs=hookimpl(lambda: [Failing]))
+    with registered(plugin):
+        small_model().run(backend="skfem", out=tmp_path, progress=True)
+    err = capsys.readouterr().err
+    before = err[:err.index("primordia: warning: output 'failing' failed")]
+    assert before.endswith(("\r", "\n")), repr(before[-80:])
+
+
 @pytest.mark.parametrize("output, message", [
     ({"pictures": "false"}, "output.pictures must be true or false, got 'false'"),
     ({"displacement_scale": -1}, "output.displacement_scale must be a number >= 0, got -1"),
