@@ -139,6 +139,7 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
         origin = _distribution_label(entry_point)
         try:
             plugin = entry_point.load()
+            _check_not_a_class(plugin, entry_point.value)
             _check_contract(plugin)
             pm.register(plugin, name=entry_point.name)
             _check_hook_names(pm, plugin, entry_point.name)
@@ -208,6 +209,14 @@ def _load_file(path: str, name: str):
         del sys.modules[module_name]
         raise
     return module
+
+
+def _check_not_a_class(plugin, target: str) -> None:
+    """Refuse an entry point naming a class: pluggy would call its ``@hookimpl`` methods without an instance, and
+    every hook would fail with "missing 1 required positional argument: 'self'"."""
+    if inspect.isclass(plugin):
+        raise PluginError(f"{target} is a class, whose @hookimpl methods need an instance: name a module with "
+                          f"@hookimpl functions, or an instance (PLUGIN = {plugin.__name__}() in the module)")
 
 
 def _check_contract(plugin) -> None:

@@ -101,6 +101,21 @@ def test_an_entry_point_kinetics_can_be_selected_in_a_run(primordia_cli, plugin_
         assert final[species]["max"] == pytest.approx(value, abs=1e-12), species
 
 
+def test_an_entry_point_naming_a_class_is_one_warning_saying_so(primordia_cli, plugin_distribution):
+    """It was "hook primordia_kinetics raised TypeError: FrozenPlugin.primordia_kinetics() missing 1 required
+    positional argument: 'self'", once per hook, for a plugin written as the guide's classes are."""
+    source = FROZEN_KINETICS.replace("@hookimpl\ndef primordia_kinetics():",
+                                     "class FrozenPlugin:\n    @hookimpl\n    def primordia_kinetics(self):")
+    source = source.replace("\n    return [Frozen]", "\n        return [Frozen]")
+    env = plugin_distribution("primordia-frozen-class", "0.1", {"frozen_class": source},
+                              {"frozen": "frozen_class:FrozenPlugin"})
+    listed = primordia_cli("plugins", env=env)
+    assert listed.returncode == 0 and len(listed.stderr.splitlines()) == 1, listed.stderr
+    assert listed.stderr.startswith("primordia: warning: plugin 'frozen' (primordia-frozen-class 0.1) failed to load "
+                                    "and is skipped: PluginError: frozen_class:FrozenPlugin is a class, whose "
+                                    "@hookimpl methods need an instance"), listed.stderr
+
+
 def test_a_broken_entry_point_is_one_warning_and_the_rest_works(primordia_cli, plugin_distribution,
                                                                 small_config, tmp_path):
     plugin_distribution("primordia-broken", "1.0", {"broken_plugin": BROKEN_PLUGIN}, {"broken": "broken_plugin"})
