@@ -312,7 +312,9 @@ def _junk(kind: str, pieces, taken: dict) -> str | None:
         fits = isinstance(piece, required) if kind == "backends" else (
             isinstance(piece, type) and issubclass(piece, required))
         if not fits:
-            return f"returned {piece!r}, which is not a {required.__name__}{'' if kind == 'backends' else ' class'}"
+            article = "an" if required.__name__[0] in "AEIOU" else "a"
+            return (f"returned {piece!r}, which is not {article} {required.__name__}"
+                    f"{'' if kind == 'backends' else ' class'}")
         name = getattr(piece, "name", None)
         if not isinstance(name, str) or not name:
             return f"returned {piece!r}, which has no name"

@@ -209,7 +209,10 @@ def test_a_named_plugin_that_cannot_be_loaded_is_one_line_and_exit_2(primordia_c
     (FROZEN_KINETICS.replace("return [Frozen]", "raise RuntimeError('broken on purpose')"),
      "hook primordia_kinetics raised RuntimeError: broken on purpose"),
     (FROZEN_KINETICS.replace("return [Frozen]", "return Frozen"), "hook primordia_kinetics returned <class "),
-], ids=["a name taken", "a hook that raises", "not a list"])
+    # "which is not a Output class"
+    (FROZEN_KINETICS.replace("def primordia_kinetics():", "def primordia_outputs():"),
+     "hook primordia_outputs returned <class 'primordia_plugin_mine.Frozen'>, which is not an Output class"),
+], ids=["a name taken", "a hook that raises", "not a list", "not an output"])
 def test_a_named_plugin_whose_hook_is_broken_stops_in_one_line(primordia_cli, small_config, tmp_path, source,
                                                                expected):
     """Before, it was one warning, its kinetics skipped, and the run went on: with the built-in painter2018 when
