@@ -680,8 +680,11 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
     )
     if metrics:
         first = next(iter(metrics.values()))
-        inner = {"time": first["time"].values, "configuration": first["configuration"].values,
-                 "species": first["species"].values}
+        # every run's times, configurations and species: runs of another t_final (or output.times) measured
+        # at other times, and the first run's alone dropped the others' metrics for NaN
+        inner = {"time": np.unique(np.concatenate([run["time"].values for run in metrics.values()])),
+                 **{name: np.array(list(dict.fromkeys(value for run in metrics.values() for value in run[name].values)))
+                    for name in ("configuration", "species")}}
         full = names + list(inner)
         for variable in [name for name, _, _ in SCALAR_METRICS] + ["pattern"]:
             fill = -1 if variable == "pattern" else np.nan

@@ -28,7 +28,7 @@ from dask.distributed import Client, LocalCluster
 
 from primordia.core.errors import ConfigError
 from primordia.core.outputs import run_is_alive
-from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, is_done, run_sweep
+from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, gather, is_done, run_sweep
 
 from small_config import SMALL_CONFIG
 
@@ -467,3 +467,17 @@ def test_a_second_sweep_into_the_same_folder_is_refused(small_config, tmp_path):
         holder.kill()
         holder.wait()
     assert not (tmp_path / "sweep" / "runs").exists()
+
+
+def test_runs_measured_at_other_times_keep_their_metrics(small_config, tmp_path):
+    """Runs of another t_final (output.times is [t_final] by default) are measured at other times: sweep.nc
+    took the first completed run's times only, and wrote NaN for every metric of the others."""
+    sweep = Sweep(small_config(), (Axis.parse("time.t_final=0.6:1:2"),), out=tmp_path / "sweep")
+    points = sweep.points()
+    records = {point.directory: execute(str(sweep.config), list(point.overrides), str(point.directory),
+                                        point.fingerprint) for point in points}
+    ds = gather(sweep, points, records)
+    assert list(ds["time"].values) == [0.6, 1.0]
+    prominence = ds["spectral_prominence"].sel(configuration="reference", species="m").values
+    assert np.isfinite(prominence.diagonal()).all()  # each run at its own t_final
+    assert np.isnan([prominence[0, 1], prominence[1, 0]]).all()  # and at no other time
