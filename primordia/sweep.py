@@ -25,8 +25,8 @@ boundary and predicted wavelength over it.
   not fatal.  Running the same command again skips every run already done (completed,
   with its metrics, from the same configuration and overrides) and retries the others.
 * Mistakes in the command (malformed ``--vary``, unknown key or parameter, missing
-  config) are one-line errors before anything runs; a value a run rejects (e.g. a
-  negative diffusivity) fails that run only.
+  config, a backend no run can use) are one-line errors before anything runs; a value
+  a run rejects (e.g. a negative diffusivity) fails that run only.
 """
 
 from __future__ import annotations
@@ -303,6 +303,22 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
         except Exception as error:  # noqa: BLE001 - a failed analysis is recorded like a failed run
             reason = f"pattern metrics: {type(error).__name__}: {error}"
     return _record(directory, fingerprint, overrides, reason, start)
+
+
+def check_runs(config: str, overrides: Sequence[str], directory: str) -> str:
+    """Why every run of the sweep would fail, or "": ``primordia run --dry-run`` with the fixed overrides, in a
+    worker (whose backends are the runs').
+
+    The sweep checks the configuration itself, but not the backend and the splitting scheme a plugin chooses
+    for a run, nor the solver options: ``--set model.backend=nope`` ran and failed every run, and the sweep
+    ended with exit status 0.
+    """
+    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    command = [sys.executable, "-m", "primordia.cli", "run", config, "--dry-run", "--out", directory]
+    for assignment in overrides:
+        command += ["--set", assignment]
+    result = subprocess.run(command, capture_output=True, text=True, env=environment)
+    return _failure_reason(result.returncode, result.stderr, Path(directory))
 
 
 #: The runs this (worker) process has going, by directory: what :func:`stop_runs` asks to stop.
@@ -588,25 +604,30 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
     records = {p.directory: _read_record(p.directory) for p, finished in zip(points, done) if finished}
     start = time.perf_counter()
     if todo:
-        # the bar once the cluster is there: not before a one-line error about its scheduler
-        with dask_client(scheduler, workers) as client, \
-                _progress_bar(len(points), len(points) - len(todo), progress) as bar:
-            token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
-            futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
-                                     str(p.directory.resolve()), p.fingerprint, timeout, token, pure=False): p
-                       for p in todo}
-            try:
-                for future in as_completed(futures):
-                    point = futures[future]
-                    try:
-                        records[point.directory] = future.result()
-                    except Exception as error:  # noqa: BLE001 - e.g. the worker died: record it, go on
-                        records[point.directory] = {"status": "failed",
-                                                    "reason": f"{type(error).__name__}: {error}"}
-                    bar.update(1)
-            except KeyboardInterrupt:  # the runs going on stop with a checkpoint, and go on from it next time
-                _stop_the_runs(client, list(futures), token)
-                raise
+        # the bar once the cluster is there and every run could start: not before a one-line error about
+        # its scheduler or the runs
+        with dask_client(scheduler, workers) as client:
+            problem = client.submit(check_runs, str(sweep.config.resolve()), list(sweep.fixed),
+                                    str((sweep.out / "runs").resolve()), pure=False).result()
+            if problem:
+                raise ConfigError(f"every run of the sweep would fail: {problem}")
+            with _progress_bar(len(points), len(points) - len(todo), progress) as bar:
+                token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
+                futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
+                                         str(p.directory.resolve()), p.fingerprint, timeout, token, pure=False): p
+                           for p in todo}
+                try:
+                    for future in as_completed(futures):
+                        point = futures[future]
+                        try:
+                            records[point.directory] = future.result()
+                        except Exception as error:  # noqa: BLE001 - e.g. the worker died: record it, go on
+                            records[point.directory] = {"status": "failed",
+                                                        "reason": f"{type(error).__name__}: {error}"}
+                        bar.update(1)
+                except KeyboardInterrupt:  # the runs going on stop with a checkpoint, and go on from it next time
+                    _stop_the_runs(client, list(futures), token)
+                    raise
     ds = gather(sweep, points, records)
     ds.attrs.update({"runs": len(points), "runs_skipped": len(points) - len(todo), "runs_executed": len(todo),
                      "runs_failed": int(np.sum(ds["status"].values != "completed")),

@@ -481,3 +481,14 @@ def test_runs_measured_at_other_times_keep_their_metrics(small_config, tmp_path)
     prominence = ds["spectral_prominence"].sel(configuration="reference", species="m").values
     assert np.isfinite(prominence.diagonal()).all()  # each run at its own t_final
     assert np.isnan([prominence[0, 1], prominence[1, 0]]).all()  # and at no other time
+
+
+def test_a_backend_no_run_can_use_is_one_line_before_any_run(small_config, primordia_cli, tmp_path):
+    """The sweep checked the configuration but not the backend a run is given: ``--set model.backend=nope``
+    ran every run, each failed at its start, and the sweep ended with exit status 0."""
+    result = primordia_cli("sweep", small_config(), "--vary", "parameters.alpha=2:4:2", "--set", "model.backend=nope",
+                           "--workers", "1", "--out", tmp_path / "out", "--no-progress")
+    assert result.returncode == 2
+    assert result.stderr.startswith("primordia: error: every run of the sweep would fail: unknown backend 'nope'")
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert not (tmp_path / "out" / "runs").exists()
