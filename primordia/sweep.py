@@ -818,9 +818,11 @@ def command_sweep(args) -> int:
             raise ConfigError("--workers applies to the local cluster only (not with --scheduler)")
     if args.timeout is not None:
         number(args.timeout, "--timeout", above=0, hint="seconds")
+    if args.out is not None and not args.out.strip():  # as primordia run: not the default folder, unsaid
+        raise ConfigError("--out needs a directory name")
     config = Path(args.config)
     sweep = Sweep(config, tuple(Axis.parse(text) for text in args.vary), tuple(range(1, args.seeds + 1)),
-                  tuple(args.overrides), Path(args.out) if args.out else None)
+                  tuple(args.overrides), Path(args.out) if args.out is not None else None)
     print(f"primordia sweep: {len(sweep.points())} runs of {config} over "
           + " x ".join(f"{name} ({len(values)})" for name, values in sweep.dimensions) + f" -> {sweep.out}")
     try:

@@ -492,3 +492,10 @@ def test_a_backend_no_run_can_use_is_one_line_before_any_run(small_config, primo
     assert result.stderr.startswith("primordia: error: every run of the sweep would fail: unknown backend 'nope'")
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "out" / "runs").exists()
+
+
+def test_an_empty_out_is_refused(small_config, primordia_cli, tmp_path):
+    """``--out ""`` (an unset shell variable) swept into the default out/sweep_<config name>, unsaid."""
+    result = primordia_cli("sweep", small_config(), "--vary", "parameters.alpha=2:8:2", "--out", "", cwd=tmp_path)
+    assert result.returncode == 2 and result.stderr == "primordia: error: --out needs a directory name\n"
+    assert not (tmp_path / "out").exists()
