@@ -729,7 +729,7 @@ def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | 
         return None
     x, y = (axis.name for axis in sweep.axes)
     species = species or ("m" if "m" in ds["species"].values else str(ds["species"].values[0]))
-    final = ds.isel(time=-1).sel(configuration="reference", species=species)
+    final = _last_measured(ds.sel(configuration="reference", species=species))
     kinds = final["pattern"]
     reduced = final[["spacing_mean", "spot_count", "dominant_wavelength"]]
     reduced["dominant_wavelength"] = reduced["dominant_wavelength"].where(kinds > 0)  # no pattern: no wavelength
@@ -744,9 +744,23 @@ def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | 
     dims = [d for d in kinds.dims if d != "seed"]
     reduced["pattern_name"] = (dims, names)
     reduced["failed"] = failed.transpose(*dims)
-    reduced.attrs["title"] = (f"{ds.attrs['title']}: {species} at t = {float(final['time']):g} "
+    times = np.unique(final["time"].values)
+    when = (f"t = {times[0]:g}" if len(times) == 1
+            else f"the last output time of each run (t = {times[0]:g}-{times[-1]:g})")
+    reduced.attrs["title"] = (f"{ds.attrs['title']}: {species} at {when} "
                               f"(reference configuration{', mean over seeds' if 'seed' in ds.dims else ''})")
     return sweep_figure(reduced.transpose(x, y), _linear_map(sweep, x, y), path, x, y)
+
+
+def _last_measured(ds):
+    """``ds`` (time, and the sweep's dimensions) at each run's last output time with a result, the last time where
+    none has one: runs of another t_final end at other times, and the sweep's last time drew them "failed"."""
+    import xarray as xr
+
+    measured = ds["pattern"] >= 0
+    dims = [dim for dim in measured.dims if dim != "time"]
+    later_first = np.flip(measured.transpose(*dims, "time").values, axis=-1)
+    return ds.isel(time=xr.DataArray(ds.sizes["time"] - 1 - np.argmax(later_first, axis=-1), dims=dims))
 
 
 def _most_common_kind(codes: np.ndarray) -> str:

@@ -28,7 +28,7 @@ from dask.distributed import Client, LocalCluster
 
 from primordia.core.errors import ConfigError
 from primordia.core.outputs import run_is_alive
-from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, gather, is_done, run_sweep
+from primordia.sweep import SEED_KEY, Axis, Sweep, dask_client, execute, gather, is_done, run_sweep, sweep_picture
 
 from small_config import SMALL_CONFIG
 
@@ -499,3 +499,21 @@ def test_an_empty_out_is_refused(small_config, primordia_cli, tmp_path):
     result = primordia_cli("sweep", small_config(), "--vary", "parameters.alpha=2:8:2", "--out", "", cwd=tmp_path)
     assert result.returncode == 2 and result.stderr == "primordia: error: --out needs a directory name\n"
     assert not (tmp_path / "out").exists()
+
+
+def test_the_map_shows_each_run_at_its_last_output_time(small_config, tmp_path, monkeypatch):
+    """The map took the sweep's last time: a completed run of a shorter t_final had no result there, and was
+    drawn "failed"."""
+    sweep = Sweep(small_config(), (Axis.parse("time.t_final=0.6:1:2"), Axis.parse("parameters.alpha=4:4:1")),
+                  out=tmp_path / "sweep")
+    points = sweep.points()
+    records = {point.directory: execute(str(sweep.config), list(point.overrides), str(point.directory),
+                                        point.fingerprint) for point in points}
+    drawn = {}
+    monkeypatch.setattr("primordia.analysis.patterns.figures.sweep_figure",
+                        lambda reduced, *args: drawn.setdefault("map", reduced))
+    sweep_picture(gather(sweep, points, records), sweep, tmp_path / "map.png")
+    names = drawn["map"]["pattern_name"].values.ravel()
+    assert len(names) == 2 and "failed" not in names
+    assert np.isfinite(drawn["map"]["spot_count"].values).all()
+    assert "the last output time of each run (t = 0.6-1)" in drawn["map"].attrs["title"]
