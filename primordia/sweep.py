@@ -276,7 +276,7 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     that sweep is interrupted (:func:`stop_runs`), its points not yet started are not started.
     """
     if sweep is not None and sweep in _STOPPED:
-        return {"status": "failed", "reason": "not started: the sweep was interrupted", "fingerprint": fingerprint}
+        return {"status": "failed", "reason": NOT_STARTED, "fingerprint": fingerprint}
     import dask
 
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run
@@ -290,7 +290,7 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     for assignment in overrides:
         command += ["--set", assignment]
     start = time.perf_counter()
-    log, reason = _resume_or_run(command, directory, timeout)
+    log, reason = _resume_or_run(command, directory, timeout, sweep)
     atomic_write_text(directory / "run.log", log)
     if not reason:
         try:
@@ -328,12 +328,26 @@ _RUNNING_LOCK = threading.Lock()
 _STOPPED: set[str] = set()
 
 
-def _run_point(command: list[str], directory: Path, timeout: float | None) -> tuple[str, str]:
-    """(its output, why it failed or "") of ``primordia run`` in a subprocess, killed with its worker."""
+#: Why a point of an interrupted sweep has no run.
+NOT_STARTED = "not started: the sweep was interrupted"
+
+
+def _run_point(command: list[str], directory: Path, timeout: float | None,
+               sweep: str | None = None) -> tuple[str, str]:
+    """(its output, why it failed or "") of ``primordia run`` in a subprocess, killed with its worker; not started
+    once ``sweep`` (its token) is interrupted.
+
+    The check and the start are one step under :data:`_RUNNING_LOCK`, as :func:`stop_runs` is: a run started
+    between the point's check at its start and the run's registration was neither refused nor asked to stop,
+    and the interrupted sweep waited for it to end (up to :data:`STOP_GRACE`), whatever it took.
+    """
     environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
-    process = subprocess.Popen(_dying_with_its_parent(command), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True, env=environment)
+    command = _dying_with_its_parent(command)
     with _RUNNING_LOCK:
+        if sweep is not None and sweep in _STOPPED:
+            return "", NOT_STARTED
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env=environment)
         _RUNNING[str(directory)] = process
     try:
         try:
@@ -369,18 +383,19 @@ def stop_runs(sweep: str | None = None) -> int:
 ANOTHER_RUN = ("differs from the checkpointed run's", "it was written on backend", "cannot restart from")
 
 
-def _resume_or_run(command: list[str], directory: Path, timeout: float | None) -> tuple[str, str]:
+def _resume_or_run(command: list[str], directory: Path, timeout: float | None,
+                   sweep: str | None = None) -> tuple[str, str]:
     """(log, why it failed or "") of the point's run: continued from its checkpoint if its folder holds one of
-    this model (an interrupted run), else from the start."""
+    this model (an interrupted run), else from the start (none once ``sweep`` is interrupted)."""
     from primordia.core.checkpoint import CHECKPOINT_FILE
 
     fresh = [*command, "--out", str(directory), "--overwrite"]
     if not (directory / CHECKPOINT_FILE).is_file():
-        return _run_point(fresh, directory, timeout)
-    log, reason = _run_point([*command, "--restart", str(directory)], directory, timeout)
+        return _run_point(fresh, directory, timeout, sweep)
+    log, reason = _run_point([*command, "--restart", str(directory)], directory, timeout, sweep)
     if not reason or not any(text in log for text in ANOTHER_RUN):
         return log, reason
-    again, reason = _run_point(fresh, directory, timeout)
+    again, reason = _run_point(fresh, directory, timeout, sweep)
     return f"{log}\n[the checkpoint could not be continued: the point is run from the start]\n{again}", reason
 
 

@@ -517,3 +517,21 @@ def test_the_map_shows_each_run_at_its_last_output_time(small_config, tmp_path, 
     assert len(names) == 2 and "failed" not in names
     assert np.isfinite(drawn["map"]["spot_count"].values).all()
     assert "the last output time of each run (t = 0.6-1)" in drawn["map"].attrs["title"]
+
+
+def test_a_point_starting_as_its_sweep_is_interrupted_runs_nothing(small_config, tmp_path, monkeypatch):
+    """A Ctrl-C between a point's start and its run's: the point had passed its check, and its run was not
+    yet one to stop, so it ran to its end while the interrupted sweep waited for it."""
+    import primordia.sweep as sweep_module
+
+    token = f"a sweep interrupted in {tmp_path}"
+    starting = sweep_module._dying_with_its_parent
+
+    def interrupted_now(command):  # the sweep's stop_runs, as the run is about to start
+        sweep_module.stop_runs(token)
+        return starting(command)
+
+    monkeypatch.setattr(sweep_module, "_dying_with_its_parent", interrupted_now)
+    record = execute(str(small_config()), [], str(tmp_path / "run"), "fingerprint", sweep=token)
+    assert record["status"] == "failed" and record["reason"] == "not started: the sweep was interrupted"
+    assert not (tmp_path / "run" / "summary.json").exists()
