@@ -151,6 +151,8 @@ class Sweep:
         from primordia.model import Model
 
         self.config = Path(self.config)
+        if isinstance(self.out, str) and not self.out.strip():  # Path("") is the current directory
+            raise ConfigError("a sweep's out needs a directory name")
         self.out = Path(self.out) if self.out is not None else Path("out") / f"sweep_{self.config.stem}"
         if not self.axes:
             raise ConfigError("sweep needs at least one --vary SECTION.KEY=LO:HI:N")

@@ -499,6 +499,8 @@ def test_an_empty_out_is_refused(small_config, primordia_cli, tmp_path):
     result = primordia_cli("sweep", small_config(), "--vary", "parameters.alpha=2:8:2", "--out", "", cwd=tmp_path)
     assert result.returncode == 2 and result.stderr == "primordia: error: --out needs a directory name\n"
     assert not (tmp_path / "out").exists()
+    with pytest.raises(ConfigError, match="a sweep's out needs a directory name"):  # wrote into the current folder
+        Sweep(small_config(), (Axis.parse("parameters.alpha=2:8:2"),), out=" ")
 
 
 def test_the_map_shows_each_run_at_its_last_output_time(small_config, tmp_path, monkeypatch):
