@@ -241,12 +241,15 @@ def test_analyse_command(tmp_path, primordia_cli):
 
 
 @pytest.mark.parametrize("arguments, message", [
-    (["analyse", "no/such/run"], "no fields.xdmf"),
+    (["analyse", "no/such/run"], "no/such/run does not exist"),  # said "no fields.xdmf (not a run directory..."
+    (["analyse", "RUN/config.toml"], "config.toml is a file, not a run directory"),
+    (["analyse", "RUN/nothing"], "no fields.xdmf"),
     (["analyse", "RUN", "--species", "q"], "no scalar field 'q'"),
 ])
 def test_analyse_bad_input_is_one_line(tmp_path, primordia_cli, arguments, message):
     write_run(tmp_path, stretch=1.0)
-    result = primordia_cli(*[str(tmp_path) if a == "RUN" else a for a in arguments])
+    (tmp_path / "nothing").mkdir()
+    result = primordia_cli(*[a.replace("RUN", str(tmp_path)) for a in arguments])
     assert result.returncode == 2
     assert result.stderr.startswith("primordia: error: ") and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1

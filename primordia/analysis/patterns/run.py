@@ -157,6 +157,10 @@ def read_run(directory: str | Path) -> RunFields:
 
     directory = Path(directory)
     xdmf = directory / "fields.xdmf"
+    if not directory.exists():
+        raise ConfigError(f"{directory} does not exist")
+    if not directory.is_dir():
+        raise ConfigError(f"{directory} is a file, not a run directory")
     if not xdmf.is_file():
         raise ConfigError(f"{directory}: no fields.xdmf (not a run directory, or the run wrote no output time yet)")
     try:  # a damaged run directory (a truncated fields.xdmf, fields_h5/ gone) is named, not a traceback
