@@ -49,6 +49,10 @@ SCALAR_METRICS = (
     ("level", "level", "threshold separating high from low phase (halfway between min and max)"),
 )
 
+#: CF units of the metrics: lengths and areas are the mesh's, the seed's dimensionless ones ("1"), as the
+#: wavenumber's; counts and orders are numbers ("1")
+METRIC_UNITS = {name: "1" for name, _, _ in SCALAR_METRICS} | {"spot_x": "1", "spot_y": "1", "spot_area": "1"}
+
 
 class PredictedMode(NamedTuple):
     """The linear analysis's fastest-growing stationary (Turing) mode.
@@ -265,7 +269,8 @@ def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predict
         spot_arrays["spot_area"][at][:count] = m.metrics.spot_areas
         spectrum[at] = np.interp(wavenumbers, m.metrics.wavenumbers, m.metrics.power, right=np.nan)
     ds = xr.Dataset(
-        {name: (dims, scalars[name], {"long_name": text}) for name, _, text in SCALAR_METRICS},
+        {name: (dims, scalars[name], {"long_name": text, "units": METRIC_UNITS[name]})
+         for name, _, text in SCALAR_METRICS},
         coords={"time": ("time", np.array(times), {"long_name": SERIES_OWN["time"][0], "units": SERIES_OWN["time"][1]}),
                 "configuration": ("configuration", configurations, {
                     "long_name": "reference: on X; current: on x = X + u"}),
@@ -278,7 +283,8 @@ def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predict
                                   "flag_meanings": " ".join(PATTERN_KINDS)})
     for name, text in (("spot_x", "x of the spot's maximum"), ("spot_y", "y of the spot's maximum"),
                        ("spot_area", "area of the spot above the level")):
-        ds[name] = (dims + ("spot",), spot_arrays[name], {"long_name": text + " (NaN past spot_count)"})
+        ds[name] = (dims + ("spot",), spot_arrays[name], {"long_name": text + " (NaN past spot_count)",
+                                                          "units": METRIC_UNITS[name]})
     ds["power_spectrum"] = (dims + ("wavenumber",), spectrum, {
         "long_name": "radially averaged power spectrum of the field minus its mean (Hann window)"})
     ds["predicted_wavenumber"] = ((), predicted.k_max, {"long_name": "linear analysis: fastest stationary k"})
