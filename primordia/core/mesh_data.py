@@ -13,6 +13,7 @@ Generators (:func:`rectangle`, :func:`box`) and the meshio reader
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,8 +41,8 @@ class MeshData:
     description: str = ""
 
     def __post_init__(self):
-        self.points = np.ascontiguousarray(self.points, dtype=np.float64)
-        self.cells = np.ascontiguousarray(self.cells, dtype=np.int64)
+        self.points = _coordinates(self.points)
+        self.cells = _vertex_indices(self.cells, "mesh cells")
         if self.points.ndim != 2 or self.points.shape[1] not in (2, 3):
             raise MeshError(f"mesh points must be an (n, 2) or (n, 3) array, got shape {self.points.shape}")
         if self.cells.ndim != 2 or self.cells.shape[1] != self.gdim + 1:
@@ -53,10 +54,23 @@ class MeshData:
             raise MeshError("the mesh has no cells")
         if self.cells.min() < 0 or self.cells.max() >= len(self.points):
             raise MeshError("mesh cells refer to vertices that do not exist")
-        self.boundaries = {
-            name: np.ascontiguousarray(facets, dtype=np.int64).reshape(-1, self.gdim)
-            for name, facets in self.boundaries.items()
-        }
+        if not isinstance(self.boundaries, Mapping):
+            raise MeshError(f"mesh boundaries must be a mapping of boundary name -> facets, got "
+                            f"{type(self.boundaries).__name__}")
+        if not isinstance(self.description, str):
+            raise MeshError(f"a mesh's description must be a string, got {self.description!r}")
+        self.boundaries = {_boundary_name(name): self._facets(name, facets) for name, facets in self.boundaries.items()}
+
+    def _facets(self, name: str, facets) -> np.ndarray:
+        """Boundary ``name``'s facets as an (n, tdim) array of vertex indices; any other shape is refused (an
+        (n, 4) array in 2D was read as 2n facets)."""
+        facets = _vertex_indices(facets, f"boundary '{name}'")
+        if facets.size == 0:
+            return facets.reshape(0, self.gdim)
+        if facets.ndim != 2 or facets.shape[1] != self.gdim:
+            raise MeshError(f"boundary '{name}' must be an (n, {self.gdim}) array of the vertex indices of its "
+                            f"facets ({self.gdim} vertices each in {self.gdim}D), got shape {facets.shape}")
+        return facets
 
     def __repr__(self) -> str:
         """Sizes and boundary names, not every coordinate (the dataclass repr printed the arrays)."""
@@ -130,3 +144,41 @@ class MeshData:
         edges = x[:, 1:, :] - x[:, :1, :]
         factor = 2.0 if self.gdim == 2 else 6.0
         return np.abs(np.linalg.det(edges)) / factor
+
+
+def _coordinates(points) -> np.ndarray:
+    """Vertex coordinates as float64: real numbers only (complex ones lost their imaginary part, with a numpy
+    warning; strings were one numpy traceback)."""
+    try:
+        array = np.asarray(points)
+    except ValueError:  # a ragged list
+        raise MeshError("mesh points must be an (n, 2) or (n, 3) array of coordinates, got rows of "
+                        "different lengths") from None
+    if array.dtype.kind not in "iuf":
+        raise MeshError(f"mesh points must be real numbers, got an array of {array.dtype} "
+                        f"(e.g. {array.ravel()[:1].tolist()})")
+    return np.ascontiguousarray(array, dtype=np.float64)
+
+
+def _vertex_indices(values, what: str) -> np.ndarray:
+    """Vertex indices as int64: integers, or floats with integer values (as some readers give them); a
+    fractional index was truncated to another vertex without a word."""
+    try:
+        array = np.asarray(values)
+    except ValueError:
+        raise MeshError(f"{what} must be an array of vertex indices, got rows of different lengths") from None
+    if array.size and array.dtype.kind not in "iu":
+        numeric = array.dtype.kind == "f"
+        fractional = ~np.isfinite(array) | (array != np.round(array)) if numeric else None
+        if not numeric or fractional.any():
+            example = array[fractional][0] if numeric else array.ravel()[0]
+            raise MeshError(f"{what} must be integer vertex indices, got {array.dtype} values such as {example!r}")
+    return np.ascontiguousarray(array, dtype=np.int64)
+
+
+def _boundary_name(name) -> str:
+    """A boundary's name, as configs name it (``boundary = "top"``): a non-empty string."""
+    if not isinstance(name, str) or not name.strip():
+        raise MeshError(f"mesh boundary names must be non-empty strings (configs name boundaries by them), "
+                        f"got {name!r}")
+    return name

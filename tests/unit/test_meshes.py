@@ -673,3 +673,28 @@ def test_a_mesh_built_by_hand_is_checked_as_a_file_is(changes, message):
         Model(physics=["chemotaxis"], mesh=_two_triangles(**changes), dt=0.1, t_final=0.2)
     assert str(error.value).startswith("the model's MeshData") and message in str(error.value)
     Model(physics=["chemotaxis"], mesh=_two_triangles(), dt=0.1, t_final=0.2)  # the square itself is fine
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"cells": np.array([[0.0, 1.0, 2.7], [0.0, 2.0, 3.0]])}, "mesh cells must be integer vertex indices, got float64 "
+                                                              "values such as 2.7"),
+    ({"boundaries": {"left": np.array([[3.0, 0.5]])}}, "boundary 'left' must be integer vertex indices"),
+    ({"boundaries": {"left": np.array([[3, 0, 1, 2]])}}, "boundary 'left' must be an (n, 2) array"),
+    ({"boundaries": [np.array([[3, 0]])]}, "mesh boundaries must be a mapping of boundary name -> facets, got list"),
+    ({"boundaries": {1: np.array([[3, 0]])}}, "mesh boundary names must be non-empty strings"),
+    ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]) + 1j}, "mesh points must be real numbers"),
+    ({"points": [["0", "0"], ["1", "0"], ["1", "1"], ["0", "1"]]}, "mesh points must be real numbers"),
+])
+def test_a_mesh_built_by_hand_of_the_wrong_kinds_of_values_is_refused_in_one_line(changes, message):
+    """A fractional vertex index was truncated to another vertex, an (n, 4) boundary in 2D read as 2n facets and
+    complex coordinates lost their imaginary parts, without a word; a list of boundaries or string coordinates
+    were a numpy or AttributeError traceback."""
+    with pytest.raises(MeshError) as error:
+        _two_triangles(**changes)
+    assert message in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_mesh_built_by_hand_may_give_its_indices_as_whole_floats():
+    mesh = _two_triangles(cells=np.array([[0.0, 1.0, 2.0], [0.0, 2.0, 3.0]]), boundaries={"left": [[3.0, 0.0]]})
+    assert mesh.cells.dtype == np.int64 and mesh.cells.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert mesh.boundaries["left"].tolist() == [[3, 0]]
