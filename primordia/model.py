@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -138,8 +139,9 @@ class Model:
             if piece is not None:
                 pieces.append((f"{label} {piece.name}", piece))
         declarations = _declarations(pieces)
-        if not isinstance(overrides, dict):
-            raise ConfigError("[parameters] must be a table of name = value")
+        if not isinstance(overrides, Mapping):  # a dict, or another model's parameters (a ParameterSet)
+            raise ConfigError(f"[parameters] must be a table of name = value, got {_kind(overrides)}")
+        overrides = dict(overrides)
         declared = {parameter.name for parameter in declarations}
         for name in overrides:
             if name not in declared:
@@ -231,7 +233,9 @@ class Model:
             return self._mesh_spec
         if isinstance(self._mesh_spec, dict):
             return mesh_from_config(self._mesh_spec, self.base_dir)
-        raise ConfigError("a model needs a mesh (a MeshData or a [mesh] table)")
+        hint = (": make one with MeshData(points, cells, boundaries), or read its file with "
+                "primordia.core.meshes.read_mesh" if type(self._mesh_spec).__module__.startswith("meshio") else "")
+        raise ConfigError(f"a model needs a mesh (a MeshData or a [mesh] table), got {_kind(self._mesh_spec)}{hint}")
 
     # -- what a run needs ----------------------------------------------------------------------
     @property
@@ -428,6 +432,17 @@ def _as_list(value, where: str) -> list[str]:
     return list(value)
 
 
+def _kind(value) -> str:
+    """What a value given in the place of a table is, in a few words: a class or an object by its type's name
+    (a kinetics class, a meshio.Mesh), anything else by its repr, shortened."""
+    if isinstance(value, type):
+        return f"the class {value.__module__}.{value.__qualname__}"
+    if isinstance(value, (str, int, float, bool, list, tuple, dict, type(None))):
+        text = repr(value)
+        return text if len(text) <= 80 else text[:77] + "..."
+    return f"a {type(value).__module__}.{type(value).__qualname__} object"
+
+
 def _text(value, where: str) -> str:
     if not isinstance(value, str):
         raise ConfigError(f"{where} must be a string, got {value!r}")
@@ -485,7 +500,8 @@ def _kinetics_table(kinetics, physics_classes) -> dict | None:
     if isinstance(kinetics, str):
         return {"name": kinetics}
     if not isinstance(kinetics, dict):
-        raise ConfigError("[kinetics] must be a table with a name")
+        raise ConfigError(f"[kinetics] must be a table with a name (in Python: kinetics=\"painter2018\" or "
+                          f"{{\"name\": ..., options}}), got {_kind(kinetics)}")
     table = {"name": "painter2018", **kinetics}
     if not isinstance(table["name"], str):
         raise ConfigError(f"kinetics.name must be the name of a kinetics, got {table['name']!r}")
@@ -509,7 +525,8 @@ def _growth_law_table(growth_law, physics_classes) -> dict | None:
     if isinstance(growth_law, str):
         return {"name": growth_law}
     if not isinstance(growth_law, dict) or "name" not in growth_law:
-        raise ConfigError("[growth_law] must be a table with a name (e.g. name = \"seed2d\")")
+        raise ConfigError(f"[growth_law] must be a table with a name (e.g. name = \"seed2d\"; in Python: "
+                          f"growth_law=\"seed2d\" or {{\"name\": ..., options}}), got {_kind(growth_law)}")
     if not isinstance(growth_law["name"], str):
         raise ConfigError(f"growth_law.name must be the name of a growth law, got {growth_law['name']!r}")
     return dict(growth_law)

@@ -210,6 +210,40 @@ def test_a_bad_input_is_one_config_error_naming_it(changes, fragments):
         assert fragment in message, message
 
 
+def _python_objects_in_the_place_of_tables():
+    """What a user in Python reaches for: the pieces themselves, where the model takes their names or tables."""
+    import meshio
+
+    from primordia.core.plugins import lookup
+
+    square = rectangle((0, 0), (4, 4), cells=(2, 2))
+    return [
+        ({"kinetics": lookup("kinetics", "painter2018")},
+         "[kinetics] must be a table with a name (in Python: kinetics=\"painter2018\" or {\"name\": ..., options}), "
+         "got the class primordia.physics.kinetics.painter2018.Painter2018"),
+        ({"physics": ["chemotaxis", "poroelastic_growth"], "growth_law": lookup("growth_laws", "seed2d")},
+         "got the class primordia.physics.growth_laws.Seed2D"),
+        ({"mesh": meshio.Mesh(square.points, [("triangle", square.cells)])},
+         "a model needs a mesh (a MeshData or a [mesh] table), got a meshio._mesh.Mesh object: make one with "
+         "MeshData(points, cells, boundaries), or read its file with primordia.core.meshes.read_mesh"),
+        ({"mesh": "tissue.msh"}, "a model needs a mesh (a MeshData or a [mesh] table), got 'tissue.msh'"),
+    ]
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_a_piece_given_in_the_place_of_its_name_is_refused_saying_what_was_given(index):
+    """'[kinetics] must be a table with a name' and 'a model needs a mesh' did not say what they had been given:
+    a kinetics class or a meshio mesh read as if nothing had been."""
+    changes, fragment = _python_objects_in_the_place_of_tables()[index]
+    assert fragment in one_line_error(ConfigError, **changes)
+
+
+def test_another_models_parameters_may_be_given_as_they_are():
+    """``model.parameters`` (a read-only mapping) was refused as "not a table of name = value"."""
+    first = small(parameters={"m0": 0.5, "D_m": 0.04})
+    assert dict(small(parameters=first.parameters).parameters) == dict(first.parameters)
+
+
 @pytest.mark.parametrize("changes, fragment", [
     ({"physics": ["chemotaxs"]}, "unknown physics 'chemotaxs' (registered: active_stress, chemotaxis"),
     ({"kinetics": "painter2019"}, "unknown kinetics 'painter2019' (registered: painter2018"),
