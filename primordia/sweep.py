@@ -125,6 +125,27 @@ def _is_integer(text: str) -> bool:
     return True
 
 
+def _checked_pieces(axes, fixed, seeds) -> tuple[tuple, tuple, tuple]:
+    """A Sweep's axes, fixed overrides and seeds as tuples, or one line: a lone Axis or string, or a count of
+    seeds, was a TypeError or read letter by letter ("--set expects section.key=value, got 'm'"), and a seed
+    given twice (or as True or "1") made runs that wrote into one folder or failed one by one."""
+    def pieces(value, kind, what: str, example: str) -> tuple:
+        if isinstance(value, (str, kind)) or not isinstance(value, Sequence) or not all(
+                isinstance(piece, kind) and not isinstance(piece, bool) for piece in value):
+            raise ConfigError(f"Sweep {what} must be a tuple of {kind.__name__}, e.g. {what}={example}, got {value!r}")
+        return tuple(value)
+
+    axes = pieces(axes, Axis, "axes", '(Axis.parse("parameters.alpha=2:8:7"),)')
+    fixed = pieces(fixed, str, "fixed", '("mesh.cells=[43,43]",)')
+    seeds = pieces(seeds, int, "seeds", "(1, 2, 3) (what --seeds 3 runs)")
+    for axis in axes:
+        if not all(is_number(value) for value in axis.values) or len(set(axis.labels)) != len(axis.values):
+            raise ConfigError(f"Sweep axis {axis.key} must have distinct numbers as values, got {axis.values!r}")
+    if min(seeds, default=0) < 0 or len(set(seeds)) != len(seeds):
+        raise ConfigError(f"Sweep seeds must be distinct integers >= 0 (each a run of its own), got {seeds!r}")
+    return axes, fixed, seeds
+
+
 @dataclass(frozen=True)
 class Point:
     """One run of the sweep."""
@@ -154,6 +175,7 @@ class Sweep:
         if isinstance(self.out, str) and not self.out.strip():  # Path("") is the current directory
             raise ConfigError("a sweep's out needs a directory name")
         self.out = Path(self.out) if self.out is not None else Path("out") / f"sweep_{self.config.stem}"
+        self.axes, self.fixed, self.seeds = _checked_pieces(self.axes, self.fixed, self.seeds)
         if not self.axes:
             raise ConfigError("sweep needs at least one --vary SECTION.KEY=LO:HI:N")
         runs = int(np.prod([len(values) for _, values in self.dimensions], dtype=float))

@@ -116,6 +116,31 @@ def test_values_that_print_alike_get_folders_of_their_own(small_config, tmp_path
         assert [p.directory.name for p in sweep.points()] == [f"{name}_seed=1" for name in names]
 
 
+ALPHA = (Axis.parse("parameters.alpha=2:4:2"),)
+
+
+@pytest.mark.parametrize("pieces, message", [
+    ({"seeds": 3}, "Sweep seeds must be a tuple of int, e.g. seeds=(1, 2, 3) (what --seeds 3 runs), got 3"),
+    ({"seeds": (1, 1)}, "Sweep seeds must be distinct integers >= 0 (each a run of its own), got (1, 1)"),
+    ({"seeds": (True,)}, "Sweep seeds must be a tuple of int"),
+    ({"seeds": ("1",)}, "Sweep seeds must be a tuple of int"),
+    ({"axes": ALPHA[0]}, "Sweep axes must be a tuple of Axis, e.g. axes=(Axis.parse(\"parameters.alpha=2:8:7\"),)"),
+    ({"axes": ["parameters.alpha=2:4:2"]}, "Sweep axes must be a tuple of Axis"),
+    ({"axes": (Axis("parameters.alpha", (2, 2)),)}, "Sweep axis parameters.alpha must have distinct numbers as values"),
+    ({"fixed": "time.t_final=0.4"}, "Sweep fixed must be a tuple of str, e.g. fixed=(\"mesh.cells=[43,43]\",), got "
+                                    "'time.t_final=0.4'"),
+])
+def test_a_python_sweep_of_malformed_pieces_is_one_line(small_config, tmp_path, pieces, message):
+    """seeds=3 and a lone Axis were a TypeError, a lone fixed string was read letter by letter ("--set expects
+    section.key=value, got 't'"), and seeds=(1, 1), (True,) or ("1",) were taken: two runs into one folder, or
+    runs that each failed."""
+    with pytest.raises(ConfigError) as error:
+        Sweep(small_config(COARSE), **{"axes": ALPHA, **pieces}, out=tmp_path)
+    assert message in str(error.value) and "\n" not in str(error.value)
+    assert Sweep(small_config(COARSE), list(ALPHA), seeds=range(1, 3), fixed=["output.pictures=false"],
+                 out=tmp_path).dimensions == [("alpha", (2, 4)), ("seed", (1, 2))]  # lists and ranges are tuples
+
+
 def test_integer_and_float_axes():
     assert Axis.parse("physics.chemotaxis.seed=1:3:3").values == (1, 2, 3)
     assert Axis.parse("parameters.m0=0.5:1.5:3").values == (0.5, 1.0, 1.5)
