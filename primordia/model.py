@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -60,7 +61,7 @@ class Model:
         self.name = _text(name, "model.name")
         self.description = _text(description, "model.description")
         self.backend = _backend_name(backend, "model.backend")
-        self.base_dir = Path(base_dir)
+        self.base_dir = _path(base_dir, "base_dir")
         if not isinstance(coupling, (str, dict)):
             raise ConfigError(f"[coupling] must be a table (scheme = \"...\" and its options), got {coupling!r}")
         coupling = {"scheme": coupling} if isinstance(coupling, str) else dict(coupling)
@@ -97,6 +98,8 @@ class Model:
 
     def __repr__(self) -> str:
         """What the model is, in one line: its composition, mesh and time span (not the default object repr)."""
+        if "mesh_data" not in vars(self):  # a construction that raised part-way, as a traceback or debugger shows it
+            return "Model(not set up: its construction raised)"
         pieces = [f"name={self.name!r}"] if self.name else []
         pieces.append(f"physics={[module.name for module in self.physics_objects]}")
         if self.kinetics_object is not None:
@@ -300,6 +303,7 @@ class Model:
         if restart and overwrite:
             raise ConfigError("restart=True continues the run in out, overwrite=True replaces it: choose one")
         existing = "restart" if restart else "overwrite" if overwrite else "refuse"
+        out = _path(out, "out")
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
         sim.setup()
         sim.run(progress=progress)
@@ -441,6 +445,13 @@ def _kind(value) -> str:
         text = repr(value)
         return text if len(text) <= 80 else text[:77] + "..."
     return f"a {type(value).__module__}.{type(value).__qualname__} object"
+
+
+def _path(value, where: str) -> Path:
+    """A folder given as a str or a path-like object; anything else was a TypeError from inside pathlib."""
+    if not isinstance(value, (str, os.PathLike)):
+        raise ConfigError(f"{where} must be a folder (a str or a pathlib.Path), got {_kind(value)}")
+    return Path(value)
 
 
 def _text(value, where: str) -> str:

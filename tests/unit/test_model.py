@@ -238,6 +238,21 @@ def test_a_piece_given_in_the_place_of_its_name_is_refused_saying_what_was_given
     assert fragment in one_line_error(ConfigError, **changes)
 
 
+def test_a_folder_of_the_wrong_type_is_one_line(tmp_path):
+    """base_dir=None and run(out=None) were a TypeError from inside pathlib, naming neither."""
+    assert "base_dir must be a folder (a str or a pathlib.Path), got None" in one_line_error(ConfigError, base_dir=None)
+    with pytest.raises(ConfigError, match=r"^out must be a folder \(a str or a pathlib.Path\), got None$"):
+        small().run(out=None)
+
+
+def test_a_model_whose_construction_raised_says_so_in_its_repr():
+    """A traceback's or debugger's view of the half-made model showed the AttributeError its repr raised."""
+    with pytest.raises(ConfigError) as error:
+        small(output={"times": [7.0]})
+    half_made = next(entry.locals["self"] for entry in error.traceback if entry.name == "__init__")
+    assert repr(half_made) == "Model(not set up: its construction raised)"
+
+
 def test_another_models_parameters_may_be_given_as_they_are():
     """``model.parameters`` (a read-only mapping) was refused as "not a table of name = value"."""
     first = small(parameters={"m0": 0.5, "D_m": 0.04})
