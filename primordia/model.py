@@ -49,7 +49,26 @@ CHANGEABLE_ON_RESTART = ("time.t_final", "time.adaptive", "time.dt_min", "output
 
 
 class Model:
-    """A validated model: physics + kinetics + parameters + mesh + time + outputs."""
+    """A validated model: physics + kinetics + parameters + mesh + time + outputs.
+
+    Each argument is a table or key of a config file (:mod:`primordia.core.config`):
+
+    - ``physics``: model.physics, the names of the physics modules (``["chemotaxis", "poroelasticity"]``);
+    - ``kinetics``, ``growth_law``: [kinetics], [growth_law], a name or a dict ``{"name": ..., options}``;
+    - ``parameters``: [parameters], a dict of seed names to values (another model's ``parameters`` too);
+    - ``mesh``: a :class:`~primordia.core.mesh_data.MeshData` (``rectangle``, ``box``, ``read_mesh`` of
+      :mod:`primordia.core.meshes`, or built by hand) or a [mesh] table;
+    - ``dt``, ``t_final``, ``t_start``, ``adaptive``, ``dt_min``: [time] (dimensionless time);
+    - ``output``, ``checkpoint``, ``solver``: the tables of those names;
+    - ``physics_options``: [physics], ``{module name: {option: value}}``;
+    - ``coupling``: [coupling], a scheme's name or ``{"scheme": ..., options}``;
+    - ``backend``, ``name``, ``description``: model.backend, model.name, model.description;
+    - ``base_dir``: the folder a [mesh] table's ``path`` is relative to.
+
+    The names a model may use are those registered (``primordia plugins`` lists them, and
+    ``primordia.core.plugins.registry("physics")``, ``"kinetics"``, ``"growth_laws"`` gives them in
+    Python).  :meth:`run` runs it; :meth:`resolved_config` is the config file that builds it again.
+    """
 
     def __init__(self, physics=("chemotaxis",), kinetics: str | dict | None = None, parameters=None,
                  mesh: MeshData | dict | None = None, dt: float | None = None, t_final: float | None = None,
@@ -113,6 +132,7 @@ class Model:
     # -- construction from a config --------------------------------------------------------
     @classmethod
     def from_config(cls, config: dict) -> "Model":
+        """The model a config's tables (as :func:`primordia.core.config.load_config` reads them) describe."""
         config_.check_structure(config)
         model_table = config.get("model", {})
         time = config.get("time", {})
@@ -133,6 +153,7 @@ class Model:
 
     @classmethod
     def from_file(cls, path, overrides: list[str] | None = None) -> "Model":
+        """The model of a TOML config file, with ``overrides`` as ``--set`` gives them (``["time.t_final=320"]``)."""
         return cls.from_config(config_.apply_overrides(config_.load_config(path), overrides or []))
 
     # -- validation pieces -------------------------------------------------------------------

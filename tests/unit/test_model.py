@@ -238,6 +238,15 @@ def test_a_piece_given_in_the_place_of_its_name_is_refused_saying_what_was_given
     assert fragment in one_line_error(ConfigError, **changes)
 
 
+def test_help_on_model_says_what_every_argument_is():
+    """help(Model) gave the signature and one line: which table each argument is, and what a mesh may be, was in
+    no docstring."""
+    import inspect
+
+    arguments = [name for name in inspect.signature(Model).parameters]
+    assert arguments and [name for name in arguments if f"``{name}``" not in Model.__doc__] == []
+
+
 def test_a_folder_of_the_wrong_type_is_one_line(tmp_path):
     """base_dir=None and run(out=None) were a TypeError from inside pathlib, naming neither."""
     assert "base_dir must be a folder (a str or a pathlib.Path), got None" in one_line_error(ConfigError, base_dir=None)
