@@ -494,7 +494,7 @@ def _adaptivity(adaptive, dt_min, dt: float, latest: float) -> tuple[bool, float
     all), so a failing step was halved a thousand times for dt_min = 1e-300.  The default, dt / 2^10, stays
     allowed (it is written in config.toml, which a restart reads).
     """
-    flag(adaptive, "time.adaptive")
+    adaptive = flag(adaptive, "time.adaptive")
     default = dt / 2 ** DEFAULT_HALVINGS
     if dt_min is None:
         return adaptive, default

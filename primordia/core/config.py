@@ -28,8 +28,10 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from primordia.core.errors import ConfigError, warn
-from primordia.core.validation import is_number
+from primordia.core.validation import is_flag, is_integer, is_number
 
 SECTIONS = {
     "model": {"physics", "backend", "name", "description"},
@@ -217,7 +219,15 @@ def merge_options(where: str, defaults, given) -> dict:
         expected = _expected_kind(defaults[key])
         if expected is not None and not _is_kind(value, expected):
             raise ConfigError(f"{where}: option '{key}' must be {expected}, got {value!r}")
-    return {**defaults, **given}
+    return {**defaults, **{key: _as_toml_reads_it(value) for key, value in given.items()}}
+
+
+def _as_toml_reads_it(value):
+    """numpy's scalars as Python's (np.int64(3) was "must be an integer, got 3") and a tuple as a list (a tuple
+    was "must be a list"), as the option comes back from the run's config.toml."""
+    if isinstance(value, np.generic):
+        return value.item()
+    return list(value) if isinstance(value, tuple) else value
 
 
 def _expected_kind(default) -> str | None:
@@ -239,11 +249,11 @@ def _expected_kind(default) -> str | None:
 
 def _is_kind(value, kind: str) -> bool:
     checks = {
-        "true or false": lambda v: isinstance(v, bool),
-        "an integer": lambda v: isinstance(v, int) and not isinstance(v, bool),
+        "true or false": is_flag,
+        "an integer": is_integer,
         "a number": is_number,
         "a string": lambda v: isinstance(v, str),
-        "a list": lambda v: isinstance(v, list),
+        "a list": lambda v: isinstance(v, (list, tuple)),
         "a table": lambda v: isinstance(v, dict),
     }
     return checks[kind](value)

@@ -60,11 +60,17 @@ def number(value: Any, where: str, *, above: float | None = None, at_least: floa
     return value
 
 
+def is_flag(value: Any) -> bool:
+    """True or false (numpy's too), not the string "false", not 0."""
+    return isinstance(value, (bool, np.bool_))
+
+
 def flag(value: Any, where: str) -> bool:
-    """``value`` if it is true or false (not the string "false", not 0), else one ConfigError."""
-    if not isinstance(value, bool):
+    """``value`` as a bool if it is true or false (numpy's too; not the string "false", not 0), else one
+    ConfigError."""
+    if not is_flag(value):
         raise ConfigError(f"{where} must be true or false, got {value!r}")
-    return value
+    return bool(value)
 
 
 def numbers(value: Any, where: str, *, length: int | tuple[int, ...] | None = None, **bounds) -> list:

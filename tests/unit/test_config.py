@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from primordia.core import config
@@ -157,12 +158,17 @@ def test_options_merge_over_their_defaults():
     assert merged == {**DEFAULTS, "count": 3, "scale": 2, "free": object}  # an integer is a number; None: anything
     assert DEFAULTS["count"] == 2
     assert config.merge_options("physics p", DEFAULTS, {}) == DEFAULTS
+    # as config.toml gives them back: a tuple is a list, numpy's scalars are Python's (both were refused)
+    merged = config.merge_options("physics p", DEFAULTS, {"names": ("m", "f"), "count": np.int64(3),
+                                                          "flag": np.bool_(True), "scale": np.float32(0.5)})
+    assert merged["names"] == ["m", "f"]
+    assert [type(merged[key]) for key in ("count", "flag", "scale")] == [int, bool, float]
 
 
 @pytest.mark.parametrize("key, value, kind", [
     ("flag", 1, "true or false"), ("count", 1.5, "an integer"), ("count", True, "an integer"),
     ("scale", "1", "a number"), ("scale", False, "a number"), ("scheme", 1, "a string"),
-    ("names", "m", "a list"), ("names", ("m",), "a list"), ("table", [], "a table"),
+    ("names", "m", "a list"), ("names", {"m"}, "a list"), ("table", [], "a table"),
 ])
 def test_an_option_of_the_wrong_type_is_named_with_the_type_its_default_has(key, value, kind):
     assert one_line_error(config.merge_options, "physics p", DEFAULTS, {key: value}) == \

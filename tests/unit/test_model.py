@@ -344,3 +344,20 @@ def test_the_package_docstring_names_only_what_exists():
                 assert hasattr(module, name) or hasattr(getattr(module, attribute, None), name), (dotted, name)
                 cited += 1
     assert cited >= 10
+
+
+def test_numpy_scalars_and_tuples_are_taken_where_numbers_flags_and_lists_are():
+    """np.int64(3) for an integer option was "must be an integer, got 3", np.bool_(False) "must be true or
+    false, got False", and a tuple of boundary conditions "must be a list": what numpy and Python hand a
+    notebook user, refused in words that contradicted themselves."""
+    import numpy as np
+
+    model = small(physics_options={"chemotaxis": {"seed": np.int64(3)}}, adaptive=np.bool_(False),
+                  output={"pictures": np.bool_(False)},
+                  coupling={"scheme": "fixed_point", "max_iterations": np.int64(5)})
+    assert model.physics_objects[0].settings["seed"] == 3 and type(model.physics_objects[0].settings["seed"]) is int
+    assert model.adaptive is False and model.output["pictures"] is False
+    assert model.resolved_config()["coupling"]["max_iterations"] == 5
+    clamped = ({"boundary": "bottom", "type": "clamped"},)
+    grown = small(physics=["chemotaxis", "poroelasticity"], physics_options={"poroelasticity": {"boundary": clamped}})
+    assert grown.physics_options["poroelasticity"]["boundary"] == clamped
