@@ -361,3 +361,20 @@ def test_numpy_scalars_and_tuples_are_taken_where_numbers_flags_and_lists_are():
     clamped = ({"boundary": "bottom", "type": "clamped"},)
     grown = small(physics=["chemotaxis", "poroelasticity"], physics_options={"poroelasticity": {"boundary": clamped}})
     assert grown.physics_options["poroelasticity"]["boundary"] == clamped
+
+
+def test_a_model_with_tuples_inside_its_options_is_the_model_its_config_toml_describes(tmp_path):
+    """A boundary condition's value given as a tuple stayed a tuple in the resolved config, and config.toml gave
+    it back as a list: a restart of the same model from Python was refused as "physics.poroelasticity.boundary
+    differs from the checkpointed run's"."""
+    import tomllib
+
+    import numpy as np
+
+    from primordia.core.json_toml import write_toml
+
+    held = [{"boundary": "bottom", "type": "clamped"},
+            {"boundary": "top", "type": "traction", "value": ("0", "s"), "constants": {"s": np.float64(0.1)}}]
+    model = small(physics=["chemotaxis", "poroelasticity"], physics_options={"poroelasticity": {"boundary": held}})
+    written = write_toml(tmp_path / "config.toml", model.resolved_config())
+    assert model.differences(tomllib.loads(written.read_text()), allowed=()) == []
