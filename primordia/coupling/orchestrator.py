@@ -89,6 +89,7 @@ class Simulation:
         self.snapshot_times: list[float] = []  # the output times whose fields were written (a restart's too)
         self.restarts = 0
         self.status = "setting up"
+        self._set_up = False  # setup() has finished: a Simulation is set up, and run, once
         self.outputs: list = []
         self._saved_state = None  # a sub-step's start values (their arrays reused from step to step)
         self._state_version = 0  # counts accepted sub-steps and restores: vertex values are cached per version
@@ -112,6 +113,9 @@ class Simulation:
 
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> "Simulation":
+        if self._set_up:  # again: claiming out_dir again cleared the finished run's fields and checkpoint
+            raise ConfigError(f"this Simulation is set up already ({self.status}, t = {self.time:g}): a Simulation "
+                              f"runs once; make a new one, or continue its run with Model.run(out=..., restart=True)")
         self._choose_backend()
         self._claim_directory()
         self._choose_splitting()
@@ -128,6 +132,7 @@ class Simulation:
         if checkpoint is not None and self._missed_snapshot():  # an output time added where the run is
             self._snapshot()  # the checkpoint at the end says it is written: the next restart skips it
         self._first_step = self.step_index
+        self._set_up = True
         return self
 
     def check_choices(self) -> None:
@@ -545,6 +550,7 @@ class Simulation:
 
     # -- time loop ------------------------------------------------------------------------
     def run(self, progress: bool = False) -> "Simulation":
+        self._check_steppable("run")
         bar = _progress_bar(self, progress)
         snapshot_steps = {self._step_of(t) for t in self.model.output["times"]}
         try:
@@ -646,6 +652,10 @@ class Simulation:
         A step that a stopped run left part-way (``step_done`` > 0, restored from its checkpoint) goes on
         from where it stopped, on its own grid: sub-steps of dt / 2^level from ``step_begin``.
         """
+        self._check_steppable("step")
+        if self.step_index >= self.model.num_steps:  # a step past t_final was taken without a word
+            raise ConfigError(f"the run has reached t_final = {time_label(self.model.t_final)}; to go further, "
+                              f"continue it with a later t_final: Model.run(out=..., restart=True)")
         if self.step_done == 0.0:
             self.step_begin = self.time
         t_begin, t_end = self.step_begin, self.model.step_time(self.step_index + 1)
@@ -671,6 +681,11 @@ class Simulation:
         self.step_index += 1
         self.time, self.step_done = t_end, 0.0
         self._collect_petsc_garbage()
+
+    def _check_steppable(self, what: str) -> None:
+        """One line, not an AttributeError from inside, when the run is stepped before :meth:`setup`."""
+        if not self._set_up:
+            raise ConfigError(f"Simulation.{what}() needs setup() first (Model.run does both)")
 
     def _step_label(self, t_next: float) -> str:
         """The step under way and the try that failed, for a failure's line: "step N (t = a -> b)"."""

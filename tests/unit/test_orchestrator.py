@@ -262,6 +262,26 @@ def test_a_directory_holding_a_run_is_refused_unless_told(watching, completed):
     assert "from Python: Model.run(..., overwrite=True) or restart=True" in str(caught.value)
 
 
+def test_a_simulation_is_set_up_and_stepped_once_and_only_to_t_final(watching, tmp_path):
+    """setup() again on a finished Simulation claimed its folder again, as overwrite: it cleared the run's fields
+    and checkpoint; step() after the end went past t_final without a word; step() or run() before setup() was
+    an AttributeError from inside."""
+    sim = model(t_final=0.4).run(out=tmp_path / "run", overwrite=True)
+    written = sorted(path.name for path in sim.out_dir.iterdir())
+    with pytest.raises(ConfigError) as caught:
+        sim.setup()
+    assert one_line(caught).startswith("this Simulation is set up already (completed, t = 0.4): a Simulation runs once")
+    assert sorted(path.name for path in sim.out_dir.iterdir()) == written and "fields.xdmf" in written
+    with pytest.raises(ConfigError) as caught:
+        sim.step()
+    assert one_line(caught).startswith("the run has reached t_final = 0.4; to go further, continue it")
+    assert (sim.time, sim.step_index) == (0.4, 2)
+    fresh = Simulation(model(), out_dir=tmp_path / "fresh")
+    for method in (fresh.step, fresh.run):
+        with pytest.raises(ConfigError, match=r"^Simulation\.(step|run)\(\) needs setup\(\) first"):
+            method()
+
+
 def test_python_s_restart_and_overwrite_together_are_refused(completed):
     """Both true silently restarted; the command line refuses --restart with --overwrite."""
     with pytest.raises(ConfigError, match="restart=True continues the run in out, overwrite=True replaces it"):
