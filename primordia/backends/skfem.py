@@ -46,6 +46,7 @@ from primordia.backends.ufl_numpy import (
     UnsupportedUFL,
     cell_quantities,
     evaluate_integrand,
+    forget_analyses,
     integrate_blocks,
     preprocess_form,
     reference_quadrature,
@@ -853,6 +854,7 @@ class SkfemBackend(Backend):
                                  "(or choose --backend fenicsx for parallel runs)")
         super().__init__(comm)
         blas_on_one_thread()
+        forget_analyses()  # an earlier run's integrands, which hold its mesh and spaces
         self._plans = FormCache(_CACHED_FORMS)
         self._rules: dict[tuple, _Rule] = {}
         self._patterns: dict[tuple[int, int], _Pattern] = {}

@@ -483,6 +483,22 @@ def test_a_finished_runs_petsc_objects_are_freed_when_the_next_run_begins(watchi
     assert set(comms) <= set(cleaned) and not any(keepers)  # cleaned, then the communicators let go
 
 
+def test_a_finished_skfem_run_is_not_kept_alive_by_the_next(watching, tmp_path):
+    """The integrands analysed for evaluation were cached process-wide (the last 256), and each held its run's
+    spaces and mesh: a loop of runs in one process kept the last 20 or so alive (9.5 MB a run at 86^2 squares)."""
+    import gc
+    import weakref
+
+    from primordia.backends.skfem import SkfemBackend
+
+    first = model(t_final=0.4).run(backend="skfem", out=tmp_path / "first")
+    mesh = weakref.ref(first.disc.mesh)
+    del first
+    SkfemBackend()  # the next run's
+    gc.collect()
+    assert mesh() is None
+
+
 def test_solvers_made_anew_give_the_old_ones_memory_back(watching, tmp_path, monkeypatch):
     import primordia.coupling.orchestrator as orchestrator
 
