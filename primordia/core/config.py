@@ -190,6 +190,11 @@ class Configured:
 
     settings: dict
 
+    def __repr__(self) -> str:
+        """Which piece and its settings (a notebook's model.physics_objects showed ``<... object at 0x...>``)."""
+        name = getattr(self, "name", None)
+        return f"{type(self).__name__}(name={name!r}, settings={getattr(self, 'settings', None)!r})"
+
     @property
     def opts(self) -> dict:
         cls = type(self)

@@ -312,6 +312,10 @@ def test_a_model_its_mesh_and_its_simulation_say_what_they_are_in_one_line(tmp_p
                            f"dt=0.2, t=0..2, coupling='sequential', backend='fenicsx')")
     sim = Simulation(model, backend="skfem", out_dir=tmp_path)
     assert repr(sim) == f"Simulation('quick' on skfem, setting up, t = 0 after 0 steps, out_dir='{tmp_path}')"
+    # its pieces: which, and their settings, not <primordia.physics.chemotaxis.Chemotaxis object at 0x...>
+    (chemotaxis,) = model.physics_objects
+    assert repr(chemotaxis).startswith("Chemotaxis(name='chemotaxis', settings={'flux_scheme': 'exponential_fitting'")
+    assert repr(model.kinetics_object) == "Painter2018(name='painter2018', settings={'priming_wave': True})"
 
 
 @pytest.mark.parametrize("t_start, dt, t_final, steps", [
