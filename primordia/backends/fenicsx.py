@@ -183,16 +183,20 @@ def jit_parameters() -> dict:
 _RUNS: list[tuple[weakref.ref, dict]] = []
 
 
-def _clean_up_after_earlier_runs() -> None:
+def _clean_up_after_earlier_runs(comm) -> None:
     """Free the PETSc objects of the runs whose backends are gone, and let their communicators go.
 
     A run's objects dropped after its last step, with its Simulation, wait in the garbage of dolfinx's
     communicators, which only a cleanup of each frees: a loop of runs in one process kept every earlier
     run's matrices and vectors (3.5 MB a run at 86^2 squares, 13 MB at 172^2).  Collective, as making a
-    backend is: gc.collect() first, so that a backend is gone on every rank or on none.
+    backend is: gc.collect() first, and what is gone on every rank only is freed.
     """
     gc.collect()
-    for run in [run for run in _RUNS if run[0]() is None]:
+    gone = [run[0]() is None for run in _RUNS]
+    if comm.size > 1:  # only what is gone on every rank: a script holding a run on one rank would hang the free
+        every = comm.allgather(gone)
+        gone = [all(flags) for flags in zip(*every)] if len({len(flags) for flags in every}) == 1 else []
+    for run in [run for run, free in zip(list(_RUNS), gone) if free]:
         for keeper in run[1].values():
             PETSc.garbage_cleanup(keeper.getComm())
             keeper.destroy()  # the communicator goes with its last object
@@ -214,7 +218,7 @@ class FenicsxBackend(Backend):
         self._p1_spaces: dict[tuple, object] = {}
         self._components: dict[tuple, tuple] = {}
         self._petsc_comms: dict[int, object] = {}  # communicator -> an empty vector keeping it alive
-        _clean_up_after_earlier_runs()
+        _clean_up_after_earlier_runs(self.comm)
         _RUNS.append((weakref.ref(self), self._petsc_comms))
         self._jit = jit_parameters()
         _silence_jit_logging()
