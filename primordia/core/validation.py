@@ -77,6 +77,8 @@ def numbers(value: Any, where: str, *, length: int | tuple[int, ...] | None = No
     """A list of numbers (each checked as by :func:`number` with ``bounds``), of ``length`` entries if given."""
     lengths = (length,) if isinstance(length, int) else length
     what = "a list of numbers" if lengths is None else f"a list of {' or '.join(map(str, lengths))} numbers"
+    if isinstance(value, np.ndarray) and value.ndim == 1:  # np.linspace(...) in Python: was refused
+        value = value.tolist()
     if not isinstance(value, (list, tuple)) or (lengths is not None and len(value) not in lengths):
         raise ConfigError(f"{where} must be {what}, got {value!r}")
     return [number(entry, f"{where}[{index}]", **bounds) for index, entry in enumerate(value)]

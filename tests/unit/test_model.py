@@ -365,6 +365,9 @@ def test_numpy_scalars_and_tuples_are_taken_where_numbers_flags_and_lists_are():
     clamped = ({"boundary": "bottom", "type": "clamped"},)
     grown = small(physics=["chemotaxis", "poroelasticity"], physics_options={"poroelasticity": {"boundary": clamped}})
     assert grown.physics_options["poroelasticity"]["boundary"] == clamped
+    # np.linspace for the output times was "must be a list of numbers, got array([...])"
+    times = small(output={"times": np.linspace(0.4, 1.0, 4)}).output["times"]
+    assert times == pytest.approx([0.4, 0.6, 0.8, 1.0]) and all(type(t) is float for t in times)
 
 
 def test_a_model_with_tuples_inside_its_options_is_the_model_its_config_toml_describes(tmp_path):
