@@ -125,6 +125,11 @@ def test_a_species_named_like_another_modules_field_names_both():
     ({"split_rates": lambda self, c, t, ops: {"q": (1.0, None)}}, "give species q a real loss_rate, got None"),
     ({"initial_state": lambda self, t0, ops: {"q": "1"}}, "initial_state must give species q a real number"),
     ({"split_rates": lambda self, c, t, ops: {"q": (c["h"], 1.0)}}, "split_rates failed: KeyError: 'h'"),
+    # these two ran without a word: the extra species dropped, the negative loss rate taken implicitly
+    ({"initial_state": lambda self, t0, ops: {"q": 1.0, "z": 2.0}},
+     "initial_state gives z, which is not one of its species (q)"),
+    ({"split_rates": lambda self, c, t, ops: {"q": (1.0, -0.5)}},
+     "split_rates gives species q a negative loss_rate (-0.5) at the initial state"),
     ({"__init__": lambda self, params, **given: 1 / 0}, "could not be set up: ZeroDivisionError"),
 ])
 def test_a_kinetics_breaking_its_contract_is_one_line_naming_it(attributes, message):

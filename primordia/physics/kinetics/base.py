@@ -179,11 +179,16 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
         missing = sorted(set(names) - set(state)) if isinstance(state, Mapping) else names
         raise PluginError(f"{where}: initial_state must return a value for every species, got {state!r} "
                           f"(missing: {', '.join(missing)})")
+    extra = [str(name) for name in state if name not in names]
+    if extra:  # was dropped without a word
+        raise PluginError(f"{where}: initial_state gives {', '.join(extra)}, which is not one of its species "
+                          f"({', '.join(names)})")
     state = {name: state[name] for name in names}
     vertices = np.shape(ops.x[0]) if ops.x is not None else ()
     for name in names:
         _check_real(state[name], f"{where}: initial_state must give species {name} a real number", vertices)
     rates = _call(kinetics, "split_rates", state, t0, ops)
+    nonnegative = all(float(np.min(state[name])) >= 0 for name in names)  # where the split promises signs
     if not isinstance(rates, Mapping) or set(rates) != set(names):
         got = ", ".join(map(str, rates)) if isinstance(rates, Mapping) else repr(rates)
         raise PluginError(f"{where}: split_rates must return {{species: (production, loss_rate)}} for its species "
@@ -195,6 +200,11 @@ def checked_evaluation(kinetics: Kinetics, t0, ops) -> tuple[dict[str, Any], dic
                               f"got {pair!r}")
         for part, value in zip(("production", "loss_rate"), pair):
             _check_real(value, f"{where}: split_rates must give species {name} a real {part}", vertices)
+            low = float(np.min(value))
+            if low < 0 and nonnegative:  # the split's promise (module docstring): a negative loss rate ran, unsaid
+                raise PluginError(f"{where}: split_rates gives species {name} a negative {part} ({low:g}) at the "
+                                  f"initial state; production and loss rate must be >= 0 where the "
+                                  f"concentrations are (R = production - loss_rate c)")
     for species in kinetics.species:
         if species.attractant is not None:
             chi = _call(kinetics, "sensitivity", species.name, state[species.name], ops)
