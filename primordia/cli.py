@@ -25,7 +25,7 @@ import traceback
 from pathlib import Path
 
 from primordia.core import compiled
-from primordia.core.errors import ConfigError, InterruptedRun, PrimordiaError, is_root_process, mpi_world
+from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, is_root_process, mpi_world
 from primordia.core.signals import HANDLED, INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
@@ -107,7 +107,10 @@ def command_run(args) -> int:
     if args.restart is not None:
         out = Path(args.restart)
         config = config_.load_config(args.config) if args.config is not None else _checkpointed_config(out)
-        model = Model.from_config(config_.apply_overrides(config, overrides))
+        try:
+            model = Model.from_config(config_.apply_overrides(config, overrides))
+        except PluginError as error:  # e.g. the run's kinetics came from a file given by -p, not given now
+            raise PluginError(f"{error}{_plugins_of_the_run(out)}") from None
     else:
         model = Model.from_file(args.config, overrides)
         out = Path(args.out) if args.out is not None else Path("out") / Path(args.config).stem
@@ -138,6 +141,21 @@ def _warn_about_a_slow_blas() -> None:
     warning = reference_blas_warning()
     if warning is not None and is_root_process():
         print(f"primordia: warning: {warning}", file=sys.stderr)
+
+
+def _plugins_of_the_run(out: Path) -> str:
+    """A hint naming the plugins the checkpointed run in ``out`` loaded by ``-p`` and this process did not."""
+    from primordia.core import checkpoint
+    from primordia.core.plugins import PLUGINS_VARIABLE
+
+    try:
+        named = checkpoint.read_meta(out / checkpoint.CHECKPOINT_FILE).get("named_plugins") or ""
+    except PrimordiaError:
+        return ""
+    loaded = os.environ.get(PLUGINS_VARIABLE, "").split(",")
+    missing = [item for item in named.split(",") if item and item not in loaded]
+    return (f" (the run loaded {', '.join(missing)} with -p: give it again, primordia -p {missing[0]} run --restart "
+            f"{out})") if missing else ""
 
 
 def _checkpointed_config(out: Path) -> dict:

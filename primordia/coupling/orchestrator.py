@@ -25,6 +25,7 @@ Under MPI every decision that ends or changes a step is taken by all ranks toget
 from __future__ import annotations
 
 import dataclasses
+import os
 import signal
 import time as clock
 from contextlib import contextmanager
@@ -37,7 +38,7 @@ from primordia.core import checkpoint as checkpoint_file
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import time_label
-from primordia.core.plugins import choose, get_plugin_manager, registry
+from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
 from primordia.core.reductions import largest, largest_in_place, on_every_rank
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
@@ -365,6 +366,7 @@ class Simulation:
         tree = {
             "config": self.model.resolved_config(), "output_times_default": self.model.output_times_default,
             "backend": self.backend.name, "mpi_ranks": self.comm.size,
+            "named_plugins": os.environ.get(PLUGINS_VARIABLE, ""),  # -p's: what a restart must load again
             "mesh": self.model.mesh_data.fingerprint(),
             "run": {"step": self.step_index, "time": self.time, "last_dt": self.last_dt,
                     "step_begin": self.step_begin, "step_done": self.step_done,

@@ -158,6 +158,14 @@ def test_a_plugin_file_not_installed_is_loaded_by_p_and_used_in_a_run(primordia_
     relative = primordia_cli("-p", "my_frozen.py", "plugins", cwd=tmp_path)  # a sweep's runs start elsewhere
     assert listing(relative.stdout)["kinetics"]["frozen"] == f"{plugin.resolve()} (PRIMORDIA_PLUGINS)"
 
+    # a restart without -p said "unknown kinetics 'frozen'", not where the run had it from
+    longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.4")
+    assert longer.returncode == 2 and len(longer.stderr.splitlines()) == 1, longer.stderr
+    assert "unknown kinetics 'frozen'" in longer.stderr
+    assert f"(the run loaded {plugin.resolve()} with -p: give it again, primordia -p {plugin.resolve()}" in longer.stderr
+    again = primordia_cli("-p", plugin, "run", "--restart", out, "--no-progress", "--set", "time.t_final=1.4")
+    assert again.returncode == 0, again.stderr
+
 
 def test_primordia_plugins_names_modules_on_the_path_and_files(primordia_cli, tmp_path):
     (tmp_path / "frozen_module.py").write_text(FROZEN_KINETICS)
