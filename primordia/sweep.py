@@ -540,6 +540,7 @@ def _check_scheduler(address: str, timeout: float | None = None) -> None:
     from distributed.security import Security
 
     timeout = SCHEDULER_TIMEOUT if timeout is None else timeout
+    _refuse_a_closed_port(address, timeout)
 
     async def identity():
         comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
@@ -561,6 +562,29 @@ def _check_scheduler(address: str, timeout: float | None = None) -> None:
     if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
         kind = answer.get("type") if isinstance(answer, dict) else type(answer).__name__
         raise ConfigError(f"{address} is not a dask scheduler (it answers as {kind!r})")
+
+
+def _refuse_a_closed_port(address: str, timeout: float) -> None:
+    """A ConfigError at once when nothing listens at a tcp ``address``: dask's connect retries a refused
+    connection until its timeout (20 s), and then said "Timed out", not that the port was closed."""
+    import socket
+
+    from distributed.comm.addressing import get_address_host_port, parse_address
+
+    try:
+        scheme, _ = parse_address(address)
+        host, port = get_address_host_port(address) if scheme == "tcp" else (None, None)
+    except Exception:  # noqa: BLE001 - malformed: dask's own connect says why
+        return
+    if host is None:
+        return
+    try:
+        socket.create_connection((host, port), timeout=min(timeout, 5.0)).close()
+    except ConnectionRefusedError:
+        raise ConfigError(f"cannot reach the dask scheduler at {address}: the connection was refused (nothing "
+                          f"listens at port {port} of {host}: is the scheduler running?)") from None
+    except OSError:  # unreachable, slow, a name that does not resolve: dask's connect says which
+        return
 
 
 def dask_setup(worker) -> None:

@@ -231,6 +231,17 @@ def test_a_scheduler_address_that_is_no_scheduler_is_one_line_not_a_hang(answer)
         assert time.perf_counter() - start < 4
 
 
+def test_a_scheduler_address_where_nothing_listens_is_refused_at_once():
+    """dask's connect retried the refused connection for its whole timeout, then said "Timed out"."""
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        port = server.getsockname()[1]  # closed again: nothing listens there
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=f"scheduler at tcp://127.0.0.1:{port}: the connection was refused"):
+        with dask_client(f"tcp://127.0.0.1:{port}", timeout=10.0):
+            pass
+    assert time.perf_counter() - start < 3
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernel's parent-death signal is Linux's")
 def test_a_run_dies_with_the_worker_that_started_it(small_config, tmp_path):
     """A worker killed mid-run (SIGKILL, out of memory) left its `primordia run` running on, orphaned:
