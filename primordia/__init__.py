@@ -26,6 +26,13 @@ The pieces, each with its own docstring:
 
 __version__ = "0.1.0"
 
+import os as _os  # noqa: E402
+
+if _os.environ.get("PRIMORDIA_SWEEP_WORKER_STARTING"):  # a sweep's local worker importing this: see primordia.sweep
+    import signal as _signal
+
+    _signal.signal(_signal.SIGINT, lambda signum, frame: None)
+
 from primordia.model import Model  # noqa: E402
 
 __all__ = ["Model", "__version__"]

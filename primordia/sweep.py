@@ -337,7 +337,7 @@ def check_runs(config: str, overrides: Sequence[str], directory: str) -> str:
     for a run, nor the solver options: ``--set model.backend=nope`` ran and failed every run, and the sweep
     ended with exit status 0.
     """
-    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES) and k != WORKER_STARTING}
     command = [sys.executable, "-m", "primordia.cli", "run", config, "--dry-run", "--out", directory]
     for assignment in overrides:
         command += ["--set", assignment]
@@ -365,7 +365,7 @@ def _run_point(command: list[str], directory: Path, timeout: float | None,
     between the point's check at its start and the run's registration was neither refused nor asked to stop,
     and the interrupted sweep waited for it to end (up to :data:`STOP_GRACE`), whatever it took.
     """
-    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES)}
+    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES) and k != WORKER_STARTING}
     command = _dying_with_its_parent(command)
     with _RUNNING_LOCK:
         if sweep is not None and sweep in _STOPPED:
@@ -494,10 +494,53 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
         return
     # the scheduler's HTTP routes on any free loopback port (None would mean port 8787, and a warning if taken)
     # preload: Ctrl-C is the sweep's to handle (see dask_setup)
-    with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                      dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, preload=[__name__]) as cluster, \
-            Client(cluster) as client:
+    with contextlib.ExitStack() as stack:
+        started = _workers_starting(stack)
+        try:
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, preload=[__name__]))
+            client = stack.enter_context(Client(cluster))
+        except Exception:
+            if started.came:  # a worker the Ctrl-C reached before it could leave it to the sweep: "Nanny failed"
+                raise KeyboardInterrupt from None
+            raise
+        started()
         yield client
+
+
+#: Set while the local cluster starts: a worker process importing primordia (the sweep's main module, which
+#: multiprocessing's spawn imports before anything else) leaves a Ctrl-C to the sweep from its first line.
+WORKER_STARTING = "PRIMORDIA_SWEEP_WORKER_STARTING"
+
+
+def _workers_starting(stack: contextlib.ExitStack):
+    """Hold a Ctrl-C back from the local cluster's start, until the returned function is called: it raises the
+    KeyboardInterrupt then, if one came (``stack`` closes the cluster and restores the handler).
+
+    A Ctrl-C in the cluster's first seconds reached workers still importing primordia, before their preload
+    (:func:`dask_setup`) was in place: they died of it, and dask's start and close, interrupted, printed
+    40-110 lines of tracebacks. A spawned worker inherits neither a handler (reset by exec) nor a blocked
+    SIGINT (spawn resets the mask), and ignoring SIGINT here lost the sweep's own Ctrl-C (a C library's
+    thread took it); a worker inherits its environment, which ``primordia/__init__`` reads, and this
+    process records the Ctrl-C and raises it once the cluster is whole.
+    """
+    import signal
+
+    def started():
+        os.environ.pop(WORKER_STARTING, None)
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+            if started.came and previous is not signal.SIG_IGN:
+                raise KeyboardInterrupt
+
+    os.environ[WORKER_STARTING] = "1"
+    stack.callback(os.environ.pop, WORKER_STARTING, None)
+    started.came, previous = [], None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: started.came.append(signum))
+        stack.callback(signal.signal, signal.SIGINT, previous)
+    return started
 
 
 def primordia_identity() -> tuple[str, str]:
@@ -599,6 +642,7 @@ def dask_setup(worker) -> None:
     import signal
     import threading
 
+    os.environ.pop(WORKER_STARTING, None)  # its runs take a Ctrl-C as a run does
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _leave_to_the_sweep)
 

@@ -231,6 +231,29 @@ def test_a_scheduler_address_that_is_no_scheduler_is_one_line_not_a_hang(answer)
         assert time.perf_counter() - start < 4
 
 
+def test_a_ctrl_c_while_the_local_cluster_starts_waits_for_it_and_spares_its_workers():
+    """A Ctrl-C 1.5-3.5 s into a sweep reached workers still importing primordia: they died of it, and dask's
+    start and close printed 40-110 lines of tracebacks. The sweep now takes it once the cluster is whole, and a
+    worker importing primordia meanwhile leaves it to the sweep."""
+    from primordia.sweep import WORKER_STARTING, _workers_starting
+
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt), contextlib.ExitStack() as stack:
+        started = _workers_starting(stack)
+        assert os.environ[WORKER_STARTING] == "1"
+        os.kill(os.getpid(), signal.SIGINT)  # held: nothing raised here
+        time.sleep(0.05)
+        started()
+    assert WORKER_STARTING not in os.environ and signal.getsignal(signal.SIGINT) is before
+
+    worker = subprocess.run(
+        [sys.executable, "-c", "import os, signal, time; import primordia; os.kill(os.getpid(), signal.SIGINT); "
+         "time.sleep(0.05); print('still here')"],
+        env={**os.environ, WORKER_STARTING: "1"}, capture_output=True, text=True, timeout=120,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert worker.returncode == 0 and worker.stdout == "still here\n", worker.stderr
+
+
 def test_a_scheduler_address_where_nothing_listens_is_refused_at_once():
     """dask's connect retried the refused connection for its whole timeout, then said "Timed out"."""
     with socket.create_server(("127.0.0.1", 0)) as server:
