@@ -13,6 +13,7 @@ reading: a checkpoint holds data, never code.
 from __future__ import annotations
 
 import json
+import tokenize
 import zipfile
 from pathlib import Path
 
@@ -58,7 +59,8 @@ def _load(path: str | Path, arrays: bool) -> dict:
             return _unflatten(meta["tree"], data, arrays)
     except FileNotFoundError:
         raise PrimordiaError(f"no checkpoint at {path}") from None
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as error:
+    # an empty file is EOFError; a damaged .npy header fails numpy's parsing of it with TokenError
+    except (OSError, EOFError, ValueError, KeyError, tokenize.TokenError, zipfile.BadZipFile) as error:
         raise PrimordiaError(f"checkpoint {path} cannot be read ({type(error).__name__}: {error})") from None
 
 
