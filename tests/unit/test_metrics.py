@@ -349,3 +349,30 @@ def test_a_restart_says_the_analysis_in_the_run_directory_is_of_the_run_before_i
     assert extended.stderr.splitlines() == [
         f"primordia: warning: {out / 'metrics.nc'} (primordia analyse) measures the run as it was before this "
         f"restart; run primordia analyse {out} again when it ends"]
+
+
+def test_the_metrics_picture_shows_its_whole_title_and_names_its_axes(tmp_path, monkeypatch):
+    """A coupled model's note (example 1b's, 136 characters) ran off both sides of a picture of two output
+    times, and the field's axes had no names."""
+    from primordia.analysis.patterns import figures
+    from primordia.analysis.patterns.run import PredictedMode, measure, read_run
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
+    write_run(tmp_path, stretch=1.0)
+    note = ("physics chemotaxis, poroelasticity, active_stress, mechanochemical; kinetics painter2018 "
+            "(species m, e, f, b); with mechanics")
+    for times in (1, 2):
+        chosen = [m for m in measure(read_run(tmp_path), ["m"]) if m.configuration == "reference"][:times]
+        figures.metrics_figure(chosen, PredictedMode(2.78, 2.26, 0.1, note), tmp_path / "metrics_m.png")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    assert len(drawn) == 2
+    for figure in drawn:
+        renderer = FigureCanvasAgg(figure).get_renderer()
+        title = figure._suptitle.get_window_extent(renderer)
+        assert title.x0 >= 0 and title.x1 <= figure.bbox.x1 and title.y1 <= figure.bbox.y1
+        field = figure.axes[0]  # the first time's field, with its own title above it
+        assert title.y0 > field.get_tightbbox(renderer).y1
+        assert (field.get_xlabel(), field.get_ylabel()) == ("x", "y")

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,10 +35,16 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
     """Field + spots (top) and spectrum + k_max (bottom) for each output time of one species."""
     columns = len(measurements)
     width = 4.4 * columns + 0.6
-    figure = Figure(figsize=(width, 8.0))
+    height = 8.0
+    figure = Figure(figsize=(width, height))
     axes = figure.subplots(2, columns, squeeze=False)
-    # fixed margins (in inches at the sides): constrained layout triples the drawing time
-    figure.subplots_adjust(left=0.8 / width, right=1 - 0.3 / width, bottom=0.07, top=0.88, wspace=0.4, hspace=0.3)
+    # the linear analysis's note is long (a coupled model's, or why there is none): wrapped to the figure's width,
+    # about 12 characters an inch at 10 points, it ran off both sides of a one- or two-time picture
+    title = textwrap.fill(f"pattern metrics ({predicted.note or 'linear analysis'})", width=int(12 * width))
+    lines = title.count("\n") + 1
+    # fixed margins (in inches at the sides and top): constrained layout triples the drawing time
+    figure.subplots_adjust(left=0.8 / width, right=1 - 0.3 / width, bottom=0.07, top=1 - (0.8 + 0.18 * lines) / height,
+                           wspace=0.4, hspace=0.3)
     for (top, bottom), m in zip(axes.T, measurements):
         metrics, grid = m.metrics, m.grid
         image = top.imshow(grid.values, origin="lower", extent=grid.extent, cmap="viridis", interpolation="nearest")
@@ -51,6 +58,8 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
                       f"{metrics.spot_count} spots, spacing {metrics.spacing_mean:.3g} +- {metrics.spacing_std:.2g}, "
                       f"|psi6| {metrics.hexatic_order:.2f}", fontsize=8)
         top.set_aspect("equal")
+        top.set_xlabel("x")
+        top.set_ylabel("y")
         k, power = metrics.wavenumbers, metrics.power
         shown = k > 0
         bottom.semilogy(k[shown], np.maximum(power[shown], 1e-300), color="tab:blue", linewidth=1)
@@ -68,7 +77,7 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
         bottom.set_xlabel("k")
         bottom.set_ylabel("radially averaged power")
         bottom.legend(fontsize=7, loc="upper right")
-    figure.suptitle(f"pattern metrics ({predicted.note or 'linear analysis'})", fontsize=10)
+    figure.suptitle(title, fontsize=10)
     return _save(figure, path)
 
 
