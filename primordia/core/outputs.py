@@ -335,9 +335,13 @@ class Pictures(Output):
 
 def picture_time(t: float, times: Iterable[float]) -> str:
     """``t`` as the snapshot pictures' file names write it: ``0160.00``, with more decimals when the output
-    times need them (dt = 0.001: ``0000.001``), so that no two output times share a file."""
-    decimals = _picture_decimals(tuple(sorted({float(time) for time in (*times, t)})))
-    return f"{t:0{5 + decimals}.{decimals}f}"
+    times need them (dt = 0.001: ``0000.001``), so that no two output times share a file, and more digits
+    before the point when the largest needs them (``05000.00``, ``20000.00``), so that the names sort in time
+    order (four digits for every time wrote ``5000.00`` after ``20000.00``)."""
+    every = tuple(sorted({float(time) for time in (*times, t)}))
+    decimals = _picture_decimals(every)
+    digits = max(4, *(len(f"{abs(time):.{decimals}f}".partition(".")[0]) for time in (every[0], every[-1])))
+    return f"{t:0{digits + 1 + decimals}.{decimals}f}"
 
 
 @functools.lru_cache(maxsize=8)

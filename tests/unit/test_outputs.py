@@ -443,8 +443,11 @@ def test_output_times_that_agree_to_two_decimals_get_pictures_of_their_own(tmp_p
     (0.001, [0.001, 0.002], "0000.001"),
     (1.000001, [1.000001, 1.000002], "0001.000001"),
     (-0.5, [-0.5, 1.0], "-000.50"),
+    (5000.0, [5000.0, 20000.0], "05000.00"),  # was 5000.00, sorted after 20000.00
+    (20000.0, [5000.0, 20000.0], "20000.00"),
+    (0.5, [0.5, 123456.25], "000000.50"),
 ])
-def test_a_picture_s_time_has_the_decimals_its_output_times_need(t, times, stamp):
+def test_a_picture_s_time_has_the_digits_its_output_times_need(t, times, stamp):
     from primordia.core.outputs import picture_time, time_label
 
     assert picture_time(t, times) == stamp
