@@ -176,7 +176,8 @@ def _write_netcdf(path: Path, variables: Mapping[str, tuple[str, np.ndarray, dic
     from scipy.io import netcdf_file
 
     with netcdf_file(str(path), "w", version=2) as target:
-        target._attributes.update(global_attrs or {})  # the table itself: "version" or "mode" would be the file's
+        # the table itself: "version" or "mode" would be the file's
+        target._attributes.update({key: _attribute(value) for key, value in (global_attrs or {}).items()})
         for name, (dimension, values, attrs) in variables.items():
             if dimension not in target.dimensions:
                 target.createDimension(dimension, len(values))
@@ -195,7 +196,12 @@ def _write_netcdf(path: Path, variables: Mapping[str, tuple[str, np.ndarray, dic
                 variable._attributes["_FillValue"] = np.float64(np.nan)
             # into the attribute table itself: setattr would also let an attribute named "shape" hide the variable's
             for key, value in attrs.items():
-                variable._attributes[key] = value
+                variable._attributes[key] = _attribute(value)
+
+
+def _attribute(value):
+    """Text as UTF-8 bytes, as xarray writes it: scipy's writer encodes a str as ASCII and fails on "ü"."""
+    return value.encode("utf-8") if isinstance(value, str) else value
 
 
 def _variable_name(key) -> str:

@@ -79,6 +79,20 @@ def test_the_file_is_what_xarray_writes(tmp_path):
         assert ours.attrs == {"title": "a series", "version": "the file's own, not scipy's"}
 
 
+def test_text_attributes_beyond_ascii_are_written_as_xarray_writes_them(tmp_path):
+    """A model named "Hühner-Feder" put "ü" in the file's title: scipy's writer encodes text attributes as ASCII,
+    so the run's series output failed at its first row and was disabled, and the run left no series.nc."""
+    series = ScalarSeries(tmp_path / "series.nc", attrs={"psi_max": {"long_name": "maximum of ψ"}},
+                          global_attrs={"title": "scalar series of model 'Hühner-Feder 羽'"})
+    series.append(0.0, {"psi_max": 1.0})
+    by_xarray = tmp_path / "by_xarray.nc"
+    series.dataset().to_netcdf(by_xarray, engine="scipy")
+    with xr.open_dataset(series.path) as ours, xr.open_dataset(by_xarray) as theirs:
+        xr.testing.assert_identical(ours.load(), theirs.load())
+        assert ours.attrs["title"] == "scalar series of model 'Hühner-Feder 羽'"
+        assert ours["psi_max"].attrs["long_name"] == "maximum of ψ"
+
+
 def test_a_row_imports_neither_xarray_nor_dask(tmp_path):
     """xarray's own writing imports xarray, pandas and dask, and dask.distributed in to_netcdf: 1.3 s of
     every run process."""
