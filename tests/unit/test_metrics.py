@@ -376,3 +376,23 @@ def test_the_metrics_picture_shows_its_whole_title_and_names_its_axes(tmp_path, 
         field = figure.axes[0]  # the first time's field, with its own title above it
         assert title.y0 > field.get_tightbbox(renderer).y1
         assert (field.get_xlabel(), field.get_ylabel()) == ("x", "y")
+
+
+def test_a_sweep_map_panel_without_any_value_has_no_colour_bar(tmp_path, monkeypatch):
+    """A sweep where no run formed spots (a coarse or short one) drew the spacing and wavelength panels
+    empty, each with a colour bar from -0.1 to 0.1: a scale for values that are not there."""
+    from primordia.analysis.patterns import figures
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
+    grid = {"m0": [0.5, 1.0], "alpha": [2.0, 4.0]}
+    nothing = xr.DataArray(np.full((2, 2), np.nan), coords=grid, dims=("m0", "alpha"))
+    ds = xr.Dataset({"spacing_mean": nothing, "spot_count": nothing.fillna(0.0), "dominant_wavelength": nothing,
+                     "pattern_name": nothing.astype(object).fillna("none"), "failed": nothing.fillna(0).astype(bool)})
+    figures.sweep_figure(ds, None, tmp_path / "sweep_map.png", "m0", "alpha")
+    (figure,) = drawn
+    panels = [ax for ax in figure.axes if ax.get_label() != "<colorbar>"]
+    assert len(figure.axes) - len(panels) == 1, "a colour bar for the spot count only"
+    assert [ax.get_title() for ax in panels] == ["spot spacing (nearest neighbour): no run has one", "spot count",
+                                                 "dominant wavelength (spectrum): no run has one"]

@@ -110,7 +110,10 @@ def sweep_figure(ds: xr.Dataset, linear: xr.Dataset | None, path, x: str, y: str
     for ax, (name, title) in zip(axes, SWEEP_PANELS):
         values = ds[name].transpose(y, x).values
         mesh = ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_invalid(values), cmap="viridis", shading="flat")
-        figure.colorbar(mesh, ax=ax, shrink=0.85)
+        if np.isfinite(values).any():  # a panel with no value at all had a colour bar from -0.1 to 0.1
+            figure.colorbar(mesh, ax=ax, shrink=0.85)
+        else:
+            title = f"{title}: no run has one"
         for i, xv in enumerate(xs):
             for j, yv in enumerate(ys):
                 label = "failed" if ds["failed"].transpose(y, x).values[j, i] else ds["pattern_name"].transpose(
