@@ -219,7 +219,8 @@ def series_attributes(run, keys) -> dict[str, dict[str, str]]:
     (the fields' statistics, the modules' diagnostics, the run's counts, sizes and memory)."""
     if not keys:
         return {}
-    fields = {name: f"|{name}|" if spec.vector else name for name, spec in run.field_specs().items()}
+    vectors = {name for name, spec in run.field_specs().items() if spec.vector}
+    fields = {name: f"|{name}|" if name in vectors else name for name in run.field_specs()}
     diagnostics = {diagnostic.name: diagnostic for diagnostic in run.diagnostics}
     described = {**SERIES_OWN, **run.series_descriptions()}
     attrs = {}
@@ -227,9 +228,12 @@ def series_attributes(run, keys) -> dict[str, dict[str, str]]:
         name, unit = described.get(key, (None, None))
         field, _, statistic = key.rpartition("_")
         if name is None and field in fields and statistic in ("integral", "min", "max"):
+            # a vector's extrema are its components' (the backends' vertex_extrema), not its magnitude's:
+            # "minimum of |u|" stood over example 1b's u_min = -0.056
+            extrema_of = f"the components of {field}" if field in vectors else field
             name = {"integral": f"integral of {fields[field]} over the reference domain",
-                    "min": f"minimum of {fields[field]} at the vertices",
-                    "max": f"maximum of {fields[field]} at the vertices"}[statistic]
+                    "min": f"minimum of {extrema_of} at the vertices",
+                    "max": f"maximum of {extrema_of} at the vertices"}[statistic]
         if name is None:
             diagnostic = diagnostics.get(key) or (diagnostics.get(field) if statistic in ("min", "max") else None)
             if diagnostic is not None and diagnostic.description:

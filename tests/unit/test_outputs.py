@@ -452,3 +452,17 @@ def test_a_picture_s_time_has_the_digits_its_output_times_need(t, times, stamp):
 
     assert picture_time(t, times) == stamp
     assert time_label(1.0) == "1" and time_label(1.0000001) == "1.0000001"  # %g would print 1
+
+
+def test_a_vector_field_s_series_names_the_extrema_it_holds(tmp_path):
+    """u_min and u_max are the extrema of u's components (example 1b's u_min is negative), but their long_name
+    said "minimum of |u|", a magnitude that cannot be negative; u_integral is that of |u|."""
+    model = Model.from_file("examples/ex01b.toml", ["mesh.cells=[4,4]", "time.t_final=0.4", "output.times=[0.4]",
+                                                    "output.pictures=false"])
+    model.run(backend="skfem", out=tmp_path, progress=False)
+    with xr.open_dataset(tmp_path / "series.nc") as series:
+        assert float(series["u_min"][-1]) < 0 < float(series["u_max"][-1])
+        assert series["u_min"].attrs["long_name"] == "minimum of the components of u at the vertices"
+        assert series["u_max"].attrs["long_name"] == "maximum of the components of u at the vertices"
+        assert series["u_integral"].attrs["long_name"] == "integral of |u| over the reference domain"
+        assert series["p_min"].attrs["long_name"] == "minimum of p at the vertices"
