@@ -105,14 +105,17 @@ def plot_fields_grid(
     for ax in axes.ravel():
         if id(ax) not in used:
             ax.set_axis_off()
-    image = None
+    image, axes_of_view = None, {}
     for ax, (label, (view, (triangulation, values))), key in zip(slots, panels.items(), list(fields) * len(views)):
         image = _draw_panel(ax, triangulation, values, label, cmap, vmin, vmax, view.axis_names)
+        axes_of_view.setdefault(id(view), []).append(ax)
         if (displacements or {}).get(key) is not None:
             _draw_outline(ax, mesh, view)
             ax.set_xlabel(f"{view.axis_names[0]}    (displacement x{displacement_scale:g})")
         if not shared_colour_scale:
             figure.colorbar(image, ax=ax, shrink=0.85)
+    for same_view in axes_of_view.values():
+        _share_extent(same_view)
     if shared_colour_scale:
         figure.colorbar(image, ax=slots, shrink=0.85)
     if title:
@@ -120,6 +123,17 @@ def plot_fields_grid(
     with atomic_path(target) as temporary:
         figure.savefig(temporary, format="png", dpi=110)
     return target
+
+
+def _share_extent(axes) -> None:
+    """One extent for the panels of one view, the union of theirs: a growing tissue's snapshots are drawn to one
+    scale.  Each panel fitted to its own drew the smaller, earlier tissue larger, and the constrained layout,
+    laying out equal-aspect panels of different shapes, put one panel's x label below the picture's edge."""
+    lows, highs = np.array([[ax.get_xlim()[0], ax.get_ylim()[0]] for ax in axes]), np.array(
+        [[ax.get_xlim()[1], ax.get_ylim()[1]] for ax in axes])
+    for ax in axes:
+        ax.set_xlim(lows[:, 0].min(), highs[:, 0].max())
+        ax.set_ylim(lows[:, 1].min(), highs[:, 1].max())
 
 
 class _View:

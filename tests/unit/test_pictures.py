@@ -113,3 +113,33 @@ def test_the_slice_of_a_3d_mesh_is_the_whole_cross_section_with_fields_linear_on
     np.testing.assert_allclose(cut[:, 1], 2.0, atol=1e-12)  # every drawn point lies in the plane
     linear = mesh.points @ np.array([1.0, 3.0, 2.0])
     np.testing.assert_allclose(view.at_points(linear), cut @ np.array([1.0, 3.0, 2.0]), atol=1e-12)
+
+
+def test_the_snapshots_of_a_growing_tissue_are_drawn_to_one_scale_inside_the_picture(tmp_path, square,
+                                                                                    monkeypatch):
+    """Each snapshot was fitted to its own deformed extent: the earlier, smaller tissue was drawn larger than
+    the later one, and the constrained layout put that panel's x label below the picture's edge (example 2a at
+    t = 1 and 2)."""
+    from matplotlib.figure import Figure
+
+    drawn = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda figure, *args, **kwargs: (drawn.append(figure),
+                                                                             save(figure, *args, **kwargs))[1])
+    x, y = square.points.T
+    growths = {"m, t = 1": (0.5, 0.1), "m, t = 2": (0.8, 0.3)}  # stretch along x, a bend that grows with it
+    displacements = {key: np.column_stack([s * x * (1 + y), b * np.sin(np.pi * x) * (1 - y)])
+                     for key, (s, b) in growths.items()}
+    plot_fields_grid(tmp_path / "m_snapshots.png", square, {key: bump(square, 0.0) for key in growths},
+                     title="m at the snapshot times", displacements=displacements)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    (figure,) = drawn
+    renderer = FigureCanvasAgg(figure).get_renderer()
+    figure.draw(renderer)  # the constrained layout, as when it was saved
+    panels = [ax for ax in figure.axes if ax.get_label() != "<colorbar>"]
+    assert len(panels) == 2
+    assert panels[0].get_xlim() == panels[1].get_xlim() and panels[0].get_ylim() == panels[1].get_ylim()
+    for ax in panels:
+        drawn_box = ax.get_tightbbox(renderer)  # with its title and axis labels
+        assert drawn_box.y0 >= 0 and drawn_box.x0 >= 0 and drawn_box.y1 <= figure.bbox.y1, ax.get_title()
