@@ -102,7 +102,27 @@ class XdmfSeries:
         if not (self.heavy_directory / "mesh.h5").is_file():
             raise PrimordiaError(f"XDMF series {self.path}: cannot continue, {self.heavy_directory / 'mesh.h5'} "
                                  f"is missing")
+        for _, fields in self._steps:
+            self._check_heavy_file(fields)
         atomic_write_bytes(self.path, self._xdmf_document())
+
+    def _check_heavy_file(self, fields: Mapping[str, tuple[str, tuple[int, ...]]]) -> None:
+        """Refuse to list a time whose heavy-data file is gone or damaged: a restart did so without a word, and
+        the index it rewrote could not be opened (meshio: "truncated file"; ParaView reads none of its times)."""
+        import h5py
+
+        (step_file,) = {step_file for step_file, _ in fields.values()}
+        path = self.heavy_directory / step_file
+        if not path.is_file():
+            raise PrimordiaError(f"XDMF series {self.path}: cannot continue, {path} is missing")
+        try:
+            with h5py.File(path, "r") as h5:
+                damaged = [name for name, (_, shape) in fields.items() if name not in h5 or h5[name].shape != shape]
+        except OSError as error:
+            raise PrimordiaError(f"XDMF series {self.path}: cannot continue, {path} cannot be read "
+                                 f"({str(error).splitlines()[0]})") from None
+        if damaged:
+            raise PrimordiaError(f"XDMF series {self.path}: cannot continue, {path} lacks {', '.join(damaged)}")
 
     def _check_time(self, t) -> float:
         if not is_number(t):

@@ -124,3 +124,26 @@ def test_xdmf_series_directory_errors(tmp_path, square):
         XdmfSeries(tmp_path / "file", square)
     with pytest.raises(PrimordiaError, match="series name must be"):
         XdmfSeries(tmp_path, square, name="a:b")
+
+
+def _truncate(path):
+    path.write_bytes(path.read_bytes()[:2000])
+
+
+@pytest.mark.parametrize("damage, message", [
+    (_truncate, "t000001.h5 cannot be read (Unable to open file (truncated file"),
+    (lambda path: path.unlink(), "t000001.h5 is missing"),
+    (lambda path: xdmf._write_h5(path, {"other": np.zeros(3)}), "t000001.h5 lacks m"),
+], ids=["truncated", "missing", "another-file"])
+def test_a_series_whose_heavy_data_is_damaged_is_not_continued(tmp_path, square, damage, message):
+    """A restart listed every checkpointed time again without looking at its HDF5 file: with one truncated or
+    gone, it completed without a word and left an index meshio and ParaView cannot open."""
+    series = XdmfSeries(tmp_path, square)
+    for t in (0.5, 1.0):
+        series.write(t, {"m": bump(square, t)})
+    state = series.state()
+    damage(tmp_path / "fields_h5" / "t000001.h5")
+    index = (tmp_path / "fields.xdmf").read_bytes()
+    with pytest.raises(PrimordiaError, match=f"cannot continue, .*{message}".replace("(", r"\(")):
+        XdmfSeries(tmp_path, square).restore(state)
+    assert (tmp_path / "fields.xdmf").read_bytes() == index
