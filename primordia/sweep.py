@@ -796,7 +796,7 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
     ds = xr.Dataset(
         {"status": (names, status.astype(str), {"long_name": "completed or failed"}),
          "reason": (names, reason.astype(str), {"long_name": "why the run failed (empty if it completed)"}),
-         "wall_time_s": (names, wall, {"long_name": "wall time of the run and its metrics"}),
+         "wall_time_s": (names, wall, {"long_name": "wall time of the run and its metrics", "units": "s"}),
          "run_dir": (names, np.array([str(p.directory) for p in points], dtype=str).reshape(shape)),
          "predicted_wavenumber": (names, predicted["k_max"], {"long_name": "linear analysis: fastest stationary k"}),
          "predicted_wavelength": (names, predicted["wavelength"], {"long_name": "linear analysis: 2 pi / k_max"}),

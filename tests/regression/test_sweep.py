@@ -540,6 +540,7 @@ def test_runs_measured_at_other_times_keep_their_metrics(small_config, tmp_path)
     prominence = ds["spectral_prominence"].sel(configuration="reference", species="m").values
     assert np.isfinite(prominence.diagonal()).all()  # each run at its own t_final
     assert np.isnan([prominence[0, 1], prominence[1, 0]]).all()  # and at no other time
+    assert ds["wall_time_s"].attrs["units"] == "s"  # had none
 
 
 def test_a_backend_no_run_can_use_is_one_line_before_any_run(small_config, primordia_cli, tmp_path):
