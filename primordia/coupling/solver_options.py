@@ -89,12 +89,16 @@ DIRECT = ("lu", "cholesky")
 
 
 def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
-    """Flat options from a (nested) table: ``{"fieldsplit_u": {"pc_type": "gamg"}}`` -> ``fieldsplit_u_pc_type``."""
+    """Flat options from a (nested) table: ``{"fieldsplit_u": {"pc_type": "gamg"}}`` -> ``fieldsplit_u_pc_type``.
+
+    Names are lower-cased: PETSc's options database ignores case (``KSP_RTOL`` is ``ksp_rtol``), and the
+    checks and the defaults it overrides are keyed by the lower-case name.
+    """
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where} must be a table of PETSc options, got {table!r}")
     flat: dict[str, Any] = {}
     for key, value in table.items():
-        name = prefix + str(key).lstrip("-")
+        name = prefix + str(key).lstrip("-").lower()
         if isinstance(value, Mapping):
             flat.update(flatten(value, where, name + ("" if name.endswith("_") else "_")))
         elif name == SPLITS:

@@ -25,6 +25,14 @@ def test_nested_tables_are_option_prefixes_as_in_firedrake():
     assert option_text(True) == "true" and option_text(1e-2) == "0.01"
 
 
+def test_option_names_are_read_in_any_case_as_petsc_reads_them():
+    # a PC_TYPE that kept the defaults of the preconditioner it replaced, since combine() looked for pc_type
+    table = {"PC_TYPE": "hypre", "FieldSplit_U": {"KSP_Type": "preonly"}, "Splits": [["u"]]}
+    assert flatten(table, "solver.x") == {"pc_type": "hypre", "fieldsplit_u_ksp_type": "preonly", "splits": (("u",),)}
+    assert combine(DEFAULTS, flatten({"PC_TYPE": "gamg"}, "solver.x")) == {"pc_type": "gamg", "snes_rtol": 1e-7,
+                                                                            "ksp_rtol": 1e-8}
+
+
 @pytest.mark.parametrize("table, fragment", [
     ({"ksp_rtol": [1e-2]}, "solver.x.ksp_rtol must be a number, a string or true/false"),
     ({"splits": ["u", "p"]}, "solver.x.splits must be a list of lists of field names"),
@@ -195,6 +203,13 @@ BAD_SOLVER_SETTINGS = [
     # values: PETSc takes a negative tolerance for its default and stops with a traceback on what it cannot parse
     (["solver.chemotaxis_m.ksp_rtol=-1"], ["solver.chemotaxis_m.ksp_rtol must be a number in [0, 1), got -1"]),
     (["solver.chemotaxis_m.ksp_max_it=0"], ["solver.chemotaxis_m.ksp_max_it must be an integer >= 1"]),
+    # PETSc reads option names in any case: so do the checks (KSP_RTOL = -1 was PETSc's default rtol, unchecked)
+    (["solver.chemotaxis_m.KSP_RTOL=-1"], ["solver.chemotaxis_m.ksp_rtol must be a number in [0, 1), got -1"]),
+    (["solver.chemotaxis_m.Ksp_Max_It=0"], ["solver.chemotaxis_m.ksp_max_it must be an integer >= 1"]),
+    # ... and the SIGABRT of SuperLU_DIST's MC64 went unrefused (exit status 134, no summary)
+    (['solver.chemotaxis_f.pc_factor_mat_solver_type="superlu_dist"',
+      'solver.chemotaxis_f.MAT_SUPERLU_DIST_ROWPERM="LargeDiag_MC64"'],
+     ["mat_superlu_dist_rowperm = 'LargeDiag_MC64'", "aborts the whole process"]),
     (["solver.chemotaxis_m.ksp_gmres_restart=2.5"], ["solver.chemotaxis_m.ksp_gmres_restart", "got 2.5"]),
     (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'], ["solver.chemotaxis_m: PETSc refused the options",
                                                      "zz has no numeric value", "(in ksp_gmres_haptol = 'zz')"]),
