@@ -88,20 +88,32 @@ _KEPT_ACROSS_PC = ("ksp_", "snes_")
 DIRECT = ("lu", "cholesky")
 
 
-def flatten(table: Mapping, where: str, prefix: str = "") -> dict[str, Any]:
+def flatten(table: Mapping, where: str, prefix: str = "", spelled: dict[str, str] | None = None) -> dict[str, Any]:
     """Flat options from a (nested) table: ``{"fieldsplit_u": {"pc_type": "gamg"}}`` -> ``fieldsplit_u_pc_type``.
 
     Names are lower-cased: PETSc's options database ignores case (``KSP_RTOL`` is ``ksp_rtol``), and the
-    checks and the defaults it overrides are keyed by the lower-case name.
+    checks and the defaults it overrides are keyed by the lower-case name.  One option written twice
+    (``sub = { pc_type = "lu" }`` and ``sub_pc_type = "icc"``) is one line naming both spellings: which
+    one won depended on their order in the table.  ``spelled`` maps each option found so far to how it
+    was written.
     """
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where} must be a table of PETSc options, got {table!r}")
+    spelled = {} if spelled is None else spelled
+    path = spelled.get(prefix, "")
     flat: dict[str, Any] = {}
     for key, value in table.items():
         name = prefix + str(key).lstrip("-").lower()
+        written = f"{path}.{key}" if path else str(key)
         if isinstance(value, Mapping):
-            flat.update(flatten(value, where, name + ("" if name.endswith("_") else "_")))
-        elif name == SPLITS:
+            level = name + ("" if name.endswith("_") else "_")
+            spelled[level] = written
+            flat.update(flatten(value, where, level, spelled))
+            continue
+        if name in spelled:
+            raise ConfigError(f"{where}: option {name} is given twice, as {spelled[name]} and as {written}")
+        spelled[name] = written
+        if name == SPLITS:
             flat[name] = _splits(value, f"{where}.{name}")
         elif name == REBUILD:
             flat[name] = _rebuild_after(value, f"{where}.{name}")

@@ -25,6 +25,20 @@ def test_nested_tables_are_option_prefixes_as_in_firedrake():
     assert option_text(True) == "true" and option_text(1e-2) == "0.01"
 
 
+@pytest.mark.parametrize("table, spellings", [
+    ({"sub": {"pc_type": "lu"}, "sub_pc_type": "icc"}, "sub_pc_type is given twice, as sub.pc_type and as sub_pc_type"),
+    ({"fieldsplit_u_pc_type": "gamg", "fieldsplit_u": {"pc_type": "hypre"}},
+     "fieldsplit_u_pc_type is given twice, as fieldsplit_u_pc_type and as fieldsplit_u.pc_type"),
+    ({"fieldsplit": {"u": {"ksp_type": "cg"}}, "fieldsplit_u": {"ksp_type": "gmres"}},
+     "fieldsplit_u_ksp_type is given twice, as fieldsplit.u.ksp_type and as fieldsplit_u.ksp_type"),
+    ({"ksp_rtol": 1e-3, "-ksp_rtol": 1e-4}, "ksp_rtol is given twice, as ksp_rtol and as -ksp_rtol"),
+])
+def test_one_option_written_twice_is_named_with_both_spellings(table, spellings):
+    # the one written last used to win, silently
+    with pytest.raises(ConfigError, match=rf"^solver\.x: option {spellings.replace('.', r'[.]')}$"):
+        flatten(table, "solver.x")
+
+
 def test_option_names_are_read_in_any_case_as_petsc_reads_them():
     # a PC_TYPE that kept the defaults of the preconditioner it replaced, since combine() looked for pc_type
     table = {"PC_TYPE": "hypre", "FieldSplit_U": {"KSP_Type": "preonly"}, "Splits": [["u"]]}
@@ -210,6 +224,8 @@ BAD_SOLVER_SETTINGS = [
     (['solver.chemotaxis_f.pc_factor_mat_solver_type="superlu_dist"',
       'solver.chemotaxis_f.MAT_SUPERLU_DIST_ROWPERM="LargeDiag_MC64"'],
      ["mat_superlu_dist_rowperm = 'LargeDiag_MC64'", "aborts the whole process"]),
+    (['solver.chemotaxis_m.sub_pc_type="icc"', 'solver.chemotaxis_m.sub={pc_type="lu"}'],
+     ["solver.chemotaxis_m: option sub_pc_type is given twice, as sub_pc_type and as sub.pc_type"]),
     (["solver.chemotaxis_m.ksp_gmres_restart=2.5"], ["solver.chemotaxis_m.ksp_gmres_restart", "got 2.5"]),
     (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'], ["solver.chemotaxis_m: PETSc refused the options",
                                                      "zz has no numeric value", "(in ksp_gmres_haptol = 'zz')"]),
