@@ -348,10 +348,15 @@ def read_options(petsc_object, where: str, options: Mapping[str, Any] | None = N
         petsc_object.setFromOptions()
     except PETSc.Error as error:
         reason = petsc_reason(error)
-        quoted = [f"{key} = {option_text(value)!r}" for key, value in (options or {}).items()
-                  if option_text(value) and re.search(rf"(?<!\S){re.escape(option_text(value))}(?!\S)", reason)]
-        named = f" (in {quoted[0]})" if len(quoted) == 1 else ""
-        raise ConfigError(f"{where}: PETSc refused the options: {reason}{named}") from None
+        raise ConfigError(f"{where}: PETSc refused the options: {reason}{quoted_option(reason, options)}") from None
+
+
+def quoted_option(reason: str, options: Mapping[str, Any] | None) -> str:
+    """`` (in KEY = 'VALUE')`` for the one option of ``options`` whose value PETSc's ``reason`` quotes (a value
+    it could not read: "Input string abc has no numeric value"), else nothing."""
+    quoted = [f"{key} = {option_text(value)!r}" for key, value in (options or {}).items()
+              if option_text(value) and re.search(rf"(?<!\S){re.escape(option_text(value))}(?!\S)", reason)]
+    return f" (in {quoted[0]})" if len(quoted) == 1 else ""
 
 
 #: PETSc's error classes that say a solver was set up wrongly, not that it met numbers it could not solve

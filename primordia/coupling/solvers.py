@@ -45,15 +45,17 @@ from primordia.core.errors import ConfigError, SolverError
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
     FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, depends_on_step,
-    flatten, mumps_orders_itself, option_text, parallel_safe, petsc_reason, read_options)
+    flatten, mumps_orders_itself, option_text, parallel_safe, petsc_reason, quoted_option, read_options)
 from primordia.physics.kinematics import rigid_motions
 
 
-def petsc_failure(solve: str, code: int, reason: str, prefix: str) -> SolverError:
-    """One line for a solve PETSc stopped with error ``code``: which solve, PETSc's reason, where the options
-    are; a usage error (:func:`~primordia.coupling.solver_options.depends_on_step`) is not retried smaller."""
-    return SolverError(f"{solve} failed (PETSc error {code}: {reason}); try other options under -{prefix}",
-                       depends_on_step=depends_on_step(code))
+def petsc_failure(solve: str, code: int, reason: str, prefix: str, options: dict | None = None) -> SolverError:
+    """One line for a solve PETSc stopped with error ``code``: which solve, PETSc's reason, the option of the
+    user's ``options`` whose value the reason quotes (one PETSc read only at set-up, e.g. of a fieldsplit's
+    sub-solver), where the options are; a usage error (:func:`~primordia.coupling.solver_options.depends_on_step`)
+    is not retried smaller."""
+    return SolverError(f"{solve} failed (PETSc error {code}: {reason}{quoted_option(reason, options)}); "
+                       f"try other options under -{prefix}", depends_on_step=depends_on_step(code))
 
 
 #: A solve repeated within a step (a fixed-point pass after the first) stops at this fraction of the step's
@@ -256,6 +258,8 @@ class _Solver:
             raise ConfigError(f"{self.where}.{GATHER}: a system solved on one rank takes a whole-matrix "
                               f"preconditioner, not fieldsplit")
         self.options = options
+        #: the options the user gave, as PETSc holds them (named in a failure whose reason quotes one's value)
+        self.user_options = {key: options[key] for key in self._user_keys if key in options}
         write_options(subproblem.prefix, options)
         self._unchecked = bool(self._user_keys)  # the user's options are checked once PETSc has read them
         self._jacobian = None  # assembled UFL Jacobian
@@ -559,7 +563,7 @@ class LinearSolver(_Solver):
             self.ksp.solve(b, solution)
         elif raised is not None:
             raise petsc_failure(f"{self.sub.name}: the linear solve", raised.ierr, petsc_reason(raised),
-                                self.sub.prefix) from None
+                                self.sub.prefix, self.user_options) from None
 
 
 #: Why rebuild_preconditioner_after cannot apply to a direct solve (the start of the one-line refusal).
@@ -921,7 +925,7 @@ class NewtonSolver(_Solver):
                 self._rebuild_rule.solved(self.ksp.getIterationNumber())  # its last Krylov solve: no tangent read it
         except PETSc.Error as error:
             raise petsc_failure(f"{self.sub.name}: the nonlinear solve", error.ierr, petsc_reason(error),
-                                self.sub.prefix) from None
+                                self.sub.prefix, self.user_options) from None
         finally:
             add_since(self.linear_solve_seconds, start, minus=self._assembly_seconds)
             self.snes.setTolerances(atol=atol)

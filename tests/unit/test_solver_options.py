@@ -229,6 +229,9 @@ BAD_SOLVER_SETTINGS = [
     (["solver.chemotaxis_m.ksp_gmres_restart=2.5"], ["solver.chemotaxis_m.ksp_gmres_restart", "got 2.5"]),
     (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'], ["solver.chemotaxis_m: PETSc refused the options",
                                                      "zz has no numeric value", "(in ksp_gmres_haptol = 'zz')"]),
+    # a sub-solver's option is read when the solve sets it up: PETSc's reason named no option, before
+    (['solver.chemotaxis_m.sub_pc_factor_fill="zz"'],
+     ["chemotaxis.m: the linear solve failed", "zz has no numeric value (in sub_pc_factor_fill = 'zz')"]),
     # an ordering is read when the factorisation is made: a traceback after the first step's retries, before
     (['solver.chemotaxis_f.pc_factor_mat_ordering_type="zz"'],
      ["solver.chemotaxis_f: matrix ordering 'zz' in pc_factor_mat_ordering_type is not one this PETSc has",
