@@ -34,9 +34,10 @@ drops the defaults that only made sense for the preconditioner it replaces: the
 defaults' options of that level other than ``ksp_*`` and ``snes_*`` (the factor
 package, the splits and their sub-solvers, AMG settings, a ``rebuild_preconditioner_after``
 count), and, at the top level, a ``ksp_type = "preonly"`` that only made sense with a
-direct solve.  A relative ``rebuild_preconditioner_after = "fresh+K"`` stays: it measures
-the kept preconditioner against a fresh one of whatever kind (the cell density's default;
-``pc_type = "hypre"`` there keeps BoomerAMG over steps instead of building it at each).
+direct solve (kept for another one: ``lu`` to ``cholesky``).  A relative
+``rebuild_preconditioner_after = "fresh+K"`` stays: it measures the kept preconditioner
+against a fresh one of whatever kind (the cell density's default; ``pc_type = "hypre"``
+there keeps BoomerAMG over steps instead of building it at each).
 A factor package changed to MUMPS drops the defaults' fill-reducing ordering, which MUMPS
 would use in place of its own (see :func:`mumps_orders_itself`).
 
@@ -162,8 +163,8 @@ def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, A
             if (name.startswith(level) and name != key and not rest.startswith(_KEPT_ACROSS_PC)
                     and not _relative_rebuild(rest, kept[name])):
                 del kept[name]
-        if (level == "" and str(defaults.get("pc_type")) in DIRECT and "ksp_type" not in user
-                and kept.get("ksp_type") == "preonly"):
+        if (level == "" and str(defaults.get("pc_type")) in DIRECT and str(value) not in DIRECT
+                and "ksp_type" not in user and kept.get("ksp_type") == "preonly"):
             del kept["ksp_type"]
     return mumps_orders_itself({**kept, **user}, user)
 

@@ -77,6 +77,9 @@ def test_a_new_pc_type_drops_what_only_made_sense_for_the_old_one():
     combined = combine(DEFAULTS, {"pc_type": "gamg"})
     assert combined == {"pc_type": "gamg", "snes_rtol": 1e-7, "ksp_rtol": 1e-8}  # no factor package, no preonly
     assert combine(DEFAULTS, {"pc_type": "gamg", "ksp_type": "preonly"})["ksp_type"] == "preonly"  # unless asked
+    # another direct solve keeps the direct solve's preonly (it was GMRES around an exact Cholesky factor)
+    assert combine(DEFAULTS, {"pc_type": "cholesky"}) == {"ksp_type": "preonly", "pc_type": "cholesky",
+                                                          "snes_rtol": 1e-7, "ksp_rtol": 1e-8}
 
 
 def test_mumps_takes_its_own_ordering_unless_the_user_gives_one():
