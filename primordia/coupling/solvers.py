@@ -96,7 +96,8 @@ def accumulate(totals: dict[str, SolveStats], name: str, stats: SolveStats) -> N
 
 
 #: Options PETSc had before primordia wrote any (PETSC_OPTIONS, petsc4py.init arguments): the user's, never touched.
-_GIVEN_OUTSIDE = frozenset(PETSc.Options().getAll())
+#: Lower-cased, as PETSc matches names (-chemotaxis_m_KSP_RTOL is the -chemotaxis_m_ksp_rtol a table would write).
+_GIVEN_OUTSIDE = frozenset(name.lower() for name in PETSc.Options().getAll())
 #: Options primordia wrote to the (process-wide) database, by prefix, so the next solver of a prefix starts clean.
 _WRITTEN: dict[str, set[str]] = {}
 
@@ -115,7 +116,7 @@ def write_options(prefix: str, options: dict) -> None:
     written = _WRITTEN.setdefault(prefix, set())
     for key, value in options.items():
         name = prefix + key
-        if name in _GIVEN_OUTSIDE:
+        if name.lower() in _GIVEN_OUTSIDE:
             continue
         database[name] = option_text(value)
         written.add(name)

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 from petsc4py import PETSc
@@ -172,6 +175,17 @@ def test_an_option_petsc_never_read_is_named():
     with pytest.raises(ConfigError, match="solver.options_test: PETSc did not use option 'ksp_rtoll'"):
         check_used("options_test_", ["ksp_type", "ksp_rtoll"], "solver.options_test")
     ksp.destroy()
+
+
+def test_an_option_given_outside_wins_in_any_case():
+    # PETSc matches option names in any case: a table's ksp_rtol overwrote PETSC_OPTIONS' -x_KSP_RTOL
+    script = ("from petsc4py import PETSc; from primordia.coupling.solvers import write_options; "
+              "write_options('outside_test_', {'ksp_rtol': 1e-9, 'ksp_atol': 1e-9}); options = PETSc.Options(); "
+              "print(options.getReal('outside_test_ksp_rtol'), options.getReal('outside_test_ksp_atol'))")
+    environment = {**os.environ, "PETSC_OPTIONS": "-outside_test_KSP_RTOL 0.01"}
+    printed = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True, text=True,
+                             check=True)
+    assert printed.stdout.split() == ["0.01", "1e-09"]
 
 
 @pytest.mark.parametrize("key, value", [
