@@ -500,7 +500,7 @@ class LinearSolver(_Solver):
         """The system gathered to :attr:`owner` (collective: the matrix is gathered again when it changed)."""
         A, changed = self._affine_tangent() if self._affine.available else self._assemble_jacobian()
         if self._on_one_rank is None or self._on_one_rank.owner != self.owner:
-            self._on_one_rank = _OnOneRank(self.ksp, b, self.owner, self.sub.name)
+            self._on_one_rank = _OnOneRank(self.ksp, b, self.owner, self.sub.name, self.user_options)
             changed = True
         if changed or self._operators is not A:
             self._on_one_rank.set_matrix(A)
@@ -629,8 +629,9 @@ class _OnOneRank:
     others hold none of it.
     """
 
-    def __init__(self, ksp, b, owner: int, name: str):
+    def __init__(self, ksp, b, owner: int, name: str, options: dict | None = None):
         self.ksp, self.owner, self.name = ksp, owner, name
+        self._options = options  # the user's, named in a failure whose reason quotes one's value
         comm = b.getComm().tompi4py()
         self.mine = comm.rank == owner
         size = b.getSize() if self.mine else 0
@@ -679,7 +680,7 @@ class _OnOneRank:
         iterations, reason, error = self._comm.bcast(self._outcome, root=self.owner)
         if error:
             raise petsc_failure(f"{self.name}: the linear solve on rank {self.owner}", *error,
-                                self.ksp.getOptionsPrefix())
+                                self.ksp.getOptionsPrefix(), self._options)
         return int(iterations), int(reason)
 
 

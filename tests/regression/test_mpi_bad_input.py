@@ -23,7 +23,7 @@ def _assert_one_line_on_every_rank(result, *fragments):
 
 
 @pytest.mark.parametrize("case", ["out-is-a-file", "boundary-formula", "binary-config", "failed-solve",
-                                  "unused-option-on-one-rank", "usage-error-on-one-rank"])
+                                  "unused-option-on-one-rank", "usage-error-on-one-rank", "unreadable-on-one-rank"])
 def test_bad_input_under_two_ranks(case, small_config, tmp_path):
     (tmp_path / "a_file").write_text("not a directory")
     (tmp_path / "binary.toml").write_bytes(bytes(range(256)))
@@ -45,6 +45,13 @@ def test_bad_input_under_two_ranks(case, small_config, tmp_path):
                                      "--set", "solver.chemotaxis_f.mat_mumps_icntl_7=99"],
                                     ["step 1 (t = 0 -> 0.2): chemotaxis.f: the linear solve on rank 0 failed",
                                      "PETSc error 63", "Valid values are"]),
+        # read by the owner's sub-solver set-up, past read_options: the failure names the option PETSc's reason quotes
+        "unreadable-on-one-rank": ([small_config(), "--set", "solver.chemotaxis_b.solve_on_one_rank=true",
+                                    "--set", 'solver.chemotaxis_b.pc_type="bjacobi"',
+                                    "--set", 'solver.chemotaxis_b.ksp_type="cg"',
+                                    "--set", 'solver.chemotaxis_b.sub_pc_factor_fill="zz"'],
+                                   ["chemotaxis.b: the linear solve on rank 1 failed",
+                                    "zz has no numeric value (in sub_pc_factor_fill = 'zz')"]),
     }[case]
     if "--out" not in arguments:
         arguments += ["--out", tmp_path / "out"]
