@@ -32,7 +32,7 @@ from primordia.core.config import Configured, merge_options
 from primordia.core.errors import ConfigError, SolverError
 from primordia.core.plugins import hookimpl
 from primordia.core.validation import number
-from primordia.coupling.solver_options import check_tables
+from primordia.coupling.solver_options import check_table_values, check_tables
 from primordia.coupling.solvers import accumulate, solve_in_turn
 from primordia.physics.base import Subproblem, module_code, subproblems_of
 
@@ -68,7 +68,8 @@ class SplittingScheme(Configured, ABC):
         self.check_solver_tables(sim)
 
     def check_solver_tables(self, sim) -> None:
-        """Every ``[solver.NAME]`` table of the config names a subproblem of this run (or one line, exit 2).
+        """Every ``[solver.NAME]`` table of the config names a subproblem of this run, with KSP, PC and factor
+        types this PETSc has and tolerances in range (or one line, exit 2).
 
         Once a run: neither the tables nor the subproblems' names change within it, while the solvers are
         made again at every checkpoint and rejected step, where building the initial subproblems again for
@@ -78,6 +79,9 @@ class SplittingScheme(Configured, ABC):
             return
         initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
         check_tables(sim.model.solver, [solver.sub.prefix for solver in sim.solvers] + initial)
+        # the types and values of a table no solver of this process reads (a restart does not solve the initial
+        # state again): pc_type = "hypr" under [solver.poroelastic_growth_initial] was taken without a word
+        check_table_values(sim.model.solver)
         self._tables_checked = True
 
     @abstractmethod

@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from petsc4py import PETSc
@@ -14,6 +15,8 @@ from primordia.core.errors import ConfigError
 from primordia.coupling.solver_options import (
     GATHER, _try_type, check_tables, check_types, check_used, check_values, combine, flatten, option_text, parallel_safe)
 from primordia.coupling.solvers import write_options
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 # -- nested tables -----------------------------------------------------------------------------
@@ -295,6 +298,25 @@ mg_levels = { ksp_type = "chebyshev", ksp_max_it = 2 }
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["status"] == "completed"
     assert summary["mean_linear_iterations"]["chemotaxis.f"] > 1  # GMRES + AMG, not the default direct solve
+
+
+@pytest.mark.parametrize("assignment, fragment", [
+    ('solver.poroelastic_growth_initial.pc_type="hypr"', "unknown PC type 'hypr' in pc_type"),
+    ("solver.poroelastic_growth_initial_velocity.ksp_rtol=-1", "ksp_rtol must be a number in [0, 1), got -1"),
+])
+def test_a_restart_checks_the_tables_of_the_initial_solves_it_does_not_repeat(capsys, tmp_path, assignment,
+                                                                            fragment):
+    # a restart starts from the checkpoint: no solver read these tables, and they were taken without a word
+    from primordia.cli import main
+
+    out = tmp_path / "out"
+    status, stderr = run(capsys, EXAMPLES / "ex02a.toml", out, "mesh.cells=[4,4]", "time.t_final=0.2",
+                         "output.times=[0.2]", "output.pictures=false")
+    assert status == 0, stderr
+    status = main(["run", "--restart", str(out), "--no-progress", "--set", "time.t_final=0.4",
+                   "--set", "output.times=[0.4]", "--set", assignment])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 2 and len(lines) == 1 and fragment in lines[0], lines
 
 
 def test_linear_biot_in_2d_is_solved_whole_by_one_rank_up_to_eight_ranks():
