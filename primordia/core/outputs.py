@@ -299,7 +299,8 @@ class Pictures(Output):
             displacement, scale = values.get(run.displacement_field), run.model.output["displacement_scale"]
             stamp = picture_time(run.time, run.model.output["times"])
             for name in run.model.output["snapshot_fields"]:
-                label = f"{name}, t = {time_label(run.time)}"
+                shown = f"|{name}|" if values[name].ndim == 2 else name  # a vector is drawn as its magnitude
+                label = f"{shown}, t = {time_label(run.time)}"
                 field = self._scalar(values[name])
                 self.snapshots.setdefault(name, {})[label] = field
                 if displacement is not None:

@@ -399,6 +399,18 @@ def test_a_run_stopped_early_draws_the_grid_of_the_snapshots_it_reached(tmp_path
     assert list(output.snapshots["m"]) == ["m, t = 0.2", "m, t = 0.4"]
 
 
+
+def test_a_vector_snapshot_is_titled_by_the_magnitude_it_shows(tmp_path):
+    """u's pictures show |u|: its snapshots were titled "u, t = 0.1" beside final_fields.png's "|u|"."""
+    model = Model(physics=["poroelasticity"], parameters={"E": 100.0, "nu": 0.3}, mesh=MESH, dt=0.1, t_final=0.2,
+                  physics_options={"poroelasticity": {"boundary": [{"boundary": "bottom", "type": "clamped"}]}},
+                  output={"times": [0.1, 0.2], "pictures": True, "snapshot_fields": ["u", "p"]})
+    sim = model.run(backend="skfem", out=tmp_path)
+    (output,) = [o for o in sim.outputs if o.name == "pictures"]
+    assert list(output.snapshots["u"]) == ["|u|, t = 0.1", "|u|, t = 0.2"]
+    assert list(output.snapshots["p"]) == ["p, t = 0.1", "p, t = 0.2"]
+    assert {path.name for path in tmp_path.glob("u_*.png")} == {"u_t0000.10.png", "u_t0000.20.png", "u_snapshots.png"}
+
 def test_the_summary_says_why_the_run_stopped_before_the_last_pictures_are_drawn(tmp_path, monkeypatch):
     """mpirun gives its ranks one second between the SIGTERM it forwards from a Ctrl-C and SIGKILL: the final
     grids, drawn first, took most of it, and a small run on two ranks stopped that way kept "running"."""
