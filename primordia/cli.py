@@ -117,7 +117,7 @@ def command_run(args) -> int:
         if not str(args.out if args.out is not None else out).strip():
             raise ConfigError("--out needs a directory name")
     if args.dry_run:
-        return _report_dry_run(model, out)
+        return _report_dry_run(model, out, restart=args.restart is not None)
     _warn_about_a_slow_blas()
     sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
                     restart=args.restart is not None)
@@ -175,7 +175,7 @@ def _checkpointed_config(out: Path) -> dict:
     return config
 
 
-def _report_dry_run(model, out: Path) -> int:
+def _report_dry_run(model, out: Path, restart: bool) -> int:
     from primordia.core.outputs import directory_problem, existing_run
     from primordia.coupling.orchestrator import Simulation
     from primordia.coupling.solver_options import check_table_values
@@ -183,7 +183,8 @@ def _report_dry_run(model, out: Path) -> int:
     problem = directory_problem(out)
     if problem is not None:
         raise ConfigError(problem)
-    Simulation(model, backend=model.backend, out_dir=out).check_choices()  # the backend and splitting scheme
+    existing = "restart" if restart else "reuse"  # a restart: and what its checkpoint lets it change
+    Simulation(model, backend=model.backend, out_dir=out, existing=existing).check_choices()  # backend, scheme
     check_table_values(model.solver)
     found = existing_run(out)
     if is_root_process():

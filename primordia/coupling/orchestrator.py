@@ -37,7 +37,7 @@ import ufl
 from primordia.core import checkpoint as checkpoint_file
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
-from primordia.core.outputs import time_label
+from primordia.core.outputs import existing_run, time_label
 from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
 from primordia.core.reductions import largest, largest_in_place, on_every_rank
 from primordia.core.signals import INTERRUPTS, signal_name
@@ -139,9 +139,16 @@ class Simulation:
     def check_choices(self) -> None:
         """Ask the choosers for this run's backend and splitting scheme, as :meth:`setup` would, and drop
         the answers: an unknown or unavailable backend or scheme is one ConfigError/PluginError now
-        (``primordia run --dry-run``), with nothing discretised, allocated or written."""
+        (``primordia run --dry-run``), with nothing discretised, allocated or written.  A restart
+        (``existing="restart"``) is checked against its checkpoint too: what it may not change, an output
+        time it has passed."""
         self._choose_backend()
         self._choose_splitting()
+        if self.existing == "restart":
+            missing = self.is_root and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file()
+            if self.comm.bcast(missing, root=0):  # in the words of setup(), on every rank
+                raise ConfigError(self._no_checkpoint(existing_run(self.out_dir) if self.is_root else None))
+            self._read_checkpoint()
         self.backend = self.scheme = None
 
     def _choose_backend(self):
@@ -174,10 +181,7 @@ class Simulation:
                            f"--restart {self.out_dir} to continue it (from Python: Model.run(..., overwrite=True) "
                            f"or restart=True)")
             elif self.existing == "restart" and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file():
-                problem = (f"{self.out_dir} holds no checkpoint to restart from"
-                           + (f" ({found})" if found else "")
-                           + "; checkpoints are written every checkpoint.every_minutes "
-                             f"({self.model.checkpoint['every_minutes']:g}) and when a run stops")
+                problem = self._no_checkpoint(found)
             elif found and self.existing == "overwrite":
                 clear_run(self.out_dir)
             if problem is None and self.existing == "restart" and (self.out_dir / ANALYSIS_FILE).is_file():
@@ -191,6 +195,11 @@ class Simulation:
         problem = self.comm.bcast(problem, root=0)
         if problem is not None:
             raise ConfigError(problem)
+
+    def _no_checkpoint(self, found: str | None) -> str:
+        return (f"{self.out_dir} holds no checkpoint to restart from" + (f" ({found})" if found else "")
+                + f"; checkpoints are written every checkpoint.every_minutes "
+                  f"({self.model.checkpoint['every_minutes']:g}) and when a run stops")
 
     def _discretise(self):
         self.mesh_data = self.model.mesh_data

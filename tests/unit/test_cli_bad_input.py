@@ -440,6 +440,28 @@ def test_a_dry_run_refuses_what_the_run_would_refuse(capsys, small_config, tmp_p
     assert not (tmp_path / "out").exists()
 
 
+
+@pytest.mark.parametrize("arguments, fragments", [
+    (["--set", "parameters.D_m=0.05"], ["parameters.D_m differs from the checkpointed run's"]),
+    (["--set", "mesh.cells=[4,4]"], ["mesh.cells differs from the checkpointed run's"]),
+    (["--set", "output.times=[0.4]"], ["output time 0.4 is before its t = 1", "did not write the fields there"]),
+    (["--backend", "skfem"], ["it was written on backend fenicsx, this run is on skfem"]),
+], ids=["parameter", "mesh", "output-time-passed", "backend"])
+def test_a_dry_run_of_a_restart_refuses_what_the_restart_would_refuse(capsys, small_config, tmp_path, arguments,
+                                                                       fragments):
+    """``--restart OUT --dry-run`` said "the input is valid" where the restart refuses at once: the checkpoint
+    decides what a restart may change."""
+    out = tmp_path / "out"
+    assert in_process(capsys, "run", small_config(), "--out", out, "--no-progress", "--backend", "fenicsx")[0] == 0
+    assert_one_line(*in_process(capsys, "run", "--restart", out, "--dry-run", *arguments), *fragments)
+    status, stderr = in_process(capsys, "run", "--restart", out, "--dry-run", "--set", "time.t_final=1.4")
+    assert status == 0 and not stderr
+
+
+def test_a_dry_run_of_a_restart_without_a_checkpoint_says_so_as_the_restart_does(capsys, small_config, tmp_path):
+    assert_one_line(*in_process(capsys, "run", small_config(), "--restart", tmp_path, "--dry-run"),
+                    f"{tmp_path} holds no checkpoint to restart from; checkpoints are written every")
+
 def test_a_negative_seed_through_the_real_command(primordia_cli, small_config, tmp_path):
     result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
                            "--set", "physics.chemotaxis.seed=-1")
