@@ -246,6 +246,27 @@ class Model:
                     raise ConfigError(f"output.{key} names '{name}', which is not a field of this model "
                                       f"({', '.join(fields)})")
 
+    def check_affordable(self) -> None:
+        """The mesh against the memory the model's modules need per cell (``Physics.min_bytes_per_cell``), where
+        that is more than the mesh's own floor: over the machines of an MPI run when Open MPI says how many
+        ranks share one (``OMPI_COMM_WORLD_LOCAL_SIZE``), else not checked on several ranks (they may span
+        machines this one cannot see).  A run's set-up and ``--dry-run`` ask it; a linear analysis of the
+        model, which builds no system on the mesh, does not."""
+        from primordia.core.errors import mpi_world
+        from primordia.core.meshes import MIN_BYTES_PER_CELL, check_affordable
+
+        tdim = self.mesh_data.gdim
+        per_cell, name = max(((module.min_bytes_per_cell.get(tdim, 0), module.name)
+                              for module in self.physics_objects), default=(0, ""))
+        if per_cell <= MIN_BYTES_PER_CELL[tdim]:
+            return
+        size = mpi_world()[1]
+        local = os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE", "")
+        if size > 1 and not local.isdigit():
+            return
+        nodes = max(1, size // int(local)) if size > 1 else 1
+        check_affordable(self.mesh_data.num_cells, tdim, per_cell, f"physics {name}", nodes)
+
     def _mesh(self) -> MeshData:
         from primordia.core.meshes import mesh_from_config
 

@@ -153,14 +153,20 @@ def _check_coordinate_range(points: np.ndarray, what: str) -> None:
                         f"its cell volumes would vanish; rescale the domain")
 
 
-def check_affordable(n_cells: int, tdim: int) -> None:
-    """MeshError when a run on ``n_cells`` cells would need more memory than this machine has available."""
-    needed = n_cells * MIN_BYTES_PER_CELL[tdim]
-    available = available_memory()
+def check_affordable(n_cells: int, tdim: int, per_cell: int | None = None, needing: str = "",
+                     nodes: int = 1) -> None:
+    """MeshError when a run on ``n_cells`` cells would need more memory than this machine has available.
+
+    ``per_cell``: bytes a cell needs at least (default :data:`MIN_BYTES_PER_CELL`, whatever the model), for
+    ``needing`` (e.g. "physics poroelastic_growth"); ``nodes``: machines of this one's memory the run spans.
+    """
+    per_cell = MIN_BYTES_PER_CELL[tdim] if per_cell is None else per_cell
+    needed, available = n_cells * per_cell, nodes * available_memory()
     if needed > available:
-        raise MeshError(f"a mesh of {n_cells:,} cells needs at least {_bytes_text(needed)} of memory "
-                        f"({MIN_BYTES_PER_CELL[tdim] // 1000} kB per cell), more than the {_bytes_text(available)} "
-                        f"available: use fewer cells")
+        where = f"available on its {nodes} nodes" if nodes > 1 else "available"
+        raise MeshError(f"a mesh of {n_cells:,} cells needs at least {_bytes_text(needed)} of memory"
+                        f"{f' for {needing}' if needing else ''} ({per_cell // 1000} kB per cell), more than the "
+                        f"{_bytes_text(available)} {where}: use fewer cells" + (" or more nodes" if needing else ""))
 
 
 def available_memory() -> int:

@@ -117,6 +117,7 @@ class Simulation:
         if self._set_up:  # again: claiming out_dir again cleared the finished run's fields and checkpoint
             raise ConfigError(f"this Simulation is set up already ({self.status}, t = {self.time:g}): a Simulation "
                               f"runs once; make a new one, or continue its run with Model.run(out=..., restart=True)")
+        self.model.check_affordable()  # before the directory is claimed: nothing written for a run that cannot fit
         self._choose_backend()
         self._claim_directory()
         self._choose_splitting()
@@ -142,6 +143,7 @@ class Simulation:
         (``primordia run --dry-run``), with nothing discretised, allocated or written.  A restart
         (``existing="restart"``) is checked against its checkpoint too: what it may not change, an output
         time it has passed."""
+        self.model.check_affordable()
         self._choose_backend()
         self._choose_splitting()
         if self.existing == "restart":

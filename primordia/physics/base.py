@@ -171,6 +171,10 @@ class Physics(Configured, ABC):
     needs_growth_law: ClassVar[bool] = False
     #: Whether the module states its balance laws at finite strain on a reference configuration.
     finite_strain: ClassVar[bool] = False
+    #: Bytes a run of this module needs per cell at least, by dimension, where that is more than the mesh's own
+    #: floor (:data:`primordia.core.meshes.MIN_BYTES_PER_CELL`): a model whose mesh needs more memory than the
+    #: machine has is refused when it is composed (``--dry-run`` too), not killed by the kernel in its set-up.
+    min_bytes_per_cell: ClassVar[Mapping[int, int]] = {}
 
     def __init__(self, params: Mapping[str, float], kinetics=None, growth_law=None, **given):
         self.params = params

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import meshio
 import numpy as np
 import pytest
@@ -383,6 +385,34 @@ def test_a_mesh_file_too_large_for_the_memory_is_refused_as_a_generated_mesh_is(
     with pytest.raises(MeshError, match="a mesh of 2 cells needs at least") as error:
         read_mesh(path)
     assert "\n" not in str(error.value)
+
+
+def test_a_model_needing_more_memory_per_cell_than_the_mesh_is_refused_before_its_run(tmp_path, monkeypatch):
+    """3D growth needs 125-128 kB per tetrahedron; 80 x 80 x 8 boxes passed the mesh's 4 kB floor and --dry-run
+    on a machine with 23 GB, where the run would need about 38 GB.  Checked where a run starts (and by a dry
+    run), over the machines Open MPI says the ranks span; not by a linear analysis of the model."""
+    import primordia.core.meshes as meshes
+    from primordia.coupling.orchestrator import Simulation
+    from primordia.model import Model
+
+    model = Model.from_file(Path(__file__).resolve().parents[2] / "examples" / "ex04_small.toml", ["mesh.cells=[4,4,2]"])  # 192 tetrahedra
+    monkeypatch.setattr(meshes, "available_memory", lambda: 10_000_000)  # 10 MB: 52 kB a tetrahedron
+    message = ("a mesh of 192 cells needs at least 18.3 MB of memory for physics poroelastic_growth (100 kB per "
+               "cell), more than the 9.54 MB available: use fewer cells or more nodes")
+    with pytest.raises(MeshError) as error:
+        Simulation(model, out_dir=tmp_path / "out").check_choices()
+    assert str(error.value) == message
+    with pytest.raises(MeshError):
+        Simulation(model, out_dir=tmp_path / "out").setup()
+    assert not (tmp_path / "out").exists()  # nothing written
+    monkeypatch.setattr("primordia.core.errors.mpi_world", lambda: (0, 4))
+    model.check_affordable()  # 4 ranks, and no word on how many share a machine: not checked
+    monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "2")
+    monkeypatch.setattr(meshes, "available_memory", lambda: 9_000_000)  # 2 machines of 9 MB each: 18 MB
+    with pytest.raises(MeshError, match="more than the 17.2 MB available on its 2 nodes"):
+        model.check_affordable()
+    monkeypatch.setattr(meshes, "available_memory", lambda: 10_000_000)
+    model.check_affordable()  # 2 machines of 10 MB each
 
 
 #: A mesh and its facet tags as dolfinx's XDMFFile writes them (write_mesh, then write_meshtags): two grids,
