@@ -331,7 +331,7 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
 
 def check_runs(config: str, overrides: Sequence[str], directory: str) -> str:
     """Why every run of the sweep would fail, or "": ``primordia run --dry-run`` with the fixed overrides, in a
-    worker (whose backends are the runs').
+    worker of an external cluster (whose backends are the runs'), or in the sweep's process for a local one.
 
     The sweep checks the configuration itself, but not the backend and the splitting scheme a plugin chooses
     for a run, nor the solver options: ``--set model.backend=nope`` ran and failed every run, and the sweep
@@ -713,10 +713,15 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
     if todo:
         # the bar once the cluster is there and every run could start: not before a one-line error about
         # its scheduler or the runs
+        arguments = (str(sweep.config.resolve()), list(sweep.fixed), str((sweep.out / "runs").resolve()))
+        # a local cluster's workers are this machine's: checked here, before the cluster starts (refused right
+        # after its start, its closing raced the workers' heartbeats, which dask logged as errors on stderr)
+        problem = check_runs(*arguments) if not scheduler else ""
+        if problem:
+            raise ConfigError(f"every run of the sweep would fail: {problem}")
         with dask_client(scheduler, workers) as client:
-            problem = client.submit(check_runs, str(sweep.config.resolve()), list(sweep.fixed),
-                                    str((sweep.out / "runs").resolve()), pure=False).result()
-            if problem:
+            problem = client.submit(check_runs, *arguments, pure=False).result() if scheduler else ""
+            if problem:  # an external cluster's workers: their own backends and plugins
                 raise ConfigError(f"every run of the sweep would fail: {problem}")
             with _progress_bar(len(points), len(points) - len(todo), progress) as bar:
                 token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
