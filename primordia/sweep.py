@@ -493,13 +493,14 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, timeou
             yield client
         return
     # the scheduler's HTTP routes on any free loopback port (None would mean port 8787, and a warning if taken)
-    # preload: Ctrl-C is the sweep's to handle (see dask_setup)
+    # preload: Ctrl-C is the sweep's to handle (see dask_setup); logs below CRITICAL silenced: a worker's heartbeat
+    # racing the cluster's closing (a Ctrl-C, a refusal) was logged as an ERROR with its traceback on stderr
     with contextlib.ExitStack() as stack:
         started = _workers_starting(stack)
         try:
             cluster = stack.enter_context(LocalCluster(
                 n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, preload=[__name__]))
+                dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL, preload=[__name__]))
             client = stack.enter_context(Client(cluster))
         except Exception:
             if started.came:  # a worker the Ctrl-C reached before it could leave it to the sweep: "Nanny failed"
