@@ -330,7 +330,7 @@ class Model:
             resolved["growth_law"] = {"name": self.growth_law_object.name, **self.growth_law_object.settings}
         if self.solver:
             resolved["solver"] = copy.deepcopy(self.solver)
-        return _as_toml_reads_it(resolved)
+        return config_.as_toml_reads_it(resolved)
 
     def run(self, backend: str | None = None, out: str | Path = "out/run", progress: bool = False, comm=None,
             overwrite: bool = False, restart: bool = False):
@@ -440,17 +440,6 @@ def _unique_fields(modules, kinetics) -> list[str]:
                 raise ConfigError(f"field '{spec.name}' is provided by both {owners[spec.name]} and {owner}")
             owners[spec.name] = owner
     return list(owners)
-
-
-def _as_toml_reads_it(value):
-    """The resolved config as its config.toml reads back: TOML has no null, so unset options (None) are left out,
-    and it has no tuple or numpy scalar, so those are lists and Python's numbers.  A tuple inside an option (a
-    boundary condition's value) made a restart of the same model from Python refused as another model."""
-    if isinstance(value, dict):
-        return {k: _as_toml_reads_it(v) for k, v in value.items() if v is not None}
-    if isinstance(value, (list, tuple)):
-        return [_as_toml_reads_it(v) for v in value]
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def _differences(a, b, prefix: str = "") -> list[str]:

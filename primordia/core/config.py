@@ -224,15 +224,19 @@ def merge_options(where: str, defaults, given) -> dict:
         expected = _expected_kind(defaults[key])
         if expected is not None and not _is_kind(value, expected):
             raise ConfigError(f"{where}: option '{key}' must be {expected}, got {value!r}")
-    return {**defaults, **{key: _as_toml_reads_it(value) for key, value in given.items()}}
+    return {**defaults, **{key: as_toml_reads_it(value) for key, value in given.items()}}
 
 
-def _as_toml_reads_it(value):
-    """numpy's scalars as Python's (np.int64(3) was "must be an integer, got 3") and a tuple as a list (a tuple
-    was "must be a list"), as the option comes back from the run's config.toml."""
-    if isinstance(value, np.generic):
-        return value.item()
-    return list(value) if isinstance(value, tuple) else value
+def as_toml_reads_it(value):
+    """``value`` as a config.toml holding it reads back: TOML has no null, so unset options (None) inside a table are
+    left out, and it has no tuple or numpy scalar, so those are lists and Python's numbers.  An option given as
+    np.int64(3) was "must be an integer, got 3", and a tuple inside an option (a boundary condition's value) made
+    a restart of the same model from Python refused as another model."""
+    if isinstance(value, dict):
+        return {k: as_toml_reads_it(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        return [as_toml_reads_it(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _expected_kind(default) -> str | None:
