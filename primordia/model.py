@@ -212,7 +212,7 @@ class Model:
                 raise ConfigError(f"output time {time_label(t)} is not a multiple of dt = {time_label(self.dt)} "
                                   f"after t_start")
         # one time per step (a time given twice, or as 0.3 and 0.1 + 0.2, is one output and one entry in config.toml)
-        on_steps = {int(round((float(t) - self.t_start) / self.dt)): float(t) for t in reversed(times)}
+        on_steps = {self.step_of(float(t)): float(t) for t in reversed(times)}
         output["times"] = sorted(on_steps.values())
         number(output["series_every"], "output.series_every", integer=True, at_least=1, hint="steps")
         return output
@@ -285,7 +285,11 @@ class Model:
     # -- what a run needs ----------------------------------------------------------------------
     @property
     def num_steps(self) -> int:
-        return int(round((self.t_final - self.t_start) / self.dt))
+        return self.step_of(self.t_final)
+
+    def step_of(self, t: float) -> int:
+        """The step of the grid t_start + k dt nearest to time ``t`` (an output time's, t_final's, a restart's)."""
+        return int(round((t - self.t_start) / self.dt))
 
     def step_time(self, step: int) -> float:
         """The time the run reaches at the end of nominal step ``step``: t_start + step dt, except that the
@@ -294,7 +298,7 @@ class Model:
         ``sel(time=0.3)`` did not find it."""
         key = (tuple(self.output["times"]), self.t_final, self.t_start, self.dt)
         if getattr(self, "_step_times", (None,))[0] != key:  # found once per set of times, not at every step
-            self._step_times = (key, {int(round((t - self.t_start) / self.dt)): t
+            self._step_times = (key, {self.step_of(t): t
                                       for t in (*self.output["times"], self.t_final)})
         return self._step_times[1].get(step, self.t_start + step * self.dt)
 

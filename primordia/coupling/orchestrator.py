@@ -435,21 +435,18 @@ class Simulation:
         if tree["run"]["step"] + inside_a_step > self.model.num_steps:
             return f"{where}: it is at t = {tree['run']['time']:g}, past time.t_final = {self.model.t_final:g}"
         # an output time the run has passed without writing it (a checkpoint from before 2026-12-05 holds none)
-        written = {self._step_of(t) for t in tree["run"].get("snapshot_times", self.model.output["times"])}
+        written = {self.model.step_of(t) for t in tree["run"].get("snapshot_times", self.model.output["times"])}
         behind = [t for t in self.model.output["times"]
-                  if self._step_of(t) not in written and self._step_of(t) <= tree["run"]["step"]]
-        if behind and (self._step_of(behind[0]) < tree["run"]["step"] or inside_a_step):
+                  if self.model.step_of(t) not in written and self.model.step_of(t) <= tree["run"]["step"]]
+        if behind and (self.model.step_of(behind[0]) < tree["run"]["step"] or inside_a_step):
             return (f"{where}: output time {time_label(behind[0])} is before its t = {tree['run']['time']:g}, and "
                     f"the run did not write the fields there (a restart writes later times, and the time it is at)")
         return None
 
-    def _step_of(self, t: float) -> int:
-        return int(round((t - self.model.t_start) / self.dt))
-
     def _missed_snapshot(self) -> bool:
         """A restart at an output time the run did not write (checked by :meth:`_incompatibility`)."""
-        return (self.step_done == 0.0 and self.step_index not in {self._step_of(t) for t in self.snapshot_times}
-                and self.step_index in {self._step_of(t) for t in self.model.output["times"]})
+        return (self.step_done == 0.0 and self.step_index not in {self.model.step_of(t) for t in self.snapshot_times}
+                and self.step_index in {self.model.step_of(t) for t in self.model.output["times"]})
 
     def _restore(self, tree: dict) -> None:
         """Put the run back where the checkpoint left it (every rank takes its own part of each field)."""
@@ -487,7 +484,7 @@ class Simulation:
         self.coupling_iterations = {k: [int(i) for i in v] for k, v in run["coupling_iterations"].items()}
         self.rejections = list(run["rejections"])
         self.snapshot_times = [float(t) for t in run.get("snapshot_times", self.model.output["times"])
-                               if self._step_of(t) <= self.step_index]
+                               if self.model.step_of(t) <= self.step_index]
         self.restarts = int(run["restarts"]) + 1
         self._wall_before = float(run["wall_time_s"])
         self._solver_dt = self.last_dt
@@ -565,7 +562,7 @@ class Simulation:
     def run(self, progress: bool = False) -> "Simulation":
         self._check_steppable("run")
         bar = _progress_bar(self, progress)
-        snapshot_steps = {self._step_of(t) for t in self.model.output["times"]}
+        snapshot_steps = {self.model.step_of(t) for t in self.model.output["times"]}
         try:
             with INTERRUPTS.installed(), INTERRUPTS.mode_of("deferred"):
                 while self.step_index < self.model.num_steps:
