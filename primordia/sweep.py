@@ -337,12 +337,23 @@ def check_runs(config: str, overrides: Sequence[str], directory: str) -> str:
     for a run, nor the solver options: ``--set model.backend=nope`` ran and failed every run, and the sweep
     ended with exit status 0.
     """
-    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES) and k != WORKER_STARTING}
+    environment = _run_environment()
     command = [sys.executable, "-m", "primordia.cli", "run", config, "--dry-run", "--out", directory]
     for assignment in overrides:
         command += ["--set", assignment]
     result = subprocess.run(command, capture_output=True, text=True, env=environment)
     return _failure_reason(result.returncode, result.stderr, Path(directory))
+
+
+def _refuse_if_every_run_fails(problem: str) -> None:
+    if problem:
+        raise ConfigError(f"every run of the sweep would fail: {problem}")
+
+
+def _run_environment() -> dict[str, str]:
+    """The environment of a ``primordia run`` the sweep starts: this process's without the MPI launcher's variables
+    (the run is serial, not a rank of a job) nor the mark of a worker starting (the run takes a Ctrl-C)."""
+    return {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES) and k != WORKER_STARTING}
 
 
 #: The runs this (worker) process has going, by directory: what :func:`stop_runs` asks to stop.
@@ -365,7 +376,7 @@ def _run_point(command: list[str], directory: Path, timeout: float | None,
     between the point's check at its start and the run's registration was neither refused nor asked to stop,
     and the interrupted sweep waited for it to end (up to :data:`STOP_GRACE`), whatever it took.
     """
-    environment = {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES) and k != WORKER_STARTING}
+    environment = _run_environment()
     command = _dying_with_its_parent(command)
     with _RUNNING_LOCK:
         if sweep is not None and sweep in _STOPPED:
@@ -717,13 +728,11 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
         arguments = (str(sweep.config.resolve()), list(sweep.fixed), str((sweep.out / "runs").resolve()))
         # a local cluster's workers are this machine's: checked here, before the cluster starts (refused right
         # after its start, its closing raced the workers' heartbeats, which dask logged as errors on stderr)
-        problem = check_runs(*arguments) if not scheduler else ""
-        if problem:
-            raise ConfigError(f"every run of the sweep would fail: {problem}")
+        if not scheduler:
+            _refuse_if_every_run_fails(check_runs(*arguments))
         with dask_client(scheduler, workers) as client:
-            problem = client.submit(check_runs, *arguments, pure=False).result() if scheduler else ""
-            if problem:  # an external cluster's workers: their own backends and plugins
-                raise ConfigError(f"every run of the sweep would fail: {problem}")
+            if scheduler:  # an external cluster's workers: their own backends and plugins
+                _refuse_if_every_run_fails(client.submit(check_runs, *arguments, pure=False).result())
             with _progress_bar(len(points), len(points) - len(todo), progress) as bar:
                 token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
                 futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),
