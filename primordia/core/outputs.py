@@ -287,8 +287,11 @@ class Pictures(Output):
         self.snapshot_displacements: dict[str, dict[str, object]] = {}
 
     @staticmethod
-    def _scalar(values):
-        return np.linalg.norm(values, axis=1) if values.ndim == 2 else values
+    def _drawn(name: str, values) -> tuple[str, np.ndarray]:
+        """(its label, what is drawn) of a field's vertex values: a vector as its magnitude, |u|."""
+        if values.ndim == 2:
+            return f"|{name}|", np.linalg.norm(values, axis=1)
+        return name, values
 
     def snapshot(self, run):
         if not run.model.output["pictures"]:
@@ -299,9 +302,8 @@ class Pictures(Output):
             displacement, scale = values.get(run.displacement_field), run.model.output["displacement_scale"]
             stamp = picture_time(run.time, run.model.output["times"])
             for name in run.model.output["snapshot_fields"]:
-                shown = f"|{name}|" if values[name].ndim == 2 else name  # a vector is drawn as its magnitude
+                shown, field = self._drawn(name, values[name])
                 label = f"{shown}, t = {time_label(run.time)}"
-                field = self._scalar(values[name])
                 self.snapshots.setdefault(name, {})[label] = field
                 if displacement is not None:
                     self.snapshot_displacements.setdefault(name, {})[label] = displacement
@@ -328,7 +330,7 @@ class Pictures(Output):
                 yield len(frames), plot_fields_grid, run.out_dir / f"{name}_snapshots.png", dict(
                     fields=frames, title=f"{name} at the snapshot times",
                     displacements=self.snapshot_displacements.get(name), displacement_scale=scale)
-            fields = {(f"|{name}|" if v.ndim == 2 else name): self._scalar(v) for name, v in values.items()}
+            fields = dict(self._drawn(name, v) for name, v in values.items())
             displacement = values.get(run.displacement_field)
             yield len(fields), plot_fields_grid, run.out_dir / "final_fields.png", dict(
                 fields=fields, title=f"all fields at t = {time_label(run.time)} ({status})", shared_colour_scale=False,
