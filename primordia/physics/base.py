@@ -172,8 +172,9 @@ class Physics(Configured, ABC):
     #: Whether the module states its balance laws at finite strain on a reference configuration.
     finite_strain: ClassVar[bool] = False
     #: Bytes a run of this module needs per cell at least, by dimension, where that is more than the mesh's own
-    #: floor (:data:`primordia.core.meshes.MIN_BYTES_PER_CELL`): a model whose mesh needs more memory than the
-    #: machine has is refused when it is composed (``--dry-run`` too), not killed by the kernel in its set-up.
+    #: floor (:data:`primordia.core.meshes.MIN_BYTES_PER_CELL`): a run whose mesh needs more memory than the
+    #: machine has is refused at its set-up and by ``--dry-run`` (:meth:`primordia.model.Model.check_affordable`),
+    #: not killed by the kernel part-way through allocating it.
     min_bytes_per_cell: ClassVar[Mapping[int, int]] = {}
 
     def __init__(self, params: Mapping[str, float], kinetics=None, growth_law=None, **given):
