@@ -6,7 +6,8 @@ same PETSc solvers), written directly against dolfinx without any framework
 layer.  Used by bench_examples.py; run alone:  python plain_dolfinx_ex01a.py 171 50
 """
 
-import sys
+import argparse
+import logging
 import time
 
 import numpy as np
@@ -128,7 +129,13 @@ def main(n: int, steps: int, dt: float = 0.2) -> float:
 
 
 if __name__ == "__main__":
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 171
-    steps = int(sys.argv[2]) if len(sys.argv) > 2 else 50
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("cells", nargs="?", type=int, default=171, help="squares per side (default 171, the seed's)")
+    parser.add_argument("steps", nargs="?", type=int, default=50, help="time steps to time (default 50)")
+    arguments = parser.parse_args()
+    logging.disable(logging.INFO)  # not the JIT build lines setuptools logs at the first run of a size
+    n, steps = arguments.cells, arguments.steps
+    if n < 1 or steps < 1:
+        parser.error("cells and steps must be positive")
     ms, m_min, m_max = main(n, steps)
     print(f"plain dolfinx: {n}x{n}: {ms:.2f} ms/step (m in [{m_min:.4f}, {m_max:.4f}])")

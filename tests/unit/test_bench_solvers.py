@@ -53,3 +53,28 @@ def test_a_repeat_that_failed_at_one_size_is_left_out_of_the_pairs(bench):
     _, step = bench.growth_lines(by_size)
     assert "repeats" not in step  # one pair left: no range to give
     assert step.startswith("43 -> 86: 1.1 -> 2.4 ms/step")
+
+
+SCRIPTS = sorted(p.name for p in BENCHMARKS.glob("*.py") if p.name != "machine.py")
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_every_benchmark_script_says_how_to_run_it(script):
+    """``--help`` of every script in benchmarks/ (which the suite does not otherwise run) prints its usage:
+    the plain dolfinx script read its arguments by position and took "--help" for a mesh size (a traceback)."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(BENCHMARKS / script), "--help"], capture_output=True, text=True,
+                          cwd=BENCHMARKS, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"usage: {script}"), done.stdout
+
+
+def test_the_plain_dolfinx_script_refuses_a_mesh_of_no_cells_in_one_line():
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "plain_dolfinx_ex01a.py"), "0", "5"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1] == "plain_dolfinx_ex01a.py: error: cells and steps must be positive"
+    assert "Traceback" not in done.stderr
