@@ -349,7 +349,7 @@ class Model:
         if restart and overwrite:
             raise ConfigError("restart=True continues the run in out, overwrite=True replaces it: choose one")
         existing = "restart" if restart else "overwrite" if overwrite else "refuse"
-        out = _path(out, "out")
+        out = out if isinstance(out, str) else _path(out, "out")  # a str as given: Simulation refuses "" (not ".")
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
         sim.setup()
         sim.run(progress=progress)

@@ -71,6 +71,8 @@ class Simulation:
                  existing: str = "reuse"):
         self.model = model
         self.backend_name = backend
+        if isinstance(out_dir, str) and not out_dir.strip():  # Path("") is the current directory, files and all
+            raise ConfigError("a run's out needs a directory name (\".\" for the current directory)")
         self.out_dir = Path(out_dir)
         self.comm = comm
         self.existing = existing

@@ -385,3 +385,17 @@ def test_a_model_with_tuples_inside_its_options_is_the_model_its_config_toml_des
     model = small(physics=["chemotaxis", "poroelasticity"], physics_options={"poroelasticity": {"boundary": held}})
     written = write_toml(tmp_path / "config.toml", model.resolved_config())
     assert model.differences(tomllib.loads(written.read_text()), allowed=()) == []
+
+
+def test_a_run_into_an_empty_out_is_refused(tmp_path, monkeypatch):
+    """``Model.run(out="")`` (an unset variable) wrote the whole run into the current folder, among its files,
+    where ``--out ""`` and a sweep's ``out=""`` are refused."""
+    from primordia.coupling.orchestrator import Simulation
+
+    monkeypatch.chdir(tmp_path)
+    for out in ("", "  "):
+        with pytest.raises(ConfigError, match=r"^a run's out needs a directory name \(\"\.\" for the current"):
+            small().run(out=out)
+        with pytest.raises(ConfigError, match="a run's out needs a directory name"):
+            Simulation(small(), out_dir=out)
+    assert list(tmp_path.iterdir()) == []
