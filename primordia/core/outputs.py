@@ -489,8 +489,10 @@ def declared_options(outputs: Iterable[type[Output]], reserved: Iterable[str] = 
 RUN_FILES = ("summary.json", "config.toml", "series.nc", "fields.xdmf", CHECKPOINT_FILE)
 #: What ``primordia analyse`` writes into a run's directory (:mod:`primordia.analysis.patterns.run`).
 ANALYSIS_FILE = "metrics.nc"
-#: What a run (and ``primordia analyse`` of it) writes besides: removed with it by :func:`clear_run`.
-RUN_LEFTOVERS = ("fields_h5", "*.png", ANALYSIS_FILE, ".*.tmp-*")
+#: What a run (and ``primordia analyse`` of it) writes besides: removed with it by :func:`clear_run`.  Its
+#: pictures by their names (:class:`Pictures`, ``metrics_<species>.png``): ``*.png`` also took the user's own.
+RUN_LEFTOVERS = ("fields_h5", "*_t[0-9]*.png", "*_t-[0-9]*.png", "*_snapshots.png", "final_fields.png",
+                 "metrics_*.png", ANALYSIS_FILE, ".*.tmp-*")
 
 
 def existing_run(directory: str | Path) -> str | None:

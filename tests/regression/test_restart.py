@@ -228,6 +228,10 @@ def test_a_folder_holding_a_run_is_refused_unless_overwritten_or_restarted(primo
     assert primordia_cli("run", small_config(), "--out", out, "--no-progress").returncode == 0
     (out / "m_t0001.00.png").write_bytes(b"an old picture")
     (out / "notes.txt").write_text("the user's own file")
+    for own in ("figure_1.png", "my_test.png", "m.png"):  # were removed with the run's pictures
+        (out / own).write_bytes(b"the user's own picture")
+    for written in ("final_fields.png", "m_snapshots.png", "metrics_m.png", "m_t-000.50.png", "u_t10000.0.png"):
+        (out / written).write_bytes(b"a picture runs and primordia analyse write")
 
     again = primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set", "time.t_final=0.6")
     assert again.returncode == 2 and len(again.stderr.splitlines()) == 1, again.stderr
@@ -238,6 +242,7 @@ def test_a_folder_holding_a_run_is_refused_unless_overwritten_or_restarted(primo
     assert replaced.returncode == 0, replaced.stderr
     assert rc.summary(out)["steps"] == 3
     assert not (out / "m_t0001.00.png").exists() and (out / "notes.txt").read_text() == "the user's own file"
+    assert sorted(p.name for p in out.glob("*.png")) == ["figure_1.png", "m.png", "my_test.png"]
 
     longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.0")
     assert longer.returncode == 0, longer.stderr
