@@ -51,6 +51,16 @@ def plot_field(
     )
 
 
+#: Panels in a row of :func:`plot_fields_grid` unless its caller says otherwise (the seed's snapshot rows are four).
+MAX_COLUMNS = 4
+
+
+def default_columns(panels: int) -> int:
+    """Columns for ``panels`` panels: one row up to :data:`MAX_COLUMNS`, then rows as even as they come."""
+    rows = -(-panels // MAX_COLUMNS)
+    return -(-panels // rows)  # 5: 3 + 2, 7: 4 + 3, 9: 3 + 3 + 3
+
+
 def plot_fields_grid(
     path: str | Path,
     mesh: MeshData,
@@ -74,7 +84,9 @@ def plot_fields_grid(
     displacements: those panels are drawn on the deformed configuration, as in
     :func:`plot_field`, with the outline of the undeformed domain in grey and
     their x label saying "displacement x<scale>".  ``ncols`` defaults to all
-    panels in one row.  A 3D mesh gets two rows of panels: its top face seen
+    panels in one row up to four, and to rows of at most four, as even as they come,
+    beyond (seven fields: four and three; a row of seven panels was 3,234 x 462 pixels,
+    each panel too small to read in a page).  A 3D mesh gets two rows of panels: its top face seen
     from above, and the vertical slice through the middle of its y extent
     (the seed's Figure 5.5 shows both), cut through the cells whatever the mesh.
     """
@@ -92,7 +104,7 @@ def plot_fields_grid(
                                                displacement_scale))
     if shared_colour_scale:
         vmin, vmax = _colour_range([v for _, (_, v) in panels.values()], vmin, vmax)
-    ncols = len(fields) if ncols is None else max(1, min(int(ncols), len(fields)))
+    ncols = default_columns(len(fields)) if ncols is None else max(1, min(int(ncols), len(fields)))
     rows_per_view = -(-len(fields) // ncols)
     nrows = rows_per_view * len(views)
     # each view's rows as tall as its drawn extent needs (a slice of a thin slab is a thin strip)

@@ -8,7 +8,7 @@ import pytest
 
 from primordia.core.errors import PrimordiaError
 from primordia.core.meshes import box
-from primordia.core.pictures import plot_field, plot_fields_grid
+from primordia.core.pictures import default_columns, plot_field, plot_fields_grid
 from file_writers import bump, leftovers, square  # noqa: F401
 
 
@@ -69,6 +69,19 @@ def test_plot_fields_grid_puts_panels_side_by_side(tmp_path, square):
     assert row.shape[1] > 3 * single.shape[1]
     grid = read_png(plot_fields_grid(tmp_path / "grid.png", square, snapshots, ncols=2, shared_colour_scale=False))
     assert grid.shape[0] > 1.5 * single.shape[0]
+
+
+@pytest.mark.parametrize("count, columns", [(1, 1), (4, 4), (5, 3), (7, 4), (8, 4), (9, 3), (13, 4)])
+def test_many_fields_wrap_into_rows_of_at_most_four(count, columns):
+    assert default_columns(count) == columns
+
+
+def test_all_fields_of_example_2a_are_drawn_in_two_rows(tmp_path, square):
+    """Its seven fields were one row of 3,234 x 462 pixels: each panel too small to read on a page."""
+    fields = {f"field {i}": bump(square, i / 10) for i in range(7)}
+    row = read_png(plot_fields_grid(tmp_path / "row.png", square, fields, ncols=7, shared_colour_scale=False))
+    grid = read_png(plot_fields_grid(tmp_path / "grid.png", square, fields, shared_colour_scale=False))
+    assert grid.shape[1] < 0.65 * row.shape[1] and grid.shape[0] > 1.6 * row.shape[0]
 
 
 @pytest.mark.parametrize(
