@@ -648,18 +648,35 @@ def _check_boundary_facets(cells: np.ndarray, boundaries: Mapping[str, np.ndarra
 def check_mesh(mesh: MeshData, what: str = "the model's MeshData") -> None:
     """The checks of a mesh file (:func:`read_mesh`) and of a mesh built by hand: one MeshError line.
 
-    Finite coordinates of a sensible range, no duplicated vertices, no degenerate or overlapping cells, and named
-    facets that are exterior facets of the cells, each in one boundary.
+    Finite coordinates of a sensible range, no duplicated vertices, no degenerate or overlapping cells, named
+    facets that are exterior facets of the cells, each in one boundary, and every vertex in a cell.
     """
     _check_coordinate_range(mesh.points, what)
     _check_no_coincident_vertices(mesh.points, mesh.cells, what)
     _check_not_degenerate(mesh.points, mesh.cells, what)
     _check_not_overlapping(orient_cells(mesh.points, mesh.cells), what)
     _check_boundary_facets(mesh.cells, mesh.boundaries, what)
+    _check_every_vertex_used(mesh.points, mesh.cells, what)
 
 
 def _facets_text(count: int) -> str:
     return f"{count} facet" if count == 1 else f"{count} facets"
+
+
+def _check_every_vertex_used(points: np.ndarray, cells: np.ndarray, what: str) -> None:
+    """MeshError for a vertex no cell uses (a file's are dropped on reading, by :func:`_drop_unused_points`).
+
+    Built by hand, one ran: the backends gave it the value 0, which the pictures then drew, their colour
+    range stretched from m's 0.73-0.80 down to 0 and their extent out to the stray vertex.
+    """
+    used = np.zeros(len(points), dtype=bool)
+    used[cells.ravel()] = True
+    if not used.all():
+        unused = np.flatnonzero(~used)
+        where = ", ".join(f"{c:g}" for c in points[unused[0]])
+        count = f"{len(unused)} {'vertex' if len(unused) == 1 else 'vertices'}"
+        raise MeshError(f"{what} has {count} that no cell uses (vertex {unused[0]} at ({where})): "
+                        f"leave them out of the points, and renumber the cells and boundaries")
 
 
 def _check_no_coincident_vertices(points: np.ndarray, cells: np.ndarray, what: str) -> None:

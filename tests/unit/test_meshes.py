@@ -694,6 +694,9 @@ def _two_triangles(**changes):
     ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]),
       "cells": np.array([[0, 1, 2], [4, 2, 3]]), "boundaries": {"left": np.array([[3, 4]])}},
      "1 vertex at the coordinates of another (duplicated nodes"),
+    # ran, the stray vertex drawn at 0: pictures of m = 0.73-0.80 coloured from 0, out to the vertex
+    ({"points": np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [10.0, 10.0]])},
+     "has 1 vertex that no cell uses (vertex 4 at (10, 10)): leave them out of the points, and renumber"),
 ])
 def test_a_mesh_built_by_hand_is_checked_as_a_file_is(changes, message):
     """A MeshData given to Model was used unchecked: an interior 'left' gave the backends different answers."""
