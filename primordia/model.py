@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core import config as config_
-from primordia.core.errors import ConfigError, PluginError, plugin_code
+from primordia.core.errors import ConfigError, PluginError, plugin_code, warn
 from primordia.core.mesh_data import MeshData
 from primordia.core.parameters import Parameter, ParameterSet
 from primordia.core.plugins import lookup, registry
@@ -114,6 +114,7 @@ class Model:
         for module in self.physics_objects:  # what only the mesh and the time span show: boundary formulas
             with module_code(module, "check_inputs"):
                 module.check_inputs(self.mesh_data, self.sample_times())
+        self._warn_about_inert_options()
 
     def __repr__(self) -> str:
         """What the model is, in one line: its composition, mesh and time span (not the default object repr)."""
@@ -245,6 +246,25 @@ class Model:
                 if name not in fields:
                     raise ConfigError(f"output.{key} names '{name}', which is not a field of this model "
                                       f"({', '.join(fields)})")
+
+    def _warn_about_inert_options(self) -> None:
+        """One warning per module option this model leaves without effect (``Physics.inert_options``) and that
+        holds another value than its default: physics.chemotaxis.preconditioner = "lu" under solve = "split" was
+        taken without a word.  A warning, not a refusal, as a [coupling] option of another scheme is: a config
+        whose choice was switched with --set (solve = "coupled" to "split") keeps that choice's options.  Only
+        values other than the default are told, since the resolved config.toml a restart reads holds every
+        default: a refusal of the key itself stopped every restart of example 1a."""
+        from primordia.core.json_toml import toml_text
+        from primordia.physics.base import module_code
+
+        for module in self.physics_objects:
+            with module_code(module, "inert_options"):
+                inert = module.inert_options(self.physics_objects, self.mesh_data.gdim, self.solver)
+            defaults = type(module).options
+            for key, why in (inert or {}).items():
+                value = config_.as_toml_reads_it(module.settings.get(key))
+                if key in defaults and value != config_.as_toml_reads_it(defaults[key]):
+                    warn(f"physics.{module.name}.{key} = {toml_text(value)} has no effect: {why}")
 
     def check_affordable(self) -> None:
         """The mesh against the memory the model's modules need per cell (``Physics.min_bytes_per_cell``), where

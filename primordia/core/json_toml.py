@@ -122,6 +122,11 @@ def _toml_value(value, where: tuple[str, ...]) -> str:
     raise PrimordiaError(f"cannot write {'.'.join(where)} = {value!r} to TOML ({type(value).__name__})")
 
 
+def toml_text(value) -> str:
+    """``value`` as a TOML file writes it inline (``"lu"``, ``[1.0, 0.5]``, ``false``), for messages quoting one."""
+    return _inline_table(value, ())
+
+
 def _inline_table(value, where: tuple[str, ...]) -> str:
     if not isinstance(value, Mapping):
         return _toml_value(value, where)

@@ -190,6 +190,14 @@ class Physics(Configured, ABC):
     def check_composition(self, modules: list["Physics"]) -> None:
         """Refuse, in one line (:class:`ConfigError`), a model this module cannot join."""
 
+    def inert_options(self, modules: list["Physics"], gdim: int, solver: Mapping[str, Any]) -> dict[str, str]:
+        """The options of this module that have no effect in this model, each with why (e.g. the coupled solve's
+        ``preconditioner`` under ``solve = "split"``): ``modules``, the model's physics; ``gdim``, the mesh's
+        dimension; ``solver``, the config's ``[solver.*]`` tables.  The model warns, in one line, about one that
+        holds a value other than its default: the user asked for something the run will not do.  A default is
+        not told (the resolved config.toml a restart reads holds every default)."""
+        return {}
+
     def check_scheme(self, scheme, modules: list["Physics"]) -> None:
         """Refuse, in one line (:class:`ConfigError`), a splitting scheme this module's discretisation is
         wrong under (``scheme``: the :class:`~primordia.coupling.splitting.SplittingScheme`, its ``name``

@@ -146,6 +146,25 @@ class Chemotaxis(Physics):
             raise ConfigError(f"{where}.solve = \"coupled\" needs flux_scheme = \"galerkin\" "
                               "(the exponentially fitted flux acts on the species as separate fields)")
 
+    def inert_options(self, modules, gdim, solver) -> dict[str, str]:
+        """What these settings leave unused: the coupled solve's preconditioner when the species are solved one by
+        one, the perturbation's shape options where it has another shape or none, and the conservative
+        accumulation on a tissue whose volume ratio J is 1 (no finite strain: J c - J^n c^n is c - c^n)."""
+        settings, inert = self.settings, {}
+        if settings["solve"] == "split":
+            inert["preconditioner"] = ("it is the coupled solve's (solve = \"coupled\"); under solve = \"split\" "
+                                       "each species' solver is [solver.chemotaxis_SPECIES]")
+        if settings["perturbation"] == 0:
+            for key in ("perturbation_shape", "seed", "wavenumber"):
+                inert[key] = "perturbation = 0"
+        elif settings["perturbation_shape"] == "random":
+            inert["wavenumber"] = "it is the cosine perturbation's (perturbation_shape = \"random\")"
+        else:
+            inert["seed"] = "it seeds the random perturbation (perturbation_shape = \"cosine\")"
+        if not any(module.finite_strain for module in modules):
+            inert["accumulation"] = "the tissue's volume ratio J is 1 without finite strain, so both forms are one"
+        return inert
+
     def check_inputs(self, mesh_data, times) -> None:
         """Also the kinetics' initial state at the mesh's vertices at the first time: parameters it cannot be
         evaluated with (a Hill exponent P_2 = 2000 overflows K_2^P_2) are one line naming the kinetics, not a

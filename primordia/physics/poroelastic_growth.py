@@ -168,6 +168,19 @@ class PoroelasticGrowth(Physics):
         if self.growth_law is None:
             raise ConfigError("physics poroelastic_growth needs a growth law ([growth_law] name = \"...\")")
 
+    def inert_options(self, modules, gdim, solver) -> dict[str, str]:
+        """The initial equilibrium's ramp without an initial equilibrium; the Schur split's stabilisation when no
+        solve of this module is a fieldsplit (the direct solve factorises the tangent itself: NewtonSolver)."""
+        inert = {}
+        if not self.settings["initial_equilibrium"]:
+            inert["initial_load_steps"] = "initial_equilibrium = false (no initial solve to ramp)"
+        direct = self.settings["preconditioner"] == "lu" or (self.settings["preconditioner"] == "auto" and gdim == 2)
+        tables = (f"{self.name}", f"{self.name}_initial", "monolithic")
+        if direct and not any(_pc_type(solver.get(name)) == "fieldsplit" for name in tables):
+            inert["stabilisation"] = ("it preconditions the Schur split's (psi, p) block; the preconditioner here is "
+                                      "a direct solve of the tangent (preconditioner = \"schur\" uses it)")
+        return inert
+
     def check_composition(self, modules) -> None:
         """The fields the growth law reads are provided by the model's modules (its ``requires``)."""
         provided = {spec.name for module in modules for spec in module.fields()}
@@ -394,3 +407,10 @@ def _solver_defaults(preconditioner: str, gdim: int) -> dict:
     if preconditioner == "auto":
         preconditioner = "lu" if gdim == 2 else "schur"
     return dict(REUSED_LU if preconditioner == "lu" else SCHUR_FIELDSPLIT)
+
+
+def _pc_type(table) -> str | None:
+    """The top-level ``pc_type`` a ``[solver.*]`` table gives (PETSc reads option names in any case), if any."""
+    if not isinstance(table, dict):
+        return None
+    return next((str(value) for key, value in table.items() if str(key).lstrip("-").lower() == "pc_type"), None)

@@ -194,3 +194,87 @@ def test_an_inline_table_adds_to_the_table_it_names():
     assert config.apply_overrides(original, ["physics.poroelasticity.boundary=[]"])["physics"]["poroelasticity"][
         "boundary"] == []  # a list is replaced whole
     assert config.apply_overrides({}, ["solver.m={ksp_type='cg'}"]) == {"solver": {"m": {"ksp_type": "cg"}}}
+
+
+# -- options a model leaves without effect ----------------------------------------------------------
+def _model_warnings(capsys, make) -> list[str]:
+    """The model ``make()`` composes, and the warnings composing it printed (stderr lines)."""
+    capsys.readouterr()
+    model = make()
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("primordia: warning:")]
+    return model, lines
+
+
+def _small(*overrides):
+    import tomllib
+
+    from primordia.model import Model
+
+    return Model.from_config(config.apply_overrides(tomllib.loads(SMALL_CONFIG), list(overrides)))
+
+
+def test_the_coupled_solves_preconditioner_under_the_split_solve_is_one_warning(capsys):
+    """It was taken without a word: the species were solved one by one whatever it said."""
+    _, told = _model_warnings(capsys, lambda: _small('physics.chemotaxis.preconditioner="lu"'))
+    assert told == ['primordia: warning: physics.chemotaxis.preconditioner = "lu" has no effect: it is the coupled '
+                    'solve\'s (solve = "coupled"); under solve = "split" each species\' solver is '
+                    '[solver.chemotaxis_SPECIES]']
+    _, told = _model_warnings(capsys, lambda: _small('physics.chemotaxis.preconditioner="lu"',
+                                                     'physics.chemotaxis.solve="coupled"',
+                                                     'physics.chemotaxis.flux_scheme="galerkin"'))
+    assert told == []
+
+
+def test_a_default_left_without_effect_is_not_told_so_a_resolved_config_restarts_quietly(capsys):
+    """config.toml holds every default (preconditioner = "block_jacobi" beside solve = "split"): a restart reads
+    it back, and refusing or warning about the key itself would stop or clutter every restart of example 1a."""
+    model, told = _model_warnings(capsys, _small)
+    assert told == []
+    resolved = model.resolved_config()
+    assert resolved["physics"]["chemotaxis"]["preconditioner"] == "block_jacobi"
+    from primordia.model import Model
+
+    _, told = _model_warnings(capsys, lambda: Model.from_config(resolved))
+    assert told == []
+
+
+@pytest.mark.parametrize("overrides, told", [
+    (["physics.chemotaxis.perturbation=0.0", 'physics.chemotaxis.perturbation_shape="cosine"'],
+     ['physics.chemotaxis.perturbation_shape = "cosine" has no effect: perturbation = 0']),
+    (["physics.chemotaxis.wavenumber=[1.0, 0.5]"],
+     ['physics.chemotaxis.wavenumber = [1.0, 0.5] has no effect: it is the cosine perturbation\'s '
+      '(perturbation_shape = "random")']),
+    (['physics.chemotaxis.perturbation_shape="cosine"', "physics.chemotaxis.seed=3"],
+     ['physics.chemotaxis.seed = 3 has no effect: it seeds the random perturbation (perturbation_shape = "cosine")']),
+    (['physics.chemotaxis.accumulation="conservative"'],
+     ['physics.chemotaxis.accumulation = "conservative" has no effect: the tissue\'s volume ratio J is 1 without '
+      'finite strain, so both forms are one']),
+    (['physics.chemotaxis.perturbation_shape="cosine"', "physics.chemotaxis.wavenumber=[1.0, 0.5]"], []),
+])
+def test_chemotaxis_options_another_choice_leaves_without_effect_are_told(capsys, overrides, told):
+    _, lines = _model_warnings(capsys, lambda: _small(*overrides))
+    assert lines == [f"primordia: warning: {line}" for line in told]
+
+
+def _ex02a(*overrides):
+    from primordia.model import Model
+
+    root = Path(__file__).resolve().parents[2]
+    return Model.from_file(root / "examples" / "ex02a.toml", ["mesh.cells=[4,4]", *overrides])
+
+
+@pytest.mark.parametrize("overrides, told", [
+    (["physics.poroelastic_growth.stabilisation=[2.0, 0.1]"],  # 2D: "auto" is the direct solve
+     ["physics.poroelastic_growth.stabilisation = [2.0, 0.1] has no effect: it preconditions the Schur split's "
+      '(psi, p) block; the preconditioner here is a direct solve of the tangent (preconditioner = "schur" uses it)']),
+    (["physics.poroelastic_growth.stabilisation=[2.0, 0.1]", 'physics.poroelastic_growth.preconditioner="schur"'],
+     []),
+    (["physics.poroelastic_growth.stabilisation=[2.0, 0.1]", 'solver.poroelastic_growth.PC_TYPE="fieldsplit"'], []),
+    (["physics.poroelastic_growth.initial_equilibrium=false", "physics.poroelastic_growth.initial_load_steps=8"],
+     ["physics.poroelastic_growth.initial_load_steps = 8 has no effect: initial_equilibrium = false "
+      "(no initial solve to ramp)"]),
+    ([], []),
+])
+def test_growth_options_the_chosen_solver_leaves_without_effect_are_told(capsys, overrides, told):
+    _, lines = _model_warnings(capsys, lambda: _ex02a(*overrides))
+    assert lines == [f"primordia: warning: {line}" for line in told]
