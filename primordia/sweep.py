@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from primordia.core.config import apply_overrides, load_config, parse_assignment
 from primordia.core.errors import ConfigError, one_line, warn
 from primordia.core.validation import is_number, number
 
@@ -153,7 +154,10 @@ class Point:
     index: tuple[int, ...]  #: position along each dimension of the Dataset
     overrides: tuple[str, ...]  #: the --set assignments of this run (fixed ones first)
     directory: Path
-    fingerprint: str  #: what makes a finished run reusable: config text and overrides
+    fingerprint: str  #: what makes a finished run reusable: the configuration it runs (:func:`_fingerprint`)
+    #: the fingerprint sweeps wrote before 2026-12-05 (the config's text and the overrides as written): a run
+    #: they completed is still taken as done
+    written_fingerprint: str = ""
 
 
 @dataclass
@@ -165,7 +169,8 @@ class Sweep:
     seeds: tuple[int, ...] = ()
     fixed: tuple[str, ...] = ()
     out: Path | None = None  #: default out/sweep_<config name>, as the command's
-    config_text: str = field(init=False, repr=False)  #: the configuration file as read, for fingerprints
+    config_text: str = field(init=False, repr=False)  #: the configuration file as read, for earlier fingerprints
+    config_table: dict = field(init=False, repr=False)  #: the configuration file as TOML reads it, for fingerprints
     base_config: dict = field(init=False, repr=False)  #: resolved configuration with the fixed overrides
 
     def __post_init__(self):
@@ -207,6 +212,7 @@ class Sweep:
                 raise ConfigError(f"--vary {key}: not a number of the resolved configuration of {self.config}"
                                   + (" (--seeds needs physics = [\"chemotaxis\", ...])" if key == SEED_KEY else ""))
         self.config_text = self.config.read_text()
+        self.config_table = load_config(self.config)
         self.base_config = resolved
 
     @property
@@ -223,21 +229,48 @@ class Sweep:
     def points(self) -> list[Point]:
         keys, ranges = self.keys, [values for _, values in self.dimensions]
         labels = [axis.labels for axis in self.axes] + ([tuple(str(seed) for seed in self.seeds)] if self.seeds else [])
+        given = _by_value(apply_overrides(self.config_table, list(self.fixed)))  # what every run is given
+        paths = [parse_assignment(f"{key}=0")[0] for key in keys]  # as --set reads the key ("a"."b" is a.b)
         points = []
         for index in itertools.product(*(range(len(values)) for values in ranges)):
             values = [ranges[d][i] for d, i in enumerate(index)]
             assignments = tuple(f"{key}={value!r}" for key, value in zip(keys, values))
             name = "_".join(f"{dim}={labels[d][i]}" for d, ((dim, _), i) in enumerate(zip(self.dimensions, index)))
             overrides = tuple(self.fixed) + assignments
-            digest = hashlib.sha256("\n".join((self.config_text, *overrides)).encode()).hexdigest()[:16]
-            points.append(Point(index, overrides, self.out / "runs" / name, digest))
+            written = hashlib.sha256("\n".join((self.config_text, *overrides)).encode()).hexdigest()[:16]
+            points.append(Point(index, overrides, self.out / "runs" / name,
+                                _fingerprint(given, sorted(zip(paths, map(float, values)))), written))
         return points
+
+
+def _fingerprint(given: dict, varied: list) -> str:
+    """A digest of the configuration a run is given, not of how the command wrote it: ``given``, its file as TOML
+    reads it with the --set values applied (:func:`_by_value`), and ``varied``, its [key path, value] pairs
+    (the --vary and --seeds values, in key order).  ``--set a=1`` and ``--set a=1.0``, ``--vary alpha=1:5:2`` and
+    ``1.0:5.0:2``, --set flags in another order, or a comment in the file ran every point again.  The file's
+    folder (``_base_dir``, resolved: a relative or an absolute path to it is one) is part of it, since a relative
+    mesh path names another file from another folder: the text alone took runs on another mesh for done.  Not
+    the resolved config with its defaults: making each point's model cost 0.37 s at example 1a's 171 x 171 (its
+    mesh), and :meth:`Sweep.points` is asked more than once per sweep.  A default written out is another
+    fingerprint, so such a point is run again, never a run of another model taken as done."""
+    text = json.dumps([given, varied], sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _by_value(value):
+    """A configuration with every number a float (compared by value, as a restart compares a checkpoint's config,
+    ``Model.differences``), tables with string keys, anything else TOML holds (a date) as its text."""
+    if isinstance(value, dict):
+        return {str(key): _by_value(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_by_value(item) for item in value]
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    return value if isinstance(value, (str, bool)) or value is None else str(value)
 
 
 def _assigned_keys(text: str) -> list[str]:
     """The dotted config keys a ``--set`` assignment sets (an inline table sets each of its keys)."""
-    from primordia.core.config import parse_assignment
-
     path, value = parse_assignment(text)
 
     def leaves(prefix: list[str], value) -> list[str]:
@@ -259,7 +292,8 @@ def _lookup(table: dict, key: str):
 def is_done(point: Point) -> bool:
     """A run directory with its metrics, completed from the same configuration and overrides."""
     record = _read_record(point.directory)
-    return (record.get("status") == "completed" and record.get("fingerprint") == point.fingerprint
+    return (record.get("status") == "completed"
+            and record.get("fingerprint") in {point.fingerprint, point.written_fingerprint} - {""}
             and _has_metrics(point.directory))
 
 
@@ -787,7 +821,6 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
 
     from primordia.analysis.patterns.metrics import PATTERN_KINDS
     from primordia.analysis.patterns.run import METRICS_FILE, SCALAR_METRICS, predicted_mode
-    from primordia.core.config import apply_overrides, load_config
 
     dims = sweep.dimensions
     names, shape = [name for name, _ in dims], tuple(len(values) for _, values in dims)

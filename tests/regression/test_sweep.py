@@ -597,3 +597,47 @@ def test_a_point_starting_as_its_sweep_is_interrupted_runs_nothing(small_config,
     record = execute(str(small_config()), [], str(tmp_path / "run"), "fingerprint", sweep=token)
     assert record["status"] == "failed" and record["reason"] == "not started: the sweep was interrupted"
     assert not (tmp_path / "run" / "summary.json").exists()
+
+
+def _fingerprints(config, vary, fixed=(), out=None):
+    return [(point.directory, point.fingerprint)
+            for point in Sweep(config, (Axis.parse(vary),), fixed=tuple(fixed), out=out).points()]
+
+
+def test_the_fingerprint_follows_what_the_runs_compute_not_how_the_command_is_written(small_config, tmp_path,
+                                                                                      monkeypatch):
+    """A resumed sweep written another way ran every point again (the digest was of the text of the file and of
+    the --set and --vary assignments): 1 and 1.0, --set flags in another order, a comment in the file.  A relative
+    config path for an absolute one stays the same sweep."""
+    config = small_config()
+    out = tmp_path / "sweep"
+    first = _fingerprints(config, "parameters.alpha=2:4:3", ("time.t_final=1", "parameters.D_m=0.03"), out)
+    assert first == _fingerprints(config, "parameters.alpha=2.0:4.0:3", ("parameters.D_m=3e-2", "time.t_final=1.0"),
+                                  out)
+    commented = small_config(f"# the same model\n{small_config.text}", name="small.toml")
+    monkeypatch.chdir(commented.parent)
+    assert first == _fingerprints(Path("small.toml"), "parameters.alpha=2:4:3",
+                                  ("time.t_final=1", "parameters.D_m=0.03"), out)
+    # what the runs compute still tells them apart
+    other = _fingerprints(config, "parameters.alpha=2:4:3", ("time.t_final=1", "parameters.D_m=0.04"), out)
+    assert [d for d, _ in other] == [d for d, _ in first]
+    assert all(a != b for (_, a), (_, b) in zip(other, first))
+    # the same text in another folder: a relative mesh path would name another file, so it is another config (the
+    # text alone took it for the same)
+    elsewhere = tmp_path / "elsewhere" / "small.toml"
+    elsewhere.parent.mkdir()
+    elsewhere.write_text(small_config.text)
+    assert _fingerprints(elsewhere, "parameters.alpha=2:4:3", ("time.t_final=1", "parameters.D_m=0.03"),
+                         out)[0][1] != first[0][1]
+
+
+def test_a_run_done_under_the_earlier_fingerprint_is_still_done(small_config, tmp_path, monkeypatch):
+    """Sweeps before 2026-12-05 recorded the digest of the command's text: their runs are not done again."""
+    import primordia.sweep as sweep_module
+
+    monkeypatch.setattr(sweep_module, "_has_metrics", lambda directory: True)
+    point = Sweep(small_config(), (Axis.parse("parameters.alpha=2:4:2"),), out=tmp_path / "sweep").points()[0]
+    point.directory.mkdir(parents=True)
+    for fingerprint, done in ((point.written_fingerprint, True), (point.fingerprint, True), ("0123", False)):
+        (point.directory / "sweep.json").write_text(json.dumps({"status": "completed", "fingerprint": fingerprint}))
+        assert is_done(point) is done
