@@ -34,7 +34,9 @@ drops the defaults that only made sense for the preconditioner it replaces: the
 defaults' options of that level other than ``ksp_*`` and ``snes_*`` (the factor
 package, the splits and their sub-solvers, AMG settings, a ``rebuild_preconditioner_after``
 count), and, at the top level, a ``ksp_type = "preonly"`` that only made sense with a
-direct solve (kept for another one: ``lu`` to ``cholesky``).  A relative
+direct solve (kept for another one: ``lu`` to ``cholesky``), and so does ``solve_on_one_rank``: the
+serial factorisation of the whole system on one rank beat MUMPS's distributed solves for a direct solve,
+not for an iterative one (kept from ``lu`` to ``cholesky`` too).  A relative
 ``rebuild_preconditioner_after = "fresh+K"`` stays: it measures the kept preconditioner
 against a fresh one of whatever kind (the cell density's default; ``pc_type = "hypre"``
 there keeps BoomerAMG over steps instead of building it at each).
@@ -158,10 +160,11 @@ def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, A
         if not key.endswith("pc_type") or str(defaults.get(key, value)) == str(value):
             continue
         level = key[: -len("pc_type")]
+        direct_to_direct = level == "" and str(defaults.get("pc_type")) in DIRECT and str(value) in DIRECT
         for name in list(kept):
             rest = name[len(level):]
             if (name.startswith(level) and name != key and not rest.startswith(_KEPT_ACROSS_PC)
-                    and not _relative_rebuild(rest, kept[name])):
+                    and not _relative_rebuild(rest, kept[name]) and not (direct_to_direct and name == GATHER)):
                 del kept[name]
         if (level == "" and str(defaults.get("pc_type")) in DIRECT and str(value) not in DIRECT
                 and "ksp_type" not in user and kept.get("ksp_type") == "preonly"):

@@ -367,3 +367,14 @@ def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks
 def test_a_rebuild_bound_is_a_number_or_a_number_above_the_fresh_count():
     assert flatten({"rebuild_preconditioner_after": 3}, "solver.x") == {"rebuild_preconditioner_after": 3}
     assert flatten({"rebuild_preconditioner_after": "fresh + 02"}, "solver.x") == {"rebuild_preconditioner_after": "fresh+2"}
+
+
+def test_a_system_gathered_to_one_rank_stays_so_for_another_direct_solve():
+    """solve_on_one_rank is the default of f and b (2 to 8 ranks) because one rank's serial factorisation beat
+    MUMPS's distributed solves: that holds for any direct solve.  pc_type = "cholesky" dropped it (f and b then went
+    to MUMPS on every rank), where ksp_type = "preonly" stayed; an iterative pc_type still drops it."""
+    defaults = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_ordering_type": "nd", GATHER: True}
+    assert combine(defaults, {"pc_type": "cholesky"}) == {"ksp_type": "preonly", "pc_type": "cholesky", GATHER: True}
+    assert combine(defaults, {"pc_type": "hypre"}) == {"pc_type": "hypre"}
+    assert combine(defaults, {"pc_type": "cholesky", GATHER: False})[GATHER] is False
+
