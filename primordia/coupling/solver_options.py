@@ -40,6 +40,9 @@ not for an iterative one (kept from ``lu`` to ``cholesky`` too).  A relative
 ``rebuild_preconditioner_after = "fresh+K"`` stays: it measures the kept preconditioner
 against a fresh one of whatever kind (the cell density's default; ``pc_type = "hypre"``
 there keeps BoomerAMG over steps instead of building it at each).
+A factor package the defaults give beside a preconditioner that factorises nothing (the growth's
+Schur split: its saddle point needs MUMPS's pivoting) stays when ``pc_type`` becomes a factorisation:
+``pc_type = "lu"`` there met a zero pivot in PETSc's own LU first, and went to MUMPS with a warning.
 A factor package changed to MUMPS drops the defaults' fill-reducing ordering, which MUMPS
 would use in place of its own (see :func:`mumps_orders_itself`).
 
@@ -161,10 +164,13 @@ def combine(defaults: Mapping[str, Any], user: Mapping[str, Any]) -> dict[str, A
             continue
         level = key[: -len("pc_type")]
         direct_to_direct = level == "" and str(defaults.get("pc_type")) in DIRECT and str(value) in DIRECT
+        # a factor package beside a preconditioner that factorises nothing names the one the system needs
+        system_package = str(defaults.get(key)) not in DIRECT and str(value) in DIRECT
         for name in list(kept):
             rest = name[len(level):]
             if (name.startswith(level) and name != key and not rest.startswith(_KEPT_ACROSS_PC)
-                    and not _relative_rebuild(rest, kept[name]) and not (direct_to_direct and name == GATHER)):
+                    and not _relative_rebuild(rest, kept[name]) and not (direct_to_direct and name == GATHER)
+                    and not (system_package and rest == PACKAGE)):
                 del kept[name]
         if (level == "" and str(defaults.get("pc_type")) in DIRECT and str(value) not in DIRECT
                 and "ksp_type" not in user and kept.get("ksp_type") == "preonly"):

@@ -370,6 +370,9 @@ SCHUR_FIELDSPLIT = {
     # meshes (18.3, 20.5, 21.3 a Newton step at 20, 30, 40 boxes a side), and over 8 steps (two alternating
     # repeats) 3,029-3,104 against 3,125-3,495 ms/step at 20 boxes, 11,266-11,334 against 11,671-11,912 at 30
     "rebuild_preconditioner_after": "fresh+3",
+    # not read by the fieldsplit: the package of a factorisation of the whole system, should [solver.*] make one
+    # (pc_type = "lu"): the zero psi block stops PETSc's unpivoted LU (solver_options.combine keeps it)
+    "pc_factor_mat_solver_type": "mumps",
 }
 
 #: GMRES preconditioned by a MUMPS LU factorisation kept over Newton iterations and time steps while it
