@@ -249,14 +249,19 @@ class Model:
 
     def _warn_about_inert_options(self) -> None:
         """One warning per module option this model leaves without effect (``Physics.inert_options``) and that
-        holds another value than its default: physics.chemotaxis.preconditioner = "lu" under solve = "split" was
-        taken without a word.  A warning, not a refusal, as a [coupling] option of another scheme is: a config
-        whose choice was switched with --set (solve = "coupled" to "split") keeps that choice's options.  Only
-        values other than the default are told, since the resolved config.toml a restart reads holds every
-        default: a refusal of the key itself stopped every restart of example 1a."""
+        holds another value than its default, and per [solver.NAME] table of a subproblem the modules' settings do
+        not make (``Physics.inert_solver_tables``): physics.chemotaxis.preconditioner = "lu" under solve = "split"
+        was taken without a word, and [solver.chemotaxis_m] under solve = "coupled" refused as an unknown table.
+        A warning, not a refusal, as a [coupling] option of another scheme is: a config whose choice was switched
+        with --set (solve = "coupled" to "split") keeps that choice's options.  Only option values other than the
+        default are told, since the resolved config.toml a restart reads holds every default: a refusal of the
+        key itself stopped every restart of example 1a.  (A solver table is only ever the user's.)"""
         from primordia.core.json_toml import toml_text
         from primordia.physics.base import module_code
 
+        #: the tables told here, which the run's check that every table names a subproblem leaves alone
+        #: (splitting.SplittingScheme.check_solver_tables)
+        self.inert_solver_tables = {}
         for module in self.physics_objects:
             with module_code(module, "inert_options"):
                 inert = module.inert_options(self.physics_objects, self.mesh_data.gdim, self.solver)
@@ -265,6 +270,12 @@ class Model:
                 value = config_.as_toml_reads_it(module.settings.get(key))
                 if key in defaults and value != config_.as_toml_reads_it(defaults[key]):
                     warn(f"physics.{module.name}.{key} = {toml_text(value)} has no effect: {why}")
+            with module_code(module, "inert_solver_tables"):
+                tables = module.inert_solver_tables()
+            for name, why in (tables or {}).items():
+                if name in self.solver:
+                    self.inert_solver_tables[name] = why
+                    warn(f"[solver.{name}] has no effect: {why}")
 
     def check_affordable(self) -> None:
         """The mesh against the memory the model's modules need per cell (``Physics.min_bytes_per_cell``), where

@@ -78,7 +78,9 @@ class SplittingScheme(Configured, ABC):
         if self._tables_checked:
             return
         initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
-        check_tables(sim.model.solver, [solver.sub.prefix for solver in sim.solvers] + initial)
+        inert = getattr(sim.model, "inert_solver_tables", {})  # told by the model, in one warning each
+        check_tables({name: table for name, table in sim.model.solver.items() if name not in inert},
+                     [solver.sub.prefix for solver in sim.solvers] + initial)
         # the types and values of a table no solver of this process reads (a restart does not solve the initial
         # state again): pc_type = "hypr" under [solver.poroelastic_growth_initial] was taken without a word
         check_table_values(sim.model.solver)

@@ -198,6 +198,12 @@ class Physics(Configured, ABC):
         not told (the resolved config.toml a restart reads holds every default)."""
         return {}
 
+    def inert_solver_tables(self) -> dict[str, str]:
+        """The ``[solver.NAME]`` tables of the subproblems this module has under other settings and not under these
+        (the species' own under ``solve = "coupled"``), each with why: given, such a table is one warning, as an
+        inert option is, where a table naming no subproblem of any choice is refused (a misspelling)."""
+        return {}
+
     def check_scheme(self, scheme, modules: list["Physics"]) -> None:
         """Refuse, in one line (:class:`ConfigError`), a splitting scheme this module's discretisation is
         wrong under (``scheme``: the :class:`~primordia.coupling.splitting.SplittingScheme`, its ``name``

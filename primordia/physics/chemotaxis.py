@@ -165,6 +165,13 @@ class Chemotaxis(Physics):
             inert["accumulation"] = "the tissue's volume ratio J is 1 without finite strain, so both forms are one"
         return inert
 
+    def inert_solver_tables(self) -> dict[str, str]:
+        """The coupled solve's table under solve = "split", the species' own under solve = "coupled"."""
+        if self.settings["solve"] == "split":
+            return {self.name: "solve = \"split\" solves the species one by one ([solver.chemotaxis_SPECIES])"}
+        return {f"{self.name}_{species.name}": f"solve = \"coupled\" solves the species together ([solver.{self.name}])"
+                for species in self.species}
+
     def check_inputs(self, mesh_data, times) -> None:
         """Also the kinetics' initial state at the mesh's vertices at the first time: parameters it cannot be
         evaluated with (a Hill exponent P_2 = 2000 overflows K_2^P_2) are one line naming the kinetics, not a

@@ -181,6 +181,13 @@ class PoroelasticGrowth(Physics):
                                       "a direct solve of the tangent (preconditioner = \"schur\" uses it)")
         return inert
 
+    def inert_solver_tables(self) -> dict[str, str]:
+        """The initial state's solves under initial_equilibrium = false, which has none."""
+        if self.settings["initial_equilibrium"]:
+            return {}
+        return {f"{self.name}_{initial}": "initial_equilibrium = false (the initial state is not solved)"
+                for initial in ("initial", "initial_velocity")}
+
     def check_composition(self, modules) -> None:
         """The fields the growth law reads are provided by the model's modules (its ``requires``)."""
         provided = {spec.name for module in modules for spec in module.fields()}

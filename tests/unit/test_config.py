@@ -273,6 +273,9 @@ def _ex02a(*overrides):
     (["physics.poroelastic_growth.initial_equilibrium=false", "physics.poroelastic_growth.initial_load_steps=8"],
      ["physics.poroelastic_growth.initial_load_steps = 8 has no effect: initial_equilibrium = false "
       "(no initial solve to ramp)"]),
+    (["physics.poroelastic_growth.initial_equilibrium=false", "solver.poroelastic_growth_initial.ksp_rtol=1e-3"],
+     ["[solver.poroelastic_growth_initial] has no effect: initial_equilibrium = false (the initial state is not "
+      "solved)"]),
     ([], []),
 ])
 def test_growth_options_the_chosen_solver_leaves_without_effect_are_told(capsys, overrides, told):

@@ -396,3 +396,26 @@ def test_a_factorisation_the_user_makes_of_the_growth_system_is_mumps_at_once():
     # a package chosen for the factorisation a default makes goes with it, as before
     assert "pc_factor_mat_solver_type" not in combine({"pc_type": "lu", "pc_factor_mat_solver_type": "mumps"},
                                                       {"pc_type": "ilu"})
+
+
+@pytest.mark.parametrize("assignments, told", [
+    (['physics.chemotaxis.solve="coupled"', 'physics.chemotaxis.flux_scheme="galerkin"',
+      'solver.chemotaxis_m.pc_type="hypre"'],
+     '[solver.chemotaxis_m] has no effect: solve = "coupled" solves the species together ([solver.chemotaxis])'),
+    (['solver.chemotaxis.pc_type="lu"'],
+     '[solver.chemotaxis] has no effect: solve = "split" solves the species one by one ([solver.chemotaxis_SPECIES])'),
+])
+def test_a_table_of_a_subproblem_another_setting_makes_is_one_warning(capsys, small_config, tmp_path, assignments,
+                                                                      told):
+    """As an option another choice leaves without effect (a config switched to solve = "coupled" keeps its
+    [solver.chemotaxis_m]): it was refused as an unknown table, at the run's set-up only, not by --dry-run."""
+    status, stderr = run(capsys, small_config(), tmp_path / "out", *assignments)
+    assert status == 0, stderr
+    assert stderr.splitlines() == [f"primordia: warning: {told}"]
+    # its values are still checked, and a table no setting makes is still refused
+    status, stderr = run(capsys, small_config(), tmp_path / "again", *assignments[:-1],
+                         assignments[-1].replace('"hypre"', '"hypr"').replace('"lu"', '"lux"'))
+    assert status == 2 and "unknown PC type" in stderr.splitlines()[-1], stderr
+    status, stderr = run(capsys, small_config(), tmp_path / "typo", *assignments[:-1],
+                         assignments[-1].replace("solver.chemotaxis", "solver.chemotaxsi"))
+    assert status == 2 and "unknown solver table [solver.chemotaxsi" in stderr, stderr
