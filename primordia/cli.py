@@ -186,6 +186,7 @@ def _report_dry_run(model, out: Path, restart: bool) -> int:
     existing = "restart" if restart else "reuse"  # a restart: and what its checkpoint lets it change
     Simulation(model, backend=model.backend, out_dir=out, existing=existing).check_choices()  # backend, scheme
     check_table_values(model.solver)
+    model.warn_about_inert_settings()  # once the input passed: a refused one is one line
     found = existing_run(out)
     if is_root_process():
         print(f"primordia: the input is valid: {model.mesh_data.num_cells} cells, {model.num_steps} steps of "

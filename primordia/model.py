@@ -114,7 +114,7 @@ class Model:
         for module in self.physics_objects:  # what only the mesh and the time span show: boundary formulas
             with module_code(module, "check_inputs"):
                 module.check_inputs(self.mesh_data, self.sample_times())
-        self._warn_about_inert_options()
+        self.inert_settings = self._inert_settings()
 
     def __repr__(self) -> str:
         """What the model is, in one line: its composition, mesh and time span (not the default object repr)."""
@@ -247,18 +247,20 @@ class Model:
                     raise ConfigError(f"output.{key} names '{name}', which is not a field of this model "
                                       f"({', '.join(fields)})")
 
-    def _warn_about_inert_options(self) -> None:
-        """One warning per module option this model leaves without effect (``Physics.inert_options``) and that
-        holds another value than its default, and per [solver.NAME] table of a subproblem the modules' settings do
-        not make (``Physics.inert_solver_tables``): physics.chemotaxis.preconditioner = "lu" under solve = "split"
+    def _inert_settings(self) -> list[str]:
+        """What this model leaves without effect, one line each: a module option (``Physics.inert_options``) that
+        holds another value than its default, and a [solver.NAME] table of a subproblem the modules' settings do
+        not make (``Physics.inert_solver_tables``).  physics.chemotaxis.preconditioner = "lu" under solve = "split"
         was taken without a word, and [solver.chemotaxis_m] under solve = "coupled" refused as an unknown table.
-        A warning, not a refusal, as a [coupling] option of another scheme is: a config whose choice was switched
-        with --set (solve = "coupled" to "split") keeps that choice's options.  Only option values other than the
-        default are told, since the resolved config.toml a restart reads holds every default: a refusal of the
-        key itself stopped every restart of example 1a.  (A solver table is only ever the user's.)"""
+        Warned (:meth:`warn_about_inert_settings`), not refused, as a [coupling] option of another scheme is: a
+        config whose choice was switched with --set (solve = "coupled" to "split") keeps that choice's options.
+        Only option values other than the default are told, since the resolved config.toml a restart reads holds
+        every default: a refusal of the key itself stopped every restart of example 1a.  (A solver table is only
+        ever the user's.)"""
         from primordia.core.json_toml import toml_text
         from primordia.physics.base import module_code
 
+        told = []
         #: the tables told here, which the run's check that every table names a subproblem leaves alone
         #: (splitting.SplittingScheme.check_solver_tables)
         self.inert_solver_tables = {}
@@ -269,13 +271,21 @@ class Model:
             for key, why in (inert or {}).items():
                 value = config_.as_toml_reads_it(module.settings.get(key))
                 if key in defaults and value != config_.as_toml_reads_it(defaults[key]):
-                    warn(f"physics.{module.name}.{key} = {toml_text(value)} has no effect: {why}")
+                    told.append(f"physics.{module.name}.{key} = {toml_text(value)} has no effect: {why}")
             with module_code(module, "inert_solver_tables"):
                 tables = module.inert_solver_tables()
             for name, why in (tables or {}).items():
                 if name in self.solver:
                     self.inert_solver_tables[name] = why
-                    warn(f"[solver.{name}] has no effect: {why}")
+                    told.append(f"[solver.{name}] has no effect: {why}")
+        return told
+
+    def warn_about_inert_settings(self) -> None:
+        """One warning per setting this model leaves without effect (:meth:`_inert_settings`): said by what runs or
+        checks the model (a run, ``--dry-run``, a sweep once) once its checks passed (a refused input stays one
+        line), not by each model a linear analysis or a sweep's gathering composes from a run's config."""
+        for line in self.inert_settings:
+            warn(line)
 
     def check_affordable(self) -> None:
         """The mesh against the memory the model's modules need per cell (``Physics.min_bytes_per_cell``), where
@@ -383,6 +393,7 @@ class Model:
         out = out if isinstance(out, str) else _path(out, "out")  # a str as given: Simulation refuses "" (not ".")
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
         sim.setup()
+        self.warn_about_inert_settings()  # once the run is set up: a refused input is one line, the error's
         sim.run(progress=progress)
         return sim
 

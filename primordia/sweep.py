@@ -172,6 +172,7 @@ class Sweep:
     config_text: str = field(init=False, repr=False)  #: the configuration file as read, for earlier fingerprints
     config_table: dict = field(init=False, repr=False)  #: the configuration file as TOML reads it, for fingerprints
     base_config: dict = field(init=False, repr=False)  #: resolved configuration with the fixed overrides
+    inert_settings: list = field(init=False, repr=False)  #: what the runs leave without effect (Model.inert_settings)
 
     def __post_init__(self):
         from primordia.model import Model
@@ -214,6 +215,7 @@ class Sweep:
         self.config_text = self.config.read_text()
         self.config_table = load_config(self.config)
         self.base_config = resolved
+        self.inert_settings = model.inert_settings  # said once the runs' check passed (_run_sweep)
 
     @property
     def keys(self) -> list[str]:
@@ -767,6 +769,8 @@ def _run_sweep(sweep: Sweep, scheduler, workers, timeout, progress):
         with dask_client(scheduler, workers) as client:
             if scheduler:  # an external cluster's workers: their own backends and plugins
                 _refuse_if_every_run_fails(client.submit(check_runs, *arguments, pure=False).result())
+            for line in sweep.inert_settings:  # once here, not in each run's log alone; a refusal is one line
+                warn(line)
             with _progress_bar(len(points), len(points) - len(todo), progress) as bar:
                 token = f"{socket.gethostname()}:{os.getpid()}:{time.time()}"  # this sweep's, for stop_runs
                 futures = {client.submit(execute, str(sweep.config.resolve()), list(p.overrides),

@@ -641,3 +641,16 @@ def test_a_run_done_under_the_earlier_fingerprint_is_still_done(small_config, tm
     for fingerprint, done in ((point.written_fingerprint, True), (point.fingerprint, True), ("0123", False)):
         (point.directory / "sweep.json").write_text(json.dumps({"status": "completed", "fingerprint": fingerprint}))
         assert is_done(point) is done
+
+
+def test_a_setting_the_runs_leave_without_effect_is_said_once_by_the_sweep_not_per_point(small_config, tmp_path,
+                                                                                        capsys):
+    """Each point's linear prediction composes its model: the warning was printed once a point, and before the
+    check that refuses a sweep whose every run would fail (two lines for a refusal)."""
+    sweep = Sweep(small_config(), (Axis.parse("parameters.alpha=2:4:3"),),
+                  fixed=('physics.chemotaxis.preconditioner="lu"',), out=tmp_path / "sweep")
+    sweep.points()
+    assert capsys.readouterr().err == ""
+    assert sweep.inert_settings == ['physics.chemotaxis.preconditioner = "lu" has no effect: it is the coupled '
+                                    'solve\'s (solve = "coupled"); under solve = "split" each species\' solver is '
+                                    '[solver.chemotaxis_SPECIES]']

@@ -201,6 +201,8 @@ def _model_warnings(capsys, make) -> list[str]:
     """The model ``make()`` composes, and the warnings composing it printed (stderr lines)."""
     capsys.readouterr()
     model = make()
+    assert capsys.readouterr().err == ""  # said by what runs or checks it, not by each model composed
+    model.warn_about_inert_settings()
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("primordia: warning:")]
     return model, lines
 
@@ -281,3 +283,26 @@ def _ex02a(*overrides):
 def test_growth_options_the_chosen_solver_leaves_without_effect_are_told(capsys, overrides, told):
     _, lines = _model_warnings(capsys, lambda: _ex02a(*overrides))
     assert lines == [f"primordia: warning: {line}" for line in told]
+
+
+def test_a_dry_run_says_what_the_model_leaves_without_effect(capsys, small_config, tmp_path):
+    from primordia.cli import main
+
+    status = main(["run", str(small_config()), "--out", str(tmp_path / "out"), "--dry-run",
+                   "--set", 'physics.chemotaxis.preconditioner="lu"'])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 0 and lines == ['primordia: warning: physics.chemotaxis.preconditioner = "lu" has no effect: it '
+                                     'is the coupled solve\'s (solve = "coupled"); under solve = "split" each '
+                                     'species\' solver is [solver.chemotaxis_SPECIES]']
+
+
+def test_a_refused_input_is_one_line_even_with_a_setting_left_without_effect(capsys, small_config, tmp_path):
+    """The warning is said once the input passed its checks: before them, a refused run printed two lines."""
+    from primordia.cli import main
+
+    for extra in (["--dry-run"], []):
+        status = main(["run", str(small_config()), "--out", str(tmp_path / "out"), *extra, "--no-progress",
+                       "--set", 'physics.chemotaxis.preconditioner="lu"', "--set", 'coupling.scheme="nope"'])
+        lines = capsys.readouterr().err.splitlines()
+        assert status == 2 and len(lines) == 1 and "unknown splitting scheme 'nope'" in lines[0], lines
+
