@@ -215,7 +215,7 @@ class Sweep:
         self.config_text = self.config.read_text()
         self.config_table = load_config(self.config)
         self.base_config = resolved
-        self.inert_settings = model.inert_settings  # said once the runs' check passed (_run_sweep)
+        self.inert_settings = model.inert_settings + _inert_axes(model, keys)  # said once the runs' check passed
 
     @property
     def keys(self) -> list[str]:
@@ -269,6 +269,24 @@ def _by_value(value):
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return float(value)
     return value if isinstance(value, (str, bool)) or value is None else str(value)
+
+
+def _inert_axes(model, keys: list[str]) -> list[str]:
+    """One line per varied physics option the model's other settings leave without effect (``--seeds`` under
+    perturbation_shape = "cosine": every seed was the same run).  Only where no other varied key is an option of
+    the same module, since the others' values may give it its effect at some points."""
+    told = []
+    for key in keys:
+        section, name, option = (key.split(".") + ["", ""])[:3]
+        module = next((m for m in model.physics_objects if section == "physics" and m.name == name), None)
+        if module is None or key.count(".") != 2 or any(other != key and other.startswith(f"physics.{name}.")
+                                                        for other in keys):
+            continue
+        why = module.inert_options(model.physics_objects, model.mesh_data.gdim, model.solver).get(option)
+        if why is not None:
+            flag = "--seeds" if key == SEED_KEY else f"--vary {key}"
+            told.append(f"{flag} varies {key}, which has no effect: {why}; the runs differ in nothing else")
+    return told
 
 
 def _assigned_keys(text: str) -> list[str]:

@@ -654,3 +654,20 @@ def test_a_setting_the_runs_leave_without_effect_is_said_once_by_the_sweep_not_p
     assert sweep.inert_settings == ['physics.chemotaxis.preconditioner = "lu" has no effect: it is the coupled '
                                     'solve\'s (solve = "coupled"); under solve = "split" each species\' solver is '
                                     '[solver.chemotaxis_SPECIES]']
+
+
+def test_seeds_of_a_perturbation_they_do_not_seed_are_said(small_config, tmp_path):
+    """--seeds under perturbation_shape = "cosine" ran the same run once per seed, without a word."""
+    cosine = ('physics.chemotaxis.perturbation_shape="cosine"', "physics.chemotaxis.wavenumber=[1.0, 1.0]")
+    sweep = Sweep(small_config(), (Axis.parse("parameters.alpha=2:4:2"),), seeds=(1, 2), fixed=cosine,
+                  out=tmp_path / "sweep")
+    assert sweep.inert_settings == ['--seeds varies physics.chemotaxis.seed, which has no effect: it seeds the random '
+                                    'perturbation (perturbation_shape = "cosine"); the runs differ in nothing else']
+    assert Sweep(small_config(), sweep.axes, seeds=(1, 2), out=tmp_path / "random").inert_settings == []
+    # another varied option of the module may give it its effect at some points (no perturbation in the file)
+    unperturbed = small_config(small_config.text + "\n[physics.chemotaxis]\nperturbation = 0.0\n", name="flat.toml")
+    assert Sweep(unperturbed, sweep.axes, seeds=(1, 2), out=tmp_path / "flat").inert_settings[0].startswith(
+        "--seeds varies physics.chemotaxis.seed, which has no effect: perturbation = 0")
+    mixed = Sweep(unperturbed, (Axis.parse("physics.chemotaxis.perturbation=0:0.1:2"),), seeds=(1, 2),
+                  out=tmp_path / "mixed")
+    assert mixed.inert_settings == []
