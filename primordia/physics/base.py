@@ -347,7 +347,37 @@ def subproblems_of(module: Physics, initial: bool = False) -> list[Subproblem]:
                 raise PluginError(f"physics {module.name}: subproblem {sub.name}'s {what} must be a UFL form "
                                   f"(a sum of integrals; the jacobian ufl.derivative(residual, unknown)), got "
                                   f"{getattr(sub, what)!r}")
+        _check_arguments(module, sub)
     return list(subproblems)
+
+
+def _check_arguments(module: Physics, sub: Subproblem) -> None:
+    """The residual is linear in one test function and the Jacobian bilinear in a test and a trial function,
+    all of the unknown's space, or one line naming the module.
+
+    A residual with no test function (a functional) or with a trial function too was a ValueError traceback
+    from the solver layer ("not enough values to unpack"); one tested by another field's test function
+    (``disc.test("m")`` in the balance law of ``g``), or a Jacobian differentiated with respect to another
+    field, ran to the end on another P1 field's space with a silently wrong answer.  Compared by identity:
+    scikit-fem's spaces of two P1 fields are equal as UFL spaces.
+    """
+    space = sub.unknown.ufl_function_space() if hasattr(sub.unknown, "ufl_function_space") else None
+    for what, kinds in (("residual", ("test",)), ("jacobian", ("test", "trial"))):
+        arguments = sorted(getattr(sub, what).arguments(), key=lambda argument: argument.number())
+        if len(arguments) == len(kinds) and all(argument.ufl_function_space() is space for argument in arguments):
+            continue
+        if len(arguments) != len(kinds):
+            found = f"{len(arguments)} argument(s) ({', '.join(_argument_kind(a) for a in arguments) or 'none'})"
+        else:
+            found = "an argument of another space than the unknown's (another field's disc.test or disc.trial?)"
+        shape = "one test function" if what == "residual" else "a test and a trial function"
+        raise PluginError(f"physics {module.name}: subproblem {sub.name}'s {what} must be linear in {shape} of "
+                          f"its unknown's space (disc.test(name) of a field it solves for; the jacobian "
+                          f"ufl.derivative(residual, unknown)), got {found}")
+
+
+def _argument_kind(argument) -> str:
+    return "a test function" if argument.number() == 0 else "a trial function"
 
 
 def jacobian_is_constant(jacobian: ufl.Form, disc: Discretisation) -> bool:

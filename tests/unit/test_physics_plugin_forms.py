@@ -1,0 +1,114 @@
+"""A third party's physics module whose weak forms are wrong-shaped is one line naming it, on both backends.
+
+Found writing a physics module from docs/plugins.md alone (a cue g the cells secrete): a residual without a test
+function, or with a trial function, was a ValueError traceback from the solver layer; one tested by another
+field's test function, or a Jacobian taken with respect to another field, ran to the end with a wrong answer
+(both fields P1, so the vectors had the same length).
+"""
+
+import dataclasses
+
+import pytest
+import ufl
+
+from primordia import Model
+from primordia.core.errors import PluginError
+from primordia.core.meshes import rectangle
+from primordia.core.plugins import hookimpl
+from primordia.physics.base import FieldSpec, Physics, Subproblem
+from primordia.testing import registered
+
+BACKENDS = ["fenicsx", "skfem"]
+
+
+class TwoScalars(Physics):
+    """s and r, each ds/dt = -s, dr/dt = -r, solved apart; the classes below break s's solve one way each."""
+
+    name = "qa_two_scalars"
+
+    def fields(self):
+        return [FieldSpec("s", description="a scalar"), FieldSpec("r", description="another scalar")]
+
+    def setup(self, disc):
+        self.disc = disc
+
+    def initialise(self, disc):
+        disc.interpolate("s", 1.0)
+        disc.interpolate("r", 1.0)
+
+    def solve(self, name, residual=None):
+        disc = self.disc
+        if residual is None:
+            field = disc.field(name)
+            residual = ((field - disc.previous(name)) / disc.dt + field) * disc.test(name) * disc.dx
+        unknown = disc.unknown(name)
+        return Subproblem(name=f"{self.name}.{name}", unknown=unknown, residual=residual,
+                          jacobian=ufl.derivative(residual, unknown),
+                          petsc_options={"ksp_type": "preonly", "pc_type": "lu"})
+
+    def subproblems(self):
+        return [self.solve("s"), self.solve("r")]
+
+
+class Plugin:
+    def __init__(self, physics):
+        self.physics = physics
+
+    @hookimpl
+    def primordia_physics(self):
+        return [self.physics]
+
+
+def _run(physics, backend, tmp_path):
+    with registered(Plugin(physics)):
+        model = Model(physics=[physics.name], mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2,
+                      output={"pictures": False})
+        return model.run(backend=backend, out=tmp_path / "out")
+
+
+def _s_solve(make):
+    """TwoScalars with s's subproblem replaced by ``make(module, disc, subproblem)``."""
+    def subproblems(self):
+        return [make(self, self.disc, self.solve("s")), self.solve("r")]
+    return type("Broken", (TwoScalars,), {"name": "qa_broken", "subproblems": subproblems})
+
+
+def _residual(disc, s, test):
+    return ((s - disc.previous("s")) / disc.dt + s) * test * disc.dx
+
+
+BROKEN = {
+    "a functional": (lambda module, disc, sub: module.solve("s", _residual(disc, disc.field("s"), 1.0)),
+                     "residual must be linear in one test function of its unknown's space", "got 0 argument(s) (none)"),
+    "a bilinear residual": (lambda module, disc, sub: module.solve("s", _residual(disc, disc.trial("s"),
+                                                                                 disc.test("s"))),
+                            "residual must be linear in one test function",
+                            "got 2 argument(s) (a test function, a trial function)"),
+    "another field's test function": (lambda module, disc, sub: module.solve("s", _residual(disc, disc.field("s"),
+                                                                                           disc.test("r"))),
+                                      "residual must be linear in one test function", "another space"),
+    "the residual as jacobian": (lambda module, disc, sub: dataclasses.replace(sub, jacobian=sub.residual),
+                                 "jacobian must be linear in a test and a trial function", "got 1 argument(s)"),
+    "a jacobian by another field": (lambda module, disc, sub: dataclasses.replace(
+        sub, jacobian=ufl.derivative(sub.residual + disc.field("r") * disc.test("s") * disc.dx, disc.unknown("r"))),
+        "jacobian must be linear in a test and a trial function", "another space"),
+}
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("broken", BROKEN)
+def test_a_wrong_shaped_weak_form_is_one_line_naming_the_module(broken, backend, tmp_path):
+    make, shape, found = BROKEN[broken]
+    with pytest.raises(PluginError) as error:
+        _run(_s_solve(make), backend, tmp_path)
+    message = str(error.value)
+    assert message.startswith(f"physics qa_broken: subproblem qa_broken.s's {shape.split(' must')[0]}"), message
+    assert shape in message and found in message and "\n" not in message, message
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_well_formed_pair_runs_and_decays_as_backward_euler_says(backend, tmp_path):
+    """s^{n+1} = s^n / (1 + dt): 1 / 1.1^2 after two steps of 0.1, at every vertex, on both backends."""
+    values = _run(TwoScalars, backend, tmp_path).vertex_values()
+    for name in ("s", "r"):
+        assert abs(values[name] - 1 / 1.1**2).max() < 1e-12
