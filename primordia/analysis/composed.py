@@ -549,7 +549,52 @@ def _third_party_symbol(module, context: _Context):
     if not callable(getattr(term, "add_to", None)):
         raise ConfigError(f"physics {module.name}: fourier_symbol() must return an object with add_to(system), "
                           f"got {term!r}")
-    return term
+    return _PluginSymbol(module, term)
+
+
+class _PluginSymbol:
+    """A third party's Fourier symbol, whose ``add_to`` is the plugin's code: an exception there, an entry of
+    no order 0-2, of no unknown of the model or not finite, or a declared unknown left without a row, is one
+    line naming the module.  They were a RuntimeError, KeyError or IndexError traceback from ``add_to``, a NaN
+    refused as "not a real pencil ... without the factor i k", and a matplotlib ValueError traceback once the
+    dispersion relation of a singular pencil had been printed."""
+
+    def __init__(self, module, term):
+        self.module, self.term = module, term
+        self.unknowns = tuple(getattr(term, "unknowns", ()))
+
+    def add_to(self, system: FourierSystem) -> None:
+        from primordia.physics.base import module_code
+
+        with module_code(self.module, "fourier_symbol's add_to"):
+            self.term.add_to(_CheckedSystem(system, self.module.name))
+        for name in self.unknowns:
+            row = system.names.index(name) if name in system.names else None
+            if row is not None and not any(np.any(M[..., row, :] != 0) for M in system.M):
+                raise ConfigError(f"physics {self.module.name}: its Fourier symbol declares the unknown {name!r} "
+                                  f"but adds no term to its row (system.add(order, {name!r}, column, value))")
+
+
+class _CheckedSystem:
+    """The :class:`FourierSystem` as a third party's ``add_to`` sees it: ``add`` checks each entry."""
+
+    def __init__(self, system: FourierSystem, module: str):
+        self._system, self._module = system, module
+
+    def __getattr__(self, name):
+        return getattr(self._system, name)
+
+    def add(self, order: int, row: str, column: str, value) -> None:
+        where = f"physics {self._module}: its Fourier symbol"
+        if order not in (0, 1, 2):
+            raise ConfigError(f"{where} adds a term of order {order!r} (the power of phi: 0, 1 or 2)")
+        for which, name in (("row", row), ("column", column)):
+            if name not in self._system.names:
+                raise ConfigError(f"{where} adds to the {which} {name!r}, no unknown of this model (its unknowns: "
+                                  f"{', '.join(self._system.names)}; the module's own go in its unknowns)")
+        if not np.all(np.isfinite(value)):
+            raise ConfigError(f"{where} adds a value that is not finite at ({row}, {column}), order {order}")
+        self._system.add(order, row, column, value)
 
 
 def _new_unknowns(module, term, taken: tuple[str, ...]) -> tuple[str, ...]:
