@@ -52,7 +52,15 @@ def primordia_physics() -> list[type]:
     """Physics modules (subclasses of ``primordia.physics.base.Physics``).
 
     Returns a list of classes; each has a unique ``name`` used in a config's
-    ``[model] physics = [...]`` list.
+    ``[model] physics = [...]`` list.  A module owning fields implements ``fields``,
+    ``setup(disc)``, ``initialise(disc)`` and ``subproblems()``: each ``Subproblem``'s
+    residual is linear in one test function of its unknown's space (``disc.test``
+    of a field it solves for) and its Jacobian is ``ufl.derivative(residual,
+    unknown)``.  A module that only couples subclasses ``Coupling`` and adds terms
+    to other modules' balance laws with ``disc.contribute``.  What either reads
+    from another module goes in ``requires``; ``fourier_symbol`` gives its part of
+    ``primordia stability``.  A third party's exception or wrong-shaped answer is
+    refused in one line naming the module.
     """
 
 
@@ -99,7 +107,16 @@ def primordia_backends() -> list:
 
 @hookspec
 def primordia_splitting_schemes() -> list[type]:
-    """Operator-splitting schemes (subclasses of ``primordia.coupling.splitting.SplittingScheme``)."""
+    """Operator-splitting schemes (subclasses of ``primordia.coupling.splitting.SplittingScheme``).
+
+    Returns a list of classes; each has a unique ``name`` selected by ``[coupling]
+    scheme = "..."``, and ``options`` (keys of ``[coupling]``, with defaults;
+    ``self.settings`` holds a run's).  ``advance(sim, t0, dt)`` advances every field
+    from ``t0`` to ``t0 + dt`` through ``sim.advance(flow, t0, duration,
+    inner_steps)`` on the sub-flows ``self.flows`` (one per module, in model order,
+    set by ``build``) and returns the solve statistics by subproblem, summed with
+    ``primordia.coupling.solvers.accumulate`` where a flow runs more than once.
+    """
 
 
 @hookspec
