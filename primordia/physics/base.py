@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -32,7 +33,7 @@ import ufl
 from ufl.algorithms import expand_derivatives
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import PluginError, third_party_code
+from primordia.core.errors import ConfigError, PluginError, third_party_code
 from primordia.core.parameters import Parameter
 
 if TYPE_CHECKING:
@@ -261,7 +262,6 @@ class Physics(Configured, ABC):
         """
         if "boundary" not in self.options:
             return
-        from primordia.core.errors import ConfigError
         from primordia.physics.boundary_conditions import conditions_from_config
 
         own = [spec.name for spec in self.fields()]
@@ -313,13 +313,30 @@ class Coupling(Physics):
         return []
 
 
+@contextmanager
 def module_code(module: Physics, method: str):
     """Run ``method`` of a physics module: a third party's bug in it (any exception but primordia's own
     one-line errors) is one line naming the module, the method and where in the plugin's files it
     happened (:func:`~primordia.core.errors.third_party_code`), not a traceback.  primordia's own modules
-    are left alone: their bugs are primordia's and keep their tracebacks."""
+    are left alone: their bugs are primordia's and keep their tracebacks.
+
+    A :class:`ConfigError` the discretisation raises while a third party's module builds its forms names
+    the module too: "field 'zz' is required but no physics module of this model provides it" did not say
+    which of the model's plugins read it.
+    """
     cls = type(module)
-    return third_party_code(f"physics {module.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls)
+    try:
+        with third_party_code(f"physics {module.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls):
+            yield
+    except ConfigError as error:
+        if (cls.__module__.startswith("primordia.") or method not in _BUILDING_FORMS
+                or f"physics {module.name}" in str(error)):
+            raise
+        raise ConfigError(f"physics {module.name}: {method}: {error}") from error
+
+
+#: The methods where a module reads the discretisation: a ConfigError there is about what it asked for.
+_BUILDING_FORMS = ("setup", "initialise", "subproblems", "initial_subproblems", "before_step", "diagnostics")
 
 
 def fields_of(module: Physics) -> list[FieldSpec]:

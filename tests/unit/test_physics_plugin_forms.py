@@ -112,3 +112,16 @@ def test_the_well_formed_pair_runs_and_decays_as_backward_euler_says(backend, tm
     values = _run(TwoScalars, backend, tmp_path).vertex_values()
     for name in ("s", "r"):
         assert abs(values[name] - 1 / 1.1**2).max() < 1e-12
+
+
+def test_a_field_no_module_provides_names_the_module_that_read_it(tmp_path):
+    """A module reading a field it did not declare in ``requires``: the line named the field only, not which
+    of the model's plugins asked for it."""
+    from primordia.core.errors import ConfigError
+
+    reader = _s_solve(lambda module, disc, sub: module.solve("s", _residual(disc, disc.field("s") + disc.field("zz"),
+                                                                              disc.test("s"))))
+    with pytest.raises(ConfigError) as error:
+        _run(reader, "skfem", tmp_path)
+    assert str(error.value).startswith("physics qa_broken: subproblems: field 'zz' is required but no physics "
+                                       "module of this model provides it"), str(error.value)
