@@ -39,16 +39,22 @@ BACKENDS = ("fenicsx", "skfem")
 
 @contextlib.contextmanager
 def registered(*plugins, name: str = "primordia.testing"):
-    """Register plugin objects (modules or instances with ``@hookimpl`` methods) for the block."""
+    """Register plugin objects (modules or instances with ``@hookimpl`` methods) for the block.
+
+    A piece of theirs whose name another plugin already has (an installed version of the plugin under test) is
+    a :class:`~primordia.core.errors.PluginError` when the pieces are looked up, not a skipped piece.
+    """
     from primordia.core.plugins import get_plugin_manager
 
     pm = get_plugin_manager()
     names = [pm.register(plugin, name=f"{name}.{index}") for index, plugin in enumerate(plugins)]
+    pm.load_report.placed.update(names)  # a name an installed plugin has is an error, not the installed piece
     try:
         yield pm
     finally:
         for registered_name in names:
             pm.unregister(name=registered_name)
+            pm.load_report.placed.discard(registered_name)
 
 
 def run_on_backends(model_factory: Callable[[], object], out_dir: str | Path,

@@ -108,6 +108,9 @@ class LoadReport:
     broken: dict[str, list[str]] = field(default_factory=dict)  # plugin name -> what is wrong with it
     skipped: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, piece name) -> why it was skipped
     asked: set[str] = field(default_factory=set)  # plugins named in PRIMORDIA_PLUGINS: their failures stop the program
+    #: plugins a test put in for a block (primordia.testing.registered): a name of theirs already taken stops the
+    #: program, since the test would otherwise run the piece that holds it (an installed older version) unawares
+    placed: set[str] = field(default_factory=set)
 
     def report(self, plugin: str, message: str) -> None:
         """Record (and warn, the first time) that ``plugin`` is broken."""
@@ -289,7 +292,8 @@ def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
     if pieces is None:
         return {}
     problem = _junk(kind, pieces, taken)
-    if problem and plugin in pm.load_report.asked:
+    reused = problem is not None and problem.startswith("reuses the name")
+    if problem and (plugin in pm.load_report.asked or (reused and plugin in pm.load_report.placed)):
         raise PluginError(f"{where} {problem}")
     if problem:
         message = f"{where} {problem}; its {kind.replace('_', ' ')} are skipped"
