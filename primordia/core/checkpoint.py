@@ -33,9 +33,21 @@ def write(path: str | Path, tree: dict) -> Path:
     arrays: dict[str, np.ndarray] = {}
     meta = json.dumps({"format": FORMAT, "tree": _flatten(tree, arrays)}, default=_json_scalar)
     with atomic_path(path) as temporary:
-        with open(temporary, "wb") as stream:
-            np.savez(stream, meta=np.array(meta), **arrays)
+        _savez(temporary, {"meta": np.array(meta), **arrays})
     return Path(path)
+
+
+def _savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """``numpy.savez(path, **arrays)``, with the archive closed when a write fails.
+
+    numpy 1.26's savez leaves its ZipFile open when a write raises (a full disk): the archive was closed
+    later, by the garbage collector, after its file, and printed "Exception ignored in: ZipFile.__del__ ...
+    ValueError: seek of closed file", a traceback, into the run's one-line report of the full disk.
+    """
+    with zipfile.ZipFile(path, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as archive:
+        for key, value in arrays.items():
+            with archive.open(f"{key}.npy", "w", force_zip64=True) as member:  # numpy's own layout
+                np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
 
 
 def read(path: str | Path) -> dict:

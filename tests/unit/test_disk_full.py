@@ -49,3 +49,34 @@ def test_a_fields_series_on_a_full_disk_fails_with_an_error_and_keeps_its_times(
     for t, m in zip(times, values):
         np.testing.assert_array_equal(m, t)
     assert not list((copy / "run").rglob(".*tmp-*")), "a failed write left its temporary file"
+
+
+#: A checkpoint that fits, then one that does not: the first must stay, and the failure be the only word.
+CHECKPOINT_UNTIL_FULL = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from primordia.core import checkpoint
+    path = sys.argv[1] + "/checkpoint.npz"
+    checkpoint.write(path, {"time": 1.5, "fields": {"m": np.arange(1000.0)}})
+    try:
+        checkpoint.write(path, {"time": 2.0, "fields": {"m": np.arange(100_000.0)}})
+    except Exception as error:
+        print(f"second checkpoint: {error}")
+        sys.exit(3)
+""")
+
+
+def test_a_checkpoint_that_fills_the_disk_keeps_the_previous_one_and_prints_nothing_else(tmp_path):
+    """numpy's savez left its archive open when a write failed; the garbage collector closed it after its
+    file and printed 'Exception ignored in: ZipFile.__del__' and a traceback beside the run's warning."""
+    from primordia.core import checkpoint
+
+    disk, copy = tmp_path / "disk", tmp_path / "copy"
+    result = on_a_small_disk(200, disk, copy, [sys.executable, "-c", CHECKPOINT_UNTIL_FULL, str(disk)])
+    assert result.returncode == 3, (result.returncode, result.stdout, result.stderr[-2000:])
+    assert "o space left on device" in result.stdout, result.stdout
+    assert result.stderr == "", result.stderr
+    tree = checkpoint.read(copy / "checkpoint.npz")
+    assert tree["time"] == 1.5
+    np.testing.assert_array_equal(tree["fields"]["m"], np.arange(1000.0))
+    assert [path.name for path in copy.iterdir()] == ["checkpoint.npz"]
