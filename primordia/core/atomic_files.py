@@ -12,18 +12,44 @@ its temporary file and leaves the previous file untouched.
 * :func:`atomic_path` -- a temporary path for any library that writes by file name;
 * :func:`atomic_write_text`, :func:`atomic_write_bytes` -- text and bytes;
 * :func:`writable_target`, :func:`make_directory` -- one clear error for a path that
-  cannot be written.
+  cannot be written;
+* :class:`StorageError` -- a write its file system refused (full, over quota, read-only, failing):
+  ``cannot write PATH: no space left on device``.  No later write there can succeed, so a run
+  stops on it (:mod:`primordia.coupling.orchestrator`) where it disables an output that fails otherwise.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import secrets
 from collections.abc import Iterator
 from pathlib import Path
 
 from primordia.core.errors import PrimordiaError
+
+#: What a file system answers a write with when it takes no more: full, over quota, read-only, failing.
+STORAGE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO})
+
+
+class StorageError(PrimordiaError):
+    """A file could not be written because its file system takes no more (:data:`STORAGE_ERRNOS`)."""
+
+
+def storage_error(path: str | Path, error: BaseException, doing: str = "write") -> StorageError | None:
+    """``cannot write PATH: no space left on device`` when ``error`` (or what it was raised from, as libraries
+    re-raise) is a write its file system refused; None for any other error.  ``doing``: what could not be done."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        seen.add(id(error))
+        if isinstance(error, StorageError):
+            return error
+        if isinstance(error, OSError) and error.errno in STORAGE_ERRNOS:
+            reason = os.strerror(error.errno)
+            return StorageError(f"cannot {doing} {path}: {reason[:1].lower()}{reason[1:]}")
+        error = error.__cause__ or error.__context__
+    return None
 
 
 @contextlib.contextmanager
@@ -33,7 +59,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     The temporary name keeps the suffix of ``path`` (libraries that choose a
     format by extension still work) and starts with a dot.  If the block
     raises, the temporary file is removed, ``path`` is left as it was and the
-    exception propagates.  The parent directory must exist.
+    exception propagates; a write the file system refused (a full disk) as one :class:`StorageError`
+    naming ``path``, whatever library raised it.  The parent directory must exist.
     """
     path = writable_target(path)
     temporary = path.with_name(f".{path.stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
@@ -43,9 +70,12 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             raise PrimordiaError(f"cannot write {path}: nothing was written to its temporary file")
         _fsync_file(temporary)
         os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+    except BaseException as error:
+        with contextlib.suppress(OSError):  # gone, or a file system turned read-only
             temporary.unlink()
+        storage = storage_error(path, error) if isinstance(error, Exception) else None
+        if storage is not None and storage is not error:
+            raise storage from None
         raise
     _fsync_directory(path.parent)
 
@@ -71,8 +101,10 @@ def writable_target(path: str | Path) -> Path:
         raise PrimordiaError(f"cannot write {path}: it is a directory")
     if not path.parent.is_dir():
         raise PrimordiaError(f"cannot write {path}: directory {path.parent} does not exist")
-    if not os.access(path.parent, os.W_OK | os.X_OK):
-        raise PrimordiaError(f"cannot write {path}: directory {path.parent} is not writable")
+    if not os.access(path.parent, os.W_OK | os.X_OK):  # a run's folder remounted read-only mid-run, or chmod-ed
+        read_only = bool(os.statvfs(path.parent).f_flag & os.ST_RDONLY)
+        raise StorageError(f"cannot write {path}: " + ("read-only file system" if read_only
+                                                        else f"directory {path.parent} is not writable"))
     return path
 
 
@@ -107,5 +139,8 @@ def make_directory(directory: str | Path) -> Path:
     except FileExistsError:
         raise PrimordiaError(f"cannot use {directory} as an output directory: it is a file") from None
     except OSError as error:
+        storage = storage_error(directory, error, doing="create the directory")
+        if storage is not None:
+            raise storage from None
         raise PrimordiaError(f"cannot create output directory {directory}: {error.strerror}") from None
     return directory

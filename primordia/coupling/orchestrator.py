@@ -17,7 +17,8 @@ A run survives what a long run meets:
   set up with ``existing="restart"`` continues from the one in its directory, bit for bit;
 * Ctrl-C, SIGTERM and SIGUSR1 stop the run between two steps (:mod:`primordia.core.signals`),
   and ``summary.json`` always says why a run stopped;
-* an output that fails is disabled with a warning and the run goes on.
+* an output that fails is disabled with a warning and the run goes on; a file system that takes no
+  more (a full disk) stops the run in one line, its last checkpoint kept for ``--restart``.
 
 Under MPI every decision that ends or changes a step is taken by all ranks together.
 """
@@ -35,6 +36,7 @@ import numpy as np
 import ufl
 
 from primordia.core import checkpoint as checkpoint_file
+from primordia.core.atomic_files import StorageError, storage_error
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import existing_run, time_label
@@ -107,6 +109,7 @@ class Simulation:
         self._solve_seconds: dict[str, dict[str, float]] = {}
         self._first_step = 0  # the step this process started from (a restart's checkpoint)
         self._wall_after_first: float | None = None  # when this process's first step (and its outputs) ended
+        self._unwritten: str | None = None  # a write a full disk refused while the run ended (outputs' finish)
 
     def __repr__(self) -> str:
         """Where the run is: its model, backend, status, time and step, and its output folder."""
@@ -372,10 +375,18 @@ class Simulation:
             if self.is_root:
                 fields[key], layout[key] = np.concatenate(parts)[order[0]], order[1]
         physics = self.comm.gather({p.name: p.state() for p in self.model.physics_objects}, root=0)
-        self._checkpoint_step = self.step_index
         self._last_checkpoint_wall = clock.perf_counter()
-        if not self.is_root:
-            return
+        written, failure = self._write_checkpoint_file(fields, layout, physics) if self.is_root else (None, None)
+        if self.comm.size > 1:
+            written, failure = self.comm.bcast((written, failure), root=0)
+        if written:  # summary.json's checkpoint_step: it named a step whose checkpoint the full disk had refused
+            self._checkpoint_step = self.step_index
+        if failure is not None:  # a full disk: the previous checkpoint stays whole, and nothing more can be saved
+            raise StorageError(failure)
+
+    def _write_checkpoint_file(self, fields: dict, layout: dict, physics: list) -> tuple[bool, str | None]:
+        """Rank 0 writes the checkpoint: (whether it is written, why a full disk refused it); another failure
+        is warned about, and the run goes on."""
         tree = {
             "config": self.model.resolved_config(), "output_times_default": self.model.output_times_default,
             "backend": self.backend.name, "mpi_ranks": self.comm.size,
@@ -397,8 +408,12 @@ class Simulation:
             # and the run stops once the checkpoint is whole
             with INTERRUPTS.mode_of("shielded"):
                 checkpoint_file.write(self.out_dir / checkpoint_file.CHECKPOINT_FILE, tree)
-        except (OSError, PrimordiaError) as error:  # a full disk must not end the run
+        except StorageError as error:
+            return False, str(error)
+        except (OSError, PrimordiaError) as error:
             warn(f"cannot write the checkpoint at t = {self.time:g}: {error}; the run goes on without it")
+            return False, None
+        return True, None
 
     def _read_checkpoint(self) -> dict:
         tree, problem = None, None
@@ -592,15 +607,37 @@ class Simulation:
                                              f"{self.out_dir}") from None
             if not raised_by_a_signal:  # the run has stopped, as the signal asked: the failure's line says why
                 INTERRUPTS.reset()
+            if isinstance(exc, StorageError):
+                raise StorageError(self._stopped_by_storage(str(exc))) from None
             raise
         bar.close()
         with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
             # a completed run can be extended: --restart with a later t_final; a restart with no step left
             # writes one too, which counts it (and holds an output time it wrote), or the next counted from its number
-            if self._checkpoint_step != self.step_index or self.step_index == self._first_step:
-                self.write_checkpoint()
+            try:
+                if self._checkpoint_step != self.step_index or self.step_index == self._first_step:
+                    self.write_checkpoint()
+            except StorageError as exc:
+                self._finish(self._stop_status(exc))
+                raise StorageError(self._stopped_by_storage(str(exc))) from None
             self._finish("completed")
+        if self._unwritten is not None:  # the outputs' last writes did not fit: the files lack the run's end
+            self._patch_summary(self.status)  # it said "completed" when the pictures, drawn after it, did not fit
+            raise StorageError(self._stopped_by_storage(self._unwritten))
         return self
+
+    def _stopped_by_storage(self, failure: str) -> str:
+        """The one line of a run a full disk stopped: what could not be written, where the run is, how it goes on
+        (rank 0's words: the other ranks print nothing)."""
+        if not self.is_root:
+            return failure
+        try:
+            meta = checkpoint_file.read_meta(self.out_dir / checkpoint_file.CHECKPOINT_FILE)
+            how = (f"primordia run --restart {self.out_dir} continues it from its checkpoint at "
+                   f"t = {time_label(meta['run']['time'])}")
+        except (PrimordiaError, KeyError, TypeError):
+            how = "it wrote no checkpoint to continue from"
+        return f"{failure}; the run stopped at t = {time_label(self.time)} ({how})"
 
     def _snapshot(self) -> None:
         self._notify("snapshot")
@@ -629,8 +666,13 @@ class Simulation:
         if urgent_in_parallel:  # ranks may be anywhere: no collective is safe, rank 0 only patches the summary
             self._patch_summary(self._stop_status(exc))
             return
-        if self._checkpoint_step != self.step_index and (isinstance(exc, (KeyboardInterrupt, PrimordiaError))):
-            self.write_checkpoint()  # every step is whole: a failed one was undone
+        # every step is whole (a failed one was undone); a full disk keeps the last checkpoint written before it
+        if (self._checkpoint_step != self.step_index and isinstance(exc, (KeyboardInterrupt, PrimordiaError))
+                and not isinstance(exc, StorageError)):
+            try:
+                self.write_checkpoint()
+            except StorageError as error:
+                warn(f"{error}: the last checkpoint written before stays")
         self._finish(self._stop_status(exc))
 
     def _stop_status(self, exc: BaseException) -> str:
@@ -831,12 +873,18 @@ class Simulation:
         outputs = list(self.outputs)
         if moment == "finish":  # slow ones (the pictures) last, so that summary.json has the status before them
             outputs.sort(key=lambda output: bool(getattr(output, "finishes_last", False)))
-        for output in outputs:
-            self._call_output(output, moment, *args)
+        for output in outputs:  # the status an output finishes with is the run's as it is then (see _call_output)
+            self._call_output(output, moment, *((self.status,) if moment == "finish" else args))
 
     def _call_output(self, output, moment: str, *args) -> None:
-        """Call one output; one that fails (on any rank) is disabled on all, with a warning, and the run goes on."""
-        failure = None
+        """Call one output; one that fails (on any rank) is disabled on all, with a warning, and the run goes on.
+
+        A file system that takes no more (a full disk, :class:`StorageError`) stops the run instead: every later
+        write would fail as well, and the run computed on, writing nothing, to end "completed" with exit status 0
+        and its files missing their last times.  While the run ends, such a failure ends that output in silence
+        (the run's line says the disk is full); a completed run then stops with it, its summary saying so.
+        """
+        failure, storage = None, None
         try:
             getattr(output, moment)(self, *args)
         except (KeyboardInterrupt, SystemExit):
@@ -845,18 +893,27 @@ class Simulation:
             failure = (str(error).splitlines() or [""])[0] or type(error).__name__
             if not isinstance(error, PrimordiaError):
                 failure = f"{type(error).__name__}: {failure}"
+            storage = storage_error(f"a file of output '{output.name}'", error)
+            storage = None if storage is None else str(storage)
         if self.comm.size > 1:
-            failures = self.comm.allgather(failure)
-            failure = next((f for f in failures if f is not None), None)
-        if failure is not None:
+            failures = self.comm.allgather((failure, storage))
+            failure, storage = next((f for f in failures if f[1] is not None),
+                                    next((f for f in failures if f[0] is not None), (None, None)))
+        if failure is None:
+            return
+        if storage is not None and self.status == "running":  # kept: as the run stops it may fit (summary.json)
+            raise StorageError(storage)
+        self.outputs.remove(output)
+        if storage is None:
             warn(f"output '{output.name}' failed at t = {self.time:g} ({moment}): {failure}; "
                  f"it is disabled for the rest of the run")
-            self.outputs.remove(output)
+        elif self.status == "completed":
+            self._unwritten, self.status = storage, self._stop_status(StorageError(storage))
 
     def _finish(self, status: str):
         self.status = status
         self.wall_time = self._wall_time()
-        self._notify("finish", status)
+        self._notify("finish")
 
     def _wall_time(self) -> float:
         return self._wall_before + clock.perf_counter() - self.wall_start

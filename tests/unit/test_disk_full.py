@@ -2,14 +2,27 @@
 
 from __future__ import annotations
 
+import errno
+import json
+import os
+import subprocess
 import sys
 import textwrap
 
+import matplotlib.image
 import meshio
 import numpy as np
 import pytest
+import xarray as xr
 
-from small_disk import on_a_small_disk
+from primordia.core import atomic_files, checkpoint, outputs
+from primordia.core.atomic_files import StorageError
+from primordia.core.meshes import rectangle
+from primordia.model import Model
+from cli_checks import assert_one_line_error
+from run_control import EXAMPLES, command, environment
+from small_config import SMALL_CONFIG
+from small_disk import on_a_small_disk, primordia_command
 
 #: Writes 40 x 40 squares' fields (1,681 vertices, 13 kB a time) at t = 0, 1, 2, ... until a write fails.
 XDMF_UNTIL_FULL = textwrap.dedent("""
@@ -80,3 +93,202 @@ def test_a_checkpoint_that_fills_the_disk_keeps_the_previous_one_and_prints_noth
     assert tree["time"] == 1.5
     np.testing.assert_array_equal(tree["fields"]["m"], np.arange(1000.0))
     assert [path.name for path in copy.iterdir()] == ["checkpoint.npz"]
+
+
+#: The real flush of a written file (FillingDisk replaces it).
+FSYNC = atomic_files._fsync_file
+
+
+class FillingDisk:
+    """A disk that fills: every atomic write after the first ``room`` fails with ENOSPC (at its fsync, as on NFS);
+    ``room = None`` lets every write through, counting them.  ``once``: only the write at ``room`` fails (a large
+    file that did not fit; the smaller ones after it do)."""
+
+    def __init__(self, monkeypatch, room: int | None, once: bool = False):
+        self.room, self.once, self.written = room, once, 0
+
+        def filling(path):
+            self.written += 1
+            if self.room is not None and (self.written == self.room + 1 or self.written > self.room and not once):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+            FSYNC(path)
+
+        monkeypatch.setattr(atomic_files, "_fsync_file", filling)
+
+
+def small_model(t_final: float = 0.6) -> Model:
+    """4 x 4 squares, three steps, fields at 0.4 and t_final, a series row at every step, a checkpoint every second."""
+    return Model(physics=["chemotaxis"], parameters={"m0": 0.75}, mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4)),
+                 dt=0.2, t_final=t_final, output={"pictures": False, "times": [0.4, t_final], "series_every": 1},
+                 checkpoint={"every_steps": 2, "every_minutes": 0})
+
+
+def every_row_written(monkeypatch):
+    """series.nc and summary.json rewritten at every row: the same writes in every run, however fast it goes."""
+    monkeypatch.setattr(outputs, "SERIES_INTERVAL", 0.0)
+    monkeypatch.setattr(outputs, "SUMMARY_INTERVAL", 0.0)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The run no disk stops: its series, and how many files it writes (atomically) in all."""
+    out = tmp_path_factory.mktemp("uninterrupted")
+    monkeypatch = pytest.MonkeyPatch()
+    every_row_written(monkeypatch)
+    disk = FillingDisk(monkeypatch, None)
+    try:
+        small_model().run(out=out)
+    finally:
+        monkeypatch.undo()
+    with xr.open_dataset(out / "series.nc") as series:
+        return series.load(), disk.written
+
+
+def assert_whole(out):
+    """Every file the run left reads: what was written before the disk filled stays whole."""
+    assert not list(out.rglob(".*tmp-*")), "a failed write left its temporary file"
+    if (out / "series.nc").exists():
+        with xr.open_dataset(out / "series.nc") as series:
+            assert np.all(np.diff(series.time.values) > 0)
+    if (out / "summary.json").exists():
+        json.loads((out / "summary.json").read_text())
+    if (out / "fields.xdmf").exists():
+        with meshio.xdmf.TimeSeriesReader(out / "fields.xdmf") as reader:
+            reader.read_points_cells()
+            for k in range(reader.num_steps):
+                reader.read_data(k)
+    if (out / "checkpoint.npz").exists():
+        checkpoint.read(out / "checkpoint.npz")
+    for picture in out.glob("*.png"):
+        matplotlib.image.imread(picture)
+
+
+@pytest.mark.parametrize("once", [False, True], ids=["full", "one-file-too-large"])
+def test_a_run_whose_disk_fills_stops_in_one_line_and_continues_once_there_is_room(tmp_path, monkeypatch,
+                                                                                   uninterrupted, once):
+    """Whichever write the disk refuses first, the run stops there with one StorageError naming the file; until
+    2026-12-05 the output was disabled with a warning (the checkpoint skipped) and the run computed on, writing
+    nothing, to end "completed" with exit status 0 (example 1a at 20 x 20 into a 40 kB tmpfs: series.nc of one
+    row, no checkpoint).  Its files stay whole, and a restart once there is room ends as the run that no disk
+    stopped (the checkpoints at the same steps: bit for bit)."""
+    reference, writes = uninterrupted
+    every_row_written(monkeypatch)
+    assert writes >= 15, writes  # config, mesh, 2 field times (4 files), 4 series rows and summaries, 2 checkpoints
+    restarted = []
+    for room in range(0, writes, 3 if once else 1):  # a third of them: what a full disk adds is the summary's word
+        out = tmp_path / f"room{room}"
+        disk = FillingDisk(monkeypatch, room, once)
+        with pytest.raises(StorageError, match=f"cannot write {out}/.*: no space left on device") as stopped:
+            small_model().run(out=out)
+        assert "\n" not in str(stopped.value)
+        assert_whole(out)
+        if not (out / "checkpoint.npz").exists():
+            assert "it wrote no checkpoint to continue from" in str(stopped.value) or "stopped at" not in str(
+                stopped.value), stopped.value
+            continue
+        summary = json.loads((out / "summary.json").read_text())
+        if once:  # a full disk takes no summary either: it says "running", and a restart goes on all the same
+            assert summary["status"] == f"stopped at t = {summary['time']:g}: {str(stopped.value).split(';')[0]}"
+            continue  # the restart is the full disk's
+        assert f"primordia run --restart {out} continues it from its checkpoint at t = " in str(stopped.value)
+        disk.room = None  # space freed
+        small_model().run(out=out, restart=True)
+        restarted.append(room)
+        with xr.open_dataset(out / "series.nc") as series:
+            np.testing.assert_array_equal(series.time.values, reference.time.values)
+            for name in ("m_integral", "m_min", "m_max", "f_integral"):
+                np.testing.assert_array_equal(series[name].values, reference[name].values, err_msg=name)
+        assert json.loads((out / "summary.json").read_text())["status"] == "completed"
+    assert once or len(restarted) >= 3, restarted  # the rooms that stop after a checkpoint, and continue
+
+
+#: A small run that writes every kind of file: 8 x 8 squares, five steps, pictures at 0.4 and 1, checkpoints.
+PICTURED = SMALL_CONFIG.replace("pictures = false\n", "times = [0.4, 1.0]\nseries_every = 1\n") + """
+[checkpoint]
+every_steps = 2
+"""
+
+
+#: kB of disk -> the file that no longer fits (measured 2026-12-05: 4 series.nc at the start, 48 the first picture,
+#: 200 the second checkpoint, 260 the pictures' grid at the end): any of them is one line and whole files
+@pytest.mark.parametrize("ranks, kilobytes", [(1, 4), (1, 48), (1, 260), (2, 200)])
+def test_primordia_run_on_a_full_disk_says_so_in_one_line_and_exits_with_status_2(tmp_path, ranks, kilobytes):
+    config = tmp_path / "small.toml"
+    config.write_text(PICTURED)
+    disk, copy = tmp_path / "disk", tmp_path / "copy"
+    result = on_a_small_disk(kilobytes, disk, copy, command("run", config, "--out", disk / "run", "--no-progress",
+                                                            ranks=ranks), env=environment())
+    assert result.returncode != 0, result.stderr
+    ours = [line for line in result.stderr.splitlines() if line.startswith("primordia")]
+    assert len(ours) == 1 and ours[0].startswith(f"primordia: error: cannot write {disk / 'run'}/"), result.stderr
+    assert ours[0].split(": ")[3].startswith("no space left on device"), ours[0]
+    assert "Traceback" not in result.stderr and "Exception ignored" not in result.stderr, result.stderr
+    if ranks == 1:
+        assert result.returncode == 2 and result.stderr.splitlines() == ours, result.stderr
+    assert_whole(copy / "run")
+
+
+@pytest.mark.parametrize("code, reason", [(errno.ENOSPC, "no space left on device"),
+                                          (errno.EDQUOT, "disk quota exceeded"),
+                                          (errno.EROFS, "read-only file system")])
+def test_a_write_the_file_system_refuses_is_one_storage_error_naming_the_file(tmp_path, code, reason):
+    """Whatever library wrote (and however it re-raised the OSError), and the previous file stays."""
+    path = tmp_path / "series.nc"
+    path.write_text("the previous, whole file")
+    with pytest.raises(StorageError) as refused:
+        with atomic_files.atomic_path(path) as temporary:
+            temporary.write_text("half a")
+            try:
+                raise OSError(code, os.strerror(code))
+            except OSError as error:
+                raise RuntimeError("a library's own words") from error
+    assert str(refused.value) == f"cannot write {path}: {reason}"
+    assert path.read_text() == "the previous, whole file" and list(tmp_path.iterdir()) == [path]
+
+
+def test_a_folder_turned_read_only_is_a_storage_error(tmp_path, monkeypatch):
+    """A run's folder remounted read-only mid-run (as a failing disk is): os.access says no, even to root, and the
+    output was disabled with "directory ... is not writable" while the run went on to end "completed"."""
+    monkeypatch.setattr(atomic_files.os, "access", lambda path, mode: False)
+    monkeypatch.setattr(atomic_files.os, "statvfs", lambda path: os.statvfs_result((0,) * 8 + (os.ST_RDONLY, 255)))
+    with pytest.raises(StorageError, match=f"cannot write {tmp_path / 'summary.json'}: read-only file system$"):
+        atomic_files.atomic_write_text(tmp_path / "summary.json", "{}")
+
+
+def test_an_output_that_fails_otherwise_is_still_disabled_and_the_run_goes_on(tmp_path, monkeypatch):
+    """Only a file system that takes no more stops a run: a picture that cannot be drawn does not."""
+    def broken(*args, **kwargs):
+        raise ValueError("a drawing bug")
+
+    monkeypatch.setattr(outputs, "plot_field", broken)
+    model = Model(physics=["chemotaxis"], parameters={"m0": 0.75}, mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4)),
+                  dt=0.2, t_final=0.4, output={"times": [0.4]})
+    sim = model.run(out=tmp_path / "run")
+    assert sim.status == "completed" and "pictures" not in [output.name for output in sim.outputs]
+
+
+def test_primordia_stability_on_a_full_disk_says_so_in_one_line(tmp_path):
+    """Until 2026-12-05 a traceback ending in "OSError: [Errno 28] No space left on device", exit status 1."""
+    disk, copy = tmp_path / "disk", tmp_path / "copy"
+    result = on_a_small_disk(60, disk, copy, [*primordia_command(), "stability", str(EXAMPLES / "ex01a.toml"),
+                                              "--out", str(disk / "stability")])
+    assert_one_line_error(result, f"cannot write {disk / 'stability'}/dispersion.png: no space left on device")
+    with xr.open_dataset(copy / "stability" / "dispersion.nc") as written_before:  # whole
+        assert written_before.sizes
+
+
+def test_primordia_analyse_on_a_full_disk_says_so_in_one_line(tmp_path, small_config):
+    """Until 2026-12-05 a traceback ending in "OSError: [Errno 28] No space left on device", exit status 1."""
+    config = small_config(PICTURED.replace("times = [0.4, 1.0]", "times = [1.0]"))
+    ran = subprocess.run([*primordia_command(), "run", str(config), "--out", str(tmp_path / "run"), "--no-progress",
+                          "--set", "output.pictures=false"], capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    (tmp_path / "run" / "checkpoint.npz").unlink()  # analyse reads the fields: a smaller disk fills sooner
+    disk, copy = tmp_path / "disk", tmp_path / "copy"
+    copied = f'cp -a "{tmp_path / "run"}" "{disk}/run" && exec "$@"'  # the run's files: 40 of the 72 kB
+    result = on_a_small_disk(72, disk, copy, ["sh", "-c", copied, "sh", *primordia_command(), "analyse",
+                                              str(disk / "run"), "--species", "m"])
+    assert_one_line_error(result, f"cannot write {disk / 'run'}/metrics_m.png: no space left on device")
+    assert not list((copy / "run").glob(".*tmp-*"))
+    with xr.open_dataset(copy / "run" / "metrics.nc") as written_before:  # whole
+        assert written_before.sizes
