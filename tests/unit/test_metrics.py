@@ -196,9 +196,11 @@ def test_run_directory_in_reference_and_current_configuration(tmp_path):
     # units a tool can read (UDUNITS), and the series' own for the time: "2 pi / length" and "dimensionless
     # (seed scaling)" were neither
     assert saved["wavenumber"].attrs["units"] == "1" and saved["time"].attrs["units"] == "dimensionless"
-    # the lengths and areas had none
+    # the lengths and areas had none, and until 2026-12-05 neither had the spectrum and the linear analysis's mode
     assert all(saved[name].attrs["units"] == "1" for name in ("dominant_wavelength", "spacing_mean", "spot_x",
-                                                             "spot_area", "spot_count"))
+                                                             "spot_area", "spot_count", "power_spectrum",
+                                                             "predicted_wavenumber", "predicted_wavelength",
+                                                             "predicted_growth_rate"))
     count = int(saved["spot_count"].sel(species="m", time=20.0, configuration="reference"))
     assert count > 20
     assert np.isfinite(saved["spot_x"].sel(species="m", time=20.0, configuration="reference").values).sum() == count

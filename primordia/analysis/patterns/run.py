@@ -285,11 +285,16 @@ def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predict
                        ("spot_area", "area of the spot above the level")):
         ds[name] = (dims + ("spot",), spot_arrays[name], {"long_name": text + " (NaN past spot_count)",
                                                           "units": METRIC_UNITS[name]})
+    # the fields, lengths and times are the seed's dimensionless ones: the spectrum (the field's units squared: its
+    # sum over the k plane is the field's windowed variance) and the linear analysis's k, wavelength and rate too
     ds["power_spectrum"] = (dims + ("wavenumber",), spectrum, {
-        "long_name": "radially averaged power spectrum of the field minus its mean (Hann window)"})
-    ds["predicted_wavenumber"] = ((), predicted.k_max, {"long_name": "linear analysis: fastest stationary k"})
-    ds["predicted_wavelength"] = ((), predicted.wavelength, {"long_name": "linear analysis: 2 pi / k_max"})
-    ds["predicted_growth_rate"] = ((), predicted.rate, {"long_name": "linear analysis: Re phi at k_max"})
+        "long_name": "radially averaged power spectrum of the field minus its mean (Hann window)", "units": "1"})
+    ds["predicted_wavenumber"] = ((), predicted.k_max, {"long_name": "linear analysis: fastest stationary k",
+                                                        "units": "1"})
+    ds["predicted_wavelength"] = ((), predicted.wavelength, {"long_name": "linear analysis: 2 pi / k_max",
+                                                             "units": "1"})
+    ds["predicted_growth_rate"] = ((), predicted.rate, {"long_name": "linear analysis: Re phi at k_max (per unit of "
+                                                        "time)", "units": "1"})
     ds.attrs.update({"title": f"primordia pattern metrics of {run.directory}", "run_status": run.status,
                      "surface": run.surface,
                      "linear_analysis": predicted.note,
