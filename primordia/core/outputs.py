@@ -53,7 +53,9 @@ class OutputOption:
     ``check(value, "output.KEY")`` returns the value to use or raises one
     :class:`~primordia.core.errors.ConfigError` naming the key; the checks of
     :mod:`primordia.core.validation` fit as they are (``flag``) or with their bounds
-    (``partial(number, at_least=0)``).  The default is used as it is, unchecked.
+    (``partial(number, at_least=0)``).  The default is used as it is, and must pass the
+    check (:func:`declared_options` refuses the output otherwise, as a plugin's bug), except
+    ``None`` for an option that ``names_fields``.
     """
 
     default: Any
@@ -461,8 +463,9 @@ def primordia_outputs():
 def declared_options(outputs: Iterable[type[Output]], reserved: Iterable[str] = ()) -> dict[str, OutputOption]:
     """Every ``[output]`` key the ``outputs`` declare; a key declared by two of them is one ConfigError.
 
-    An output whose options are not a table of :class:`OutputOption`, or that declares one of the ``reserved``
-    keys (the schedule's, which the model checks itself), is one :class:`PluginError` naming it.
+    An output whose options are not a table of :class:`OutputOption`, that declares one of the ``reserved``
+    keys (the schedule's, which the model checks itself) or a default its own check refuses, is one
+    :class:`PluginError` naming it.
     """
     declared: dict[str, OutputOption] = {}
     owner: dict[str, str] = {}
@@ -479,6 +482,12 @@ def declared_options(outputs: Iterable[type[Output]], reserved: Iterable[str] = 
             if key in owner:
                 raise ConfigError(f"output option {key!r} is declared by two outputs, {owner[key]!r} and "
                                   f"{output.name!r}: one of them must rename it")
+            if not (option.names_fields and option.default is None):
+                try:  # a default its own check refuses reached the output as it was (a plugin's -1 scale)
+                    option.check(option.default, f"output.{key}")
+                except ConfigError as error:
+                    raise PluginError(f"output {output.name} declares output.{key} with the default "
+                                      f"{option.default!r}, not a valid value of it: {error}") from None
             declared[key], owner[key] = option, output.name
     return declared
 

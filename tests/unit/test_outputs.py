@@ -22,6 +22,7 @@ from primordia.core.outputs import (
     ScalarSeriesNetcdf,
     Summary,
     declared_options,
+    field_names,
 )
 from primordia.core.plugins import hookimpl
 from primordia.core.validation import flag, number
@@ -114,6 +115,13 @@ def test_a_key_two_outputs_declare_is_refused():
                                        "(series_every, times): it must rename its option"),
     ({"size": 5}, "output thumbnails: its options must be a table of primordia.core.outputs.OutputOption, "
                   "got {'size': 5}"),
+    # until 2026-12-05 the output was handed the default its own check refuses
+    ({"size": OutputOption(-1.0, partial(number, at_least=0))},
+     "output thumbnails declares output.size with the default -1.0, not a valid value of it: output.size must be "
+     "a number >= 0, got -1.0"),
+    ({"thumbnail_fields": OutputOption("m", field_names, names_fields=True)},
+     "output thumbnails declares output.thumbnail_fields with the default 'm', not a valid value of it: "
+     "output.thumbnail_fields must be a list of field names, got 'm'"),
 ])
 def test_an_output_declaring_options_wrongly_is_one_line_naming_it(options, message):
     """Before, a key of the schedule was checked by the output's check ("output.times must be true or false,
