@@ -346,11 +346,14 @@ def picture_time(t: float, times: Iterable[float]) -> str:
     """``t`` as the snapshot pictures' file names write it: ``0160.00``, with more decimals when the output
     times need them (dt = 0.001: ``0000.001``), so that no two output times share a file, and more digits
     before the point when the largest needs them (``05000.00``, ``20000.00``), so that the names sort in time
-    order (four digits for every time wrote ``5000.00`` after ``20000.00``)."""
+    order (four digits for every time wrote ``5000.00`` after ``20000.00``).  A time before 0 has its sign
+    before as many digits (``-0000.50`` beside ``0000.50``; the sign took a digit: ``-000.50``); such names sort
+    before the others, but among themselves from the latest (``-0000.50`` before ``-0001.00``), as any name
+    that writes the time does."""
     every = tuple(sorted({float(time) for time in (*times, t)}))
     decimals = _picture_decimals(every)
     digits = max(4, *(len(f"{abs(time):.{decimals}f}".partition(".")[0]) for time in (every[0], every[-1])))
-    return f"{t:0{digits + 1 + decimals}.{decimals}f}"
+    return ("-" if t < 0 else "") + f"{abs(t):0{digits + 1 + decimals}.{decimals}f}"
 
 
 @functools.lru_cache(maxsize=8)
