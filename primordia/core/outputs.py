@@ -172,7 +172,8 @@ class ScalarSeriesNetcdf(Output):
         about = {"title": f"primordia scalar series of {model} ({run.out_dir.name})",
                  "source": f"primordia {__version__}, backend {run.backend.name}, {run.comm.size} MPI rank(s), "
                            f"splitting scheme {run.scheme.name}",
-                 "references": "the run's configuration: config.toml beside this file"}
+                 "references": "the run's configuration: config.toml beside this file",
+                 "Conventions": "CF-1.8"}  # its units are UDUNITS-2's (SERIES_OWN), its attributes CF's
         return ScalarSeries(run.out_dir / "series.nc", min_interval=SERIES_INTERVAL, global_attrs=about)
 
     def record(self, run):
@@ -209,10 +210,12 @@ class ScalarSeriesNetcdf(Output):
 
 
 #: (long_name, units) of the series' time and of the rejected sub-steps' variables (along ``rejection``).
-SERIES_OWN = {"time": ("time (dimensionless, seed section 2)", "dimensionless"),
+#: Units are UDUNITS-2's, as CF asks: "1" for the seed's dimensionless times and counts (UDUNITS knows no
+#: "dimensionless": ``udunits2 -H dimensionless`` answers 'Don't recognize "dimensionless"').
+SERIES_OWN = {"time": ("time (dimensionless, seed section 2)", "1"),
               "step": ("time steps taken", "1"),
-              "rejection_time": ("the start of a rejected sub-step", "dimensionless"),
-              "rejection_dt": ("the length of a rejected sub-step", "dimensionless"),
+              "rejection_time": ("the start of a rejected sub-step", "1"),
+              "rejection_dt": ("the length of a rejected sub-step", "1"),
               "rejection_reason": ("why the sub-step was rejected", None)}
 
 

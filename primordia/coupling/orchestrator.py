@@ -54,11 +54,12 @@ from primordia.physics.discretisation import Discretisation
 NEGATIVE_TOLERANCE = 1e-8
 
 #: (long_name, units) of :meth:`Simulation.step_sizes`' keys.
-STEP_SIZES = {"dt": ("the last sub-step's length", "dimensionless"),
+STEP_SIZES = {"dt": ("the last sub-step's length", "1"),  # the seed's dimensionless time (UDUNITS: "1")
               "rejections": ("rejected sub-steps so far (adaptive steps)", "1")}
 #: (long_name, units) of :meth:`Simulation.memory_use`'s keys.
-MEMORY_USE = {"memory_mb": ("resident memory, summed over the ranks", "MB"),
-              "peak_memory_mb": ("peak resident memory so far, summed over the ranks", "MB")}
+#: MB here are MiB (/proc's kB / 1024), which UDUNITS-2 writes "1048576 byte" (it knows neither "MB" nor "MiB").
+MEMORY_USE = {"memory_mb": ("resident memory, summed over the ranks (MiB)", "1048576 byte"),
+              "peak_memory_mb": ("peak resident memory so far, summed over the ranks (MiB)", "1048576 byte")}
 
 
 class Simulation:

@@ -195,7 +195,7 @@ def test_run_directory_in_reference_and_current_configuration(tmp_path):
     saved = xr.open_dataset(tmp_path / "metrics.nc")
     # units a tool can read (UDUNITS), and the series' own for the time: "2 pi / length" and "dimensionless
     # (seed scaling)" were neither
-    assert saved["wavenumber"].attrs["units"] == "1" and saved["time"].attrs["units"] == "dimensionless"
+    assert saved["wavenumber"].attrs["units"] == "1" and saved["time"].attrs["units"] == "1"  # "dimensionless" was not
     # the lengths and areas had none, and until 2026-12-05 neither had the spectrum and the linear analysis's mode
     assert all(saved[name].attrs["units"] == "1" for name in ("dominant_wavelength", "spacing_mean", "spot_x",
                                                              "spot_area", "spot_count", "power_spectrum",

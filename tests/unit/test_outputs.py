@@ -211,9 +211,9 @@ class StandInRun:
 
     def series_descriptions(self):
         return {"newton_iterations": ("Newton iterations in the last step", "1"),
-                "dt": ("the last sub-step's length", "dimensionless"),
-                "memory_mb": ("resident memory, summed over the ranks", "MB"),
-                "peak_memory_mb": ("peak resident memory so far, summed over the ranks", "MB")}
+                "dt": ("the last sub-step's length", "1"),
+                "memory_mb": ("resident memory, summed over the ranks (MiB)", "1048576 byte"),
+                "peak_memory_mb": ("peak resident memory so far, summed over the ranks (MiB)", "1048576 byte")}
 
     def summary(self, status):
         return {"status": status, "steps": self.step_index, "time": self.time}
@@ -232,6 +232,8 @@ def test_the_scalar_series_has_a_row_per_record_and_continues_from_a_state(tmp_p
         np.testing.assert_allclose(data["time"], [0.0, 0.2, 0.4])
         assert data.attrs["title"] == f"primordia scalar series of model 'stand-in' ({tmp_path.name})"
         assert data.attrs["source"].endswith("backend none, 1 MPI rank(s), splitting scheme sequential")
+        # CF-1.8, whose units are UDUNITS-2's: "dimensionless" (the time's until 2026-12-05) is not one
+        assert data.attrs["Conventions"] == "CF-1.8" and data["time"].attrs["units"] == "1"
         np.testing.assert_allclose(data["m_integral"], [0.0, 3.2, 6.4])
         np.testing.assert_allclose(data["memory_mb"], [100.0, 101.0, 102.0])
     resumed = ScalarSeriesNetcdf()
