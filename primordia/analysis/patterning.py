@@ -223,7 +223,8 @@ def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 
         any_growth[i] = max_growth_of_kind(rates, "any").max(axis=-1)
 
     dims = (x.name, y.name)
-    flag = {"flag_values": "0 1", "flag_meanings": "no yes"}
+    # CF: the flag values of the variable's own type (the text "0 1" was an error to cfchecks)
+    flag = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "no yes"}
     ds = xr.Dataset(
         {
             "turing_growth_rate": (dims, stationary, {
@@ -242,13 +243,15 @@ def patterning_space(x, y, params=None, coupled: bool = True, k=None, nk: int = 
         },
         coords={
             x.name: (x.name, x.values, {"long_name": base.declaration(x.name).description,
-                                        "units": "dimensionless"}),
+                                        "units": "1"}),
             y.name: (y.name, y.values, {"long_name": base.declaration(y.name).description,
-                                        "units": "dimensionless"}),
-            "k": ("k", k, {"long_name": "wavenumbers searched", "units": "dimensionless"}),
+                                        "units": "1"}),
+            "k": ("k", k, {"long_name": "wavenumbers searched", "units": "1"}),
         },
         attrs={
             "title": f"primordia patterning space over ({x.name}, {y.name})",
+            "Conventions": "CF-1.8",  # cfchecks 4.1: no error or warning (units "dimensionless" and text
+            # flag_values were errors until 2026-12-05)
             "coupled": int(coupled),
             "theta_variant": theta_variant if coupled else "",
             "x": x.name,
@@ -301,7 +304,7 @@ def _add_critical_curves(ds: xr.Dataset, base, name: str, coupled: bool) -> None
     growth = [max_growth_of_kind(longitudinal_rates(linearise(t), k, coupled=True), "any") for t in trials]
     turing = [max_growth_of_kind(longitudinal_rates(linearise(t), k, coupled=True), "stationary") for t in trials]
     ds.coords["scale"] = ("scale", np.array(CRITICAL_SCALES), {"long_name": f"{name} / critical {name}"})
-    ds.coords["k_squared"] = ("k_squared", K, {"long_name": "k^2", "units": "dimensionless"})
+    ds.coords["k_squared"] = ("k_squared", K, {"long_name": "k^2", "units": "1"})
     ds[f"critical_{name}"] = ("scale", np.array(values), {"long_name": f"value of {name} on each curve"})
     ds["constant_term"] = (("scale", "k_squared"), np.array(constant_term), {
         "long_name": ("d_0(k^2) = a_0 c_0 + b_0" if coupled else "a_0(k^2)") + " (seed panels 2)"})
@@ -374,15 +377,19 @@ def _rates_dataset(roots, fastest, turing, params: Mapping, title: str, **attrs)
         "turing_growth_rate": ("k", max_growth_of_kind(roots.rates, "stationary"), {
             "long_name": "largest real root (stationary mode); -inf where none"}),
     }
-    coords = {"k": ("k", roots.k, {"units": "dimensionless"}), "branch": np.arange(roots.rates.shape[-1])}
+    coords = {"k": ("k", roots.k, {"long_name": "wavenumber", "units": "1"}),
+              "branch": ("branch", np.arange(roots.rates.shape[-1]), {"long_name": "root of the dispersion relation",
+                                                                      "units": "1"})}
     if roots.transverse.shape[-1]:
         variables["transverse_real"] = (("k", "transverse_branch"), roots.transverse.real, {
             "long_name": "Re phi of the roots of B^(d-1) = (rho phi^2 + mu k^2)^(d-1) (neutral)"})
         variables["transverse_imag"] = (("k", "transverse_branch"), roots.transverse.imag, {
             "long_name": "Im phi of the roots of B^(d-1) (shear waves, +- k sqrt(mu / rho))"})
-        coords["transverse_branch"] = np.arange(roots.transverse.shape[-1])
+        coords["transverse_branch"] = ("transverse_branch", np.arange(roots.transverse.shape[-1]), {
+            "long_name": "root of B^(d-1)", "units": "1"})
     return xr.Dataset(variables, coords=coords,
-                      attrs={"title": title, "d": roots.d, **attrs, **_mode_attrs("fastest", fastest),
+                      attrs={"title": title, "Conventions": "CF-1.8", "d": roots.d, **attrs,
+                             **_mode_attrs("fastest", fastest),
                              **_mode_attrs("turing", turing), **_attrs_of(params)})
 
 

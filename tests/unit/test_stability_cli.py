@@ -89,6 +89,10 @@ def test_a_map_of_a_model_without_active_stress_has_no_tau(tmp_path, capsys):
     assert "fastest stationary (Turing) mode: k_max = 4.494" in capsys.readouterr().out
     with xr.open_dataset(tmp_path / "dispersion" / "dispersion.nc", engine="scipy") as ds:
         assert ds.attrs["coupled"] == 0  # the sink alone does not close the loop (it said 1)
+        # CF-1.8 (cfchecks 4.1: no error, no warning); until 2026-12-05 k's units were "dimensionless", which
+        # UDUNITS-2 does not know, and the roots' index had neither long_name nor units
+        assert ds.attrs["Conventions"] == "CF-1.8"
+        assert [ds[name].attrs["units"] for name in ("k", "branch", "transverse_branch")] == ["1", "1", "1"]
     out = tmp_path / "map"
     assert run(["stability", "map", str(config), *table, "--x", "m0:1:3:5", "--y", "alpha:2:6:5", "--nk", "32",
                 "--out", str(out)]) == 0
@@ -96,6 +100,9 @@ def test_a_map_of_a_model_without_active_stress_has_no_tau(tmp_path, capsys):
     with xr.open_dataset(out / "patterning_m0_alpha.nc", engine="scipy") as ds:
         assert ds.attrs["parameter_tau"] == 0.0 and ds.attrs["coupled"] == 0
         assert int(ds["unstable_numerical"].sel(m0=2.0, alpha=4.0)) == 1
+        assert ds.attrs["Conventions"] == "CF-1.8" and ds["m0"].attrs["units"] == "1"
+        # CF: the flag values of the flags' own type; they were the text "0 1"
+        assert ds["unstable_numerical"].attrs["flag_values"].tolist() == [0, 1]
     params, coupled = linear_model(load_config(config))  # the sweep map's linear analysis
     assert not coupled and params["tau"] == 0.0 and params["xi_f"] == 0.001
 
