@@ -39,7 +39,8 @@ def on_a_small_disk(kilobytes: int, disk: Path, copy: Path, argv: list[str], **k
     result = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", _SCRIPT, "sh",
                              str(kilobytes), str(disk), str(copy), *argv],
                             capture_output=True, text=True, timeout=300, **kwargs)
-    assert result.returncode != 90, f"cannot mount a tmpfs: {result.stderr}"
+    if result.returncode == 90:  # root without CAP_SYS_ADMIN (a container): the simulated full disks still run
+        pytest.skip(f"cannot mount a tmpfs here: {result.stderr.strip()}")
     return result
 
 
