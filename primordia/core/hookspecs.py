@@ -129,6 +129,18 @@ def primordia_outputs() -> list[type]:
     ``primordia.core.outputs.OutputOption(default, check, help)``): the model then
     accepts those keys of ``[output]``, checks them and fills in their defaults
     before the run; any other key is refused.  A key belongs to one output.
+
+    Under MPI every rank calls every moment of every output.  An output that fails
+    (raises) on any rank is disabled on all, with one warning naming the rank, and
+    the run goes on.  The ranks agree on that after each call, so an output's
+    collective calls (``run.comm``'s, or those of ``run.field_statistics()``,
+    ``run.vertex_values()``) must be reached by every rank whatever happens on one:
+    catch what may fail on one rank only (a file one rank writes), take part in the
+    collective calls, and raise after them (as the pictures' ``_draw_shared`` does).
+    A rank that raised before a collective call the other ranks are inside cannot be
+    told from a slow one: it waits for them (at least 300 s, ``OUTPUT_PATIENCE_S`` of
+    ``primordia.coupling.orchestrator``),
+    then ends the job with one line and MPI_Abort, exit status 2.
     """
 
 

@@ -7,6 +7,8 @@ returns its value untouched, so the serial stand-in of the scikit-fem backend wo
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 
@@ -41,3 +43,33 @@ def largest_in_place(comm, values: np.ndarray) -> None:
     if comm.size > 1:
         MPI = _mpi()
         comm.Allreduce(MPI.IN_PLACE, values, op=MPI.MAX)
+
+
+class RanksMissing(Exception):
+    """The other ranks did not join a reduction within the time a rank was given to wait for them."""
+
+
+def lowest_rank_where(comm, flag: bool, patience: float | None = None) -> int | None:
+    """The lowest rank of ``comm`` where ``flag`` holds (None: on none), waiting for the other ranks at most
+    ``patience`` seconds (None: as long as they take) and then raising :class:`RanksMissing`.
+
+    Non-blocking underneath (MPI_Iallreduce, polled), so a rank that gives up is not stuck inside MPI: a rank
+    whose other ranks sit in a collective call it will never make can still say so and end the job.  ``comm``
+    should be one that no other code calls collectives on meanwhile (a duplicate), or the calls could match.
+    """
+    if comm.size == 1:
+        return 0 if flag else None
+    MPI = _mpi()
+    mine = np.array([comm.rank if flag else comm.size], dtype=np.int64)
+    lowest = np.empty_like(mine)
+    request = comm.Iallreduce(mine, lowest, op=MPI.MIN)
+    if patience is None:
+        request.Wait()
+    else:
+        deadline, pause = time.monotonic() + patience, 1e-4
+        while not request.Test():
+            if time.monotonic() > deadline:
+                raise RanksMissing(f"the other ranks did not come within {patience:g} s")
+            time.sleep(pause)
+            pause = min(2 * pause, 0.1)  # a prompt answer costs no 0.1 s, a long wait no busy core
+    return int(lowest[0]) if lowest[0] < comm.size else None

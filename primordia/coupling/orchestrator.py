@@ -41,7 +41,7 @@ from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import existing_run, time_label
 from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
-from primordia.core.reductions import largest, largest_in_place, on_every_rank
+from primordia.core.reductions import RanksMissing, largest, largest_in_place, lowest_rank_where, on_every_rank
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
@@ -60,6 +60,12 @@ STEP_SIZES = {"dt": ("the last sub-step's length", "1"),  # the seed's dimension
 #: MB here are MiB (/proc's kB / 1024), which UDUNITS-2 writes "1048576 byte" (it knows neither "MB" nor "MiB").
 MEMORY_USE = {"memory_mb": ("resident memory, summed over the ranks (MiB)", "1048576 byte"),
               "peak_memory_mb": ("peak resident memory so far, summed over the ranks (MiB)", "1048576 byte")}
+#: How long a rank whose output failed waits for the other ranks to finish that output before it takes them for
+#: stuck in a collective call it never reached, and aborts the job: at least OUTPUT_PATIENCE_S seconds and
+#: OUTPUT_PATIENCE_FACTOR times the longest this output has taken at that moment on this rank.  Generous: taking
+#: a slow rank for a stuck one kills a run that would have gone on, from its last checkpoint.
+OUTPUT_PATIENCE_S = 300.0
+OUTPUT_PATIENCE_FACTOR = 10.0
 
 
 class Simulation:
@@ -78,6 +84,8 @@ class Simulation:
             raise ConfigError("a run's out needs a directory name (\".\" for the current directory)")
         self.out_dir = Path(out_dir)
         self.comm = comm
+        self._output_comm = None  # see _outputs_comm
+        self._output_seconds: dict[tuple[str, str], float] = {}  # the longest call of each output, at each moment
         self.existing = existing
         self.step_index = 0
         self.time = model.t_start
@@ -352,6 +360,8 @@ class Simulation:
         self.wall_time = 0.0
         self.status = "running"
         states = (checkpoint or {}).get("outputs", {})
+        if self.comm.size > 1:
+            self._outputs_comm()
         try:
             for output in list(self.outputs):
                 if checkpoint is None:
@@ -685,8 +695,9 @@ class Simulation:
             reason = f"{type(exc).__name__}: {reason}"
         return f"stopped at t = {self.time:g}: {reason}"
 
-    def _patch_summary(self, status: str) -> None:
-        if not self.is_root:
+    def _patch_summary(self, status: str, here: bool = False) -> None:
+        """``summary.json`` says ``status`` (rank 0 writes it; ``here``: this rank, when rank 0 cannot)."""
+        if not (self.is_root or here):
             return
         import json
 
@@ -884,8 +895,17 @@ class Simulation:
         write would fail as well, and the run computed on, writing nothing, to end "completed" with exit status 0
         and its files missing their last times.  While the run ends, such a failure ends that output in silence
         (the run's line says the disk is full); a completed run then stops with it, its summary saying so.
+
+        The ranks agree on the failure over a communicator of their own (:meth:`_outputs_comm`), without
+        blocking a rank whose output raised: the others may be waiting for it inside a collective call of the
+        same output that it never reached (``primordia_outputs``'s contract forbids that, but a third party's
+        output can do it), which no rank can leave.  That rank waits for them as long as the output has ever
+        taken here, times ``OUTPUT_PATIENCE_FACTOR``, and at least ``OUTPUT_PATIENCE_S``, then ends the job
+        with one line (:meth:`_abort_for_output`).  Until 2026-12-05 it entered the failure's allgather on
+        the run's communicator, and a 2-rank run whose output raised on rank 1 before its ``allreduce`` hung
+        until ``timeout 120`` killed it.
         """
-        failure, storage = None, None
+        failure, storage, began = None, None, clock.perf_counter()
         try:
             getattr(output, moment)(self, *args)
         except (KeyboardInterrupt, SystemExit):
@@ -897,9 +917,7 @@ class Simulation:
             storage = storage_error(f"a file of output '{output.name}'", error)
             storage = None if storage is None else str(storage)
         if self.comm.size > 1:
-            failures = self.comm.allgather((failure, storage))
-            failure, storage = next((f for f in failures if f[1] is not None),
-                                    next((f for f in failures if f[0] is not None), (None, None)))
+            failure, storage = self._agreed_failure(output, moment, failure, storage, clock.perf_counter() - began)
         if failure is None:
             return
         if storage is not None and self.status == "running":  # kept: as the run stops it may fit (summary.json)
@@ -911,10 +929,57 @@ class Simulation:
         elif self.status == "completed":
             self._unwritten, self.status = storage, self._stop_status(StorageError(storage))
 
+    def _outputs_comm(self):
+        """A duplicate of the run's communicator on which only :meth:`_call_output` agrees on failures: a rank
+        whose output failed is then never matched with the others' collective calls inside that output.
+        Made before the first output is called, when every rank is at the same point."""
+        if self._output_comm is None:
+            self._output_comm = self.comm.Dup()
+        return self._output_comm
+
+    def _agreed_failure(self, output, moment: str, failure: str | None, storage: str | None,
+                        took: float) -> tuple[str | None, str | None]:
+        """The failure of the lowest rank where ``output`` failed (naming the rank) and whether it was a full
+        disk's (:class:`StorageError`), or (None, None), on every rank."""
+        key = (output.name, moment)
+        longest = self._output_seconds[key] = max(self._output_seconds.get(key, 0.0), took)
+        comm = self._outputs_comm()
+        patience = None if failure is None else max(OUTPUT_PATIENCE_S, OUTPUT_PATIENCE_FACTOR * longest)
+        try:
+            rank = lowest_rank_where(comm, failure is not None, patience)
+        except RanksMissing:
+            self._abort_for_output(output, moment, failure, patience)
+        if rank is None:
+            return None, None
+        failure, storage = comm.bcast((failure, storage), root=rank)
+        return f"{failure} (on rank {rank})", storage
+
+    def _abort_for_output(self, output, moment: str, failure: str, patience: float) -> None:
+        """``output`` failed here and the other ranks are still inside it after ``patience`` seconds: waiting in a
+        collective call this rank will never make, as far as can be told.  No rank can get them out of it, so
+        this one says so in one line, marks the summary as failed (rank 0, which writes it, is stuck) and ends
+        the job (MPI_Abort, exit status 2).  The last checkpoint is whole (written atomically) and continues
+        the run; the other files hold what they held at their last write."""
+        import sys
+
+        from mpi4py import MPI
+
+        status = (f"stopped at t = {self.time:g}: output '{output.name}' failed on rank {self.comm.rank} "
+                  f"({moment}): {failure}, and the other ranks were still inside it after {patience:g} s (a "
+                  f"collective call this rank never reached)")
+        restart = (f"; continue it from its last checkpoint with: primordia run --restart {self.out_dir}"
+                   if (self.out_dir / checkpoint_file.CHECKPOINT_FILE).exists() else "")
+        print(f"primordia: error: {status}; the run is aborted{restart}", file=sys.stderr, flush=True)
+        self._patch_summary(status, here=True)
+        MPI.COMM_WORLD.Abort(2)
+
     def _finish(self, status: str):
         self.status = status
         self.wall_time = self._wall_time()
         self._notify("finish")
+        if self._output_comm is not None:  # every rank is here: the finish's failures were just agreed on
+            self._output_comm.Free()
+            self._output_comm = None
 
     def _wall_time(self) -> float:
         return self._wall_before + clock.perf_counter() - self.wall_start

@@ -1,0 +1,102 @@
+"""A plugin that fails on one MPI rank only (``mpirun -n 2``): one line, the right exit status, and no hang.
+
+A hang is the worst outcome on a cluster (the job burns its allocation until the scheduler kills it), so
+every run here has a timeout, and a timeout fails the test.  The plugins fail on rank 1 only, as a plugin
+reading a file only one rank can see, or a value only one rank holds, would.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import run_control as rc
+
+pytestmark = pytest.mark.mpi
+
+#: An output failing on rank 1 at the moment ``FAIL_AT`` says, from step ``FAIL_FROM`` on.  ``collective`` raises
+#: before an allreduce that rank 0 makes: against the hookspec's contract, as a careless plugin does.
+FLAKY_OUTPUT = """\
+import os
+
+from mpi4py import MPI
+
+import primordia.coupling.orchestrator
+from primordia.core.outputs import Output
+from primordia.core.plugins import hookimpl
+
+primordia.coupling.orchestrator.OUTPUT_PATIENCE_S = 3.0  # the test's patience, not a user's 300 s
+WHERE, FROM = os.environ.get("FAIL_AT", ""), int(os.environ.get("FAIL_FROM", "0"))
+
+
+def failing(moment, run):
+    return WHERE == moment and MPI.COMM_WORLD.rank == 1 and run.step_index >= FROM
+
+
+class Flaky(Output):
+    name = "flaky"
+
+    def start(self, run):
+        if failing("start", run):
+            raise RuntimeError("flaky start")
+
+    def record(self, run):
+        if failing("record", run):
+            raise RuntimeError("flaky record")
+        if WHERE == "collective" and run.step_index >= FROM:
+            if failing("collective", run):
+                raise RuntimeError("flaky before its allreduce")
+            run.comm.allreduce(1.0)
+
+    def finish(self, run, status):
+        if failing("finish", run):
+            raise RuntimeError("flaky finish")
+
+
+@hookimpl
+def primordia_outputs():
+    return [Flaky]
+"""
+
+
+def _run(tmp_path, small_config, *extra, env=None, timeout=120):
+    plugin = tmp_path / "flaky.py"
+    plugin.write_text(FLAKY_OUTPUT)
+    # a record at every step, so that a failure from step FAIL_FROM on comes at that step
+    return rc.run("-p", plugin, "run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                  "--set", "output.series_every=1", *extra, ranks=2, env=env, timeout=timeout)
+
+
+@pytest.mark.parametrize("moment", ["start", "record", "finish"])
+def test_an_output_failing_on_one_rank_is_disabled_with_one_warning(moment, tmp_path, small_config):
+    result = _run(tmp_path, small_config, env={"FAIL_AT": moment, "FAIL_FROM": "2" if moment == "record" else "0"})
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = rc.primordia_lines(result.stderr + result.stdout)
+    assert len(lines) == 2, result.stderr[-2000:]
+    assert lines[0].startswith("primordia: warning: output 'flaky' failed at t = ") and f"({moment})" in lines[0]
+    assert f"flaky {moment} (on rank 1); it is disabled" in lines[0]
+    assert lines[1].startswith("primordia: completed: 5 steps")
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
+
+
+def test_an_output_failing_on_one_rank_before_its_collective_call_ends_the_job(tmp_path, small_config):
+    """Rank 1 raised before the allreduce rank 0 was inside, and entered the allgather of the failures: the two
+    waited for each other until ``timeout`` killed the job.  Now rank 1 waits 3 s (the patience the plugin
+    sets), says so in one line and aborts the job; the checkpoint of the step before continues the run."""
+    result = _run(tmp_path, small_config, "--set", "checkpoint.every_steps=1",
+                  env={"FAIL_AT": "collective", "FAIL_FROM": "3"}, timeout=60)
+    assert result.returncode == 2, result.stderr[-2000:]
+    lines = rc.primordia_lines(result.stderr)
+    assert len(lines) == 1, result.stderr[-2000:]
+    assert lines[0].startswith("primordia: error: stopped at t = 0.6: output 'flaky' failed on rank 1 (record): "
+                               "RuntimeError: flaky before its allreduce, and the other ranks were still inside it "
+                               "after 3 s"), lines[0]
+    assert lines[0].endswith(f"continue it from its last checkpoint with: primordia run --restart {tmp_path / 'out'}")
+    out = tmp_path / "out"
+    assert json.loads((out / "summary.json").read_text())["status"].startswith("stopped at t = 0.6: output 'flaky'")
+    assert rc.checkpointed_step(out) == 2  # step 3 is recorded before it is checkpointed
+    plugin = tmp_path / "flaky.py"
+    restarted = rc.run("-p", plugin, "run", "--restart", out, "--no-progress", ranks=2, timeout=120)
+    assert restarted.returncode == 0, restarted.stderr[-2000:]
+    assert rc.summary(out)["status"] == "completed" and rc.summary(out)["steps"] == 5
