@@ -29,6 +29,10 @@ from primordia.core.errors import ConfigError, InterruptedRun, PluginError, Prim
 from primordia.core.signals import HANDLED, INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
+#: How long a rank that stops on an error waits for the other ranks to stop on it too, under mpirun, before it
+#: takes itself for the only one (a plugin that failed on one rank) and aborts the job: errors are decided alike
+#: on every rank, so the others come within moments (see _stop_together).
+ERROR_PATIENCE_S = 60.0
 #: 128 + SIGPIPE, as a shell reports a reader that stopped reading (`primordia plugins | head`).
 EXIT_BROKEN_PIPE = 141
 
@@ -252,6 +256,7 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(argv)
             _broken_pipes_raise()
             _refuse_ranks_for_a_serial_command(args.command)
+            _errors_comm()
             _name_plugins(args.plugins)
             return args.func(args)
         except BrokenPipeError:  # `primordia plugins | head`: the reader has all it wanted
@@ -262,8 +267,10 @@ def main(argv: list[str] | None = None) -> int:
         except PrimordiaError as exc:
             if INTERRUPTS.received:  # a signal that came back as a failed solve or an unreadable file
                 return _interrupted(InterruptedRun(INTERRUPTS.received))
+            line = f"primordia: error: {(str(exc).splitlines() or [''])[0]}"
             if is_root_process():
-                print(f"primordia: error: {(str(exc).splitlines() or [''])[0]}", file=sys.stderr)
+                print(line, file=sys.stderr)
+            _stop_together(line)
             return EXIT_USAGE
         except Exception as exc:
             if INTERRUPTS.received:
@@ -323,6 +330,43 @@ def _interrupted(interrupted: KeyboardInterrupt) -> int:
     for handled in HANDLED:  # everything is written: a late second signal changes nothing
         signal.signal(handled, signal.SIG_IGN)
     return 128 + signum
+
+
+_ERRORS_COMM = []  # under mpirun: a duplicate of the world on which the ranks agree that they stop (_stop_together)
+
+
+def _errors_comm():
+    """The communicator of :func:`_stop_together`, made at the start on every rank (None in serial)."""
+    if not _ERRORS_COMM and mpi_world()[1] > 1:
+        from mpi4py import MPI
+
+        _ERRORS_COMM.append(MPI.COMM_WORLD.Dup())
+    return _ERRORS_COMM[0] if _ERRORS_COMM else None
+
+
+def _stop_together(line: str) -> None:
+    """Return once every rank stops on an error, as they do on an error decided alike on every rank.
+
+    An error met by one rank alone (a plugin that fails on rank 1 only, where its file or data differ) leaves
+    the other ranks waiting for it in a collective call, and this rank then waited for them in MPI_Finalize:
+    ``mpirun -n 2`` with kinetics that raised on rank 1 printed nothing and hung until ``timeout 120`` killed it.
+    The ranks agree without blocking, on a communicator of their own; after ``ERROR_PATIENCE_S`` this rank
+    prints ``line`` (rank 0, which prints, may be one of those waiting) and aborts the job, exit status 2.
+    """
+    comm = _errors_comm()
+    if comm is None:
+        return
+    from primordia.core.reductions import RanksMissing, lowest_rank_where
+
+    try:
+        lowest_rank_where(comm, True, ERROR_PATIENCE_S)
+    except RanksMissing:
+        if not is_root_process():
+            print(line, file=sys.stderr, flush=True)
+        sys.stderr.flush()
+        from mpi4py import MPI
+
+        MPI.COMM_WORLD.Abort(EXIT_USAGE)
 
 
 def _abort_other_ranks(exc: Exception) -> None:

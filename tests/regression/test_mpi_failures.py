@@ -100,3 +100,50 @@ def test_an_output_failing_on_one_rank_before_its_collective_call_ends_the_job(t
     restarted = rc.run("-p", plugin, "run", "--restart", out, "--no-progress", ranks=2, timeout=120)
     assert restarted.returncode == 0, restarted.stderr[-2000:]
     assert rc.summary(out)["status"] == "completed" and rc.summary(out)["steps"] == 5
+
+
+#: Kinetics whose set-up fails on rank 1 only, as ``KIN_MODE`` says: its rates raise, or miss a species.
+FLAKY_KINETICS = """\
+import os
+import sys
+
+from mpi4py import MPI
+
+from primordia.core.plugins import hookimpl
+from primordia.physics.kinetics.painter2018 import Painter2018
+
+sys.modules["__main__"].ERROR_PATIENCE_S = 3.0  # the test's patience (python -m primordia.cli), not a user's 60 s
+MODE = os.environ["KIN_MODE"]
+
+
+class Flaky(Painter2018):
+    name = "flaky_kinetics"
+
+    def split_rates(self, c, t, ops):
+        rates = super().split_rates(c, t, ops)
+        if MPI.COMM_WORLD.rank == 1:
+            if MODE == "raise":
+                raise RuntimeError("flaky kinetics")
+            rates.pop("b")
+        return rates
+
+
+@hookimpl
+def primordia_kinetics():
+    return [Flaky]
+"""
+
+
+@pytest.mark.parametrize("mode, message", [
+    ("raise", "kinetics flaky_kinetics: split_rates failed: RuntimeError: flaky kinetics"),
+    ("shape", "kinetics flaky_kinetics: split_rates must return {species: (production, loss_rate)} for its species "
+              "m, e, f, b, got m, e, f")])
+def test_kinetics_failing_on_one_rank_is_one_line(mode, message, tmp_path, small_config):
+    """The error was rank 1's alone: rank 1 printed nothing (only rank 0 prints errors) and waited in MPI_Finalize
+    while rank 0 waited in a collective call of the set-up, until ``timeout`` killed the job."""
+    plugin = tmp_path / "flaky_kinetics.py"
+    plugin.write_text(FLAKY_KINETICS)
+    result = rc.run("-p", plugin, "run", small_config(), "--set", "kinetics.name=flaky_kinetics", "--out",
+                    tmp_path / "out", "--no-progress", ranks=2, env={"KIN_MODE": mode}, timeout=60)
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert rc.primordia_lines(result.stderr) == [f"primordia: error: {message}"], result.stderr[-2000:]
