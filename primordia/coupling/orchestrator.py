@@ -610,6 +610,7 @@ class Simulation:
             # signal or none, or one before a signal that came while the run stopped, is the failure
             raised_by_a_signal = INTERRUPTS.count > 1
             bar.close()
+            self._stop_together(exc)
             with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
                 self._stop(exc)
             if isinstance(exc, KeyboardInterrupt):
@@ -930,9 +931,9 @@ class Simulation:
             self._unwritten, self.status = storage, self._stop_status(StorageError(storage))
 
     def _outputs_comm(self):
-        """A duplicate of the run's communicator on which only :meth:`_call_output` agrees on failures: a rank
-        whose output failed is then never matched with the others' collective calls inside that output.
-        Made before the first output is called, when every rank is at the same point."""
+        """A duplicate of the run's communicator on which only the ranks' agreements on failures are made
+        (:meth:`_call_output`, :meth:`_stop_together`): a rank that failed alone is then never matched with the
+        others' collective calls.  Made before the first output is called, when every rank is at the same point."""
         if self._output_comm is None:
             self._output_comm = self.comm.Dup()
         return self._output_comm
@@ -956,17 +957,35 @@ class Simulation:
 
     def _abort_for_output(self, output, moment: str, failure: str, patience: float) -> None:
         """``output`` failed here and the other ranks are still inside it after ``patience`` seconds: waiting in a
-        collective call this rank will never make, as far as can be told.  No rank can get them out of it, so
-        this one says so in one line, marks the summary as failed (rank 0, which writes it, is stuck) and ends
-        the job (MPI_Abort, exit status 2).  The last checkpoint is whole (written atomically) and continues
-        the run; the other files hold what they held at their last write."""
+        collective call this rank will never make, as far as can be told, which no rank can get them out of."""
+        self._abort_alone(f"stopped at t = {self.time:g}: output '{output.name}' failed on rank {self.comm.rank} "
+                          f"({moment}): {failure}, and the other ranks were still inside it after {patience:g} s (a "
+                          f"collective call this rank never reached)")
+
+    def _stop_together(self, exc: BaseException) -> None:
+        """Return once every rank stops the run, as they do when a step fails (its verdict is every rank's).
+
+        A step that raised on one rank alone (a physics plugin's ``before_step`` failing on rank 1 only) sent
+        that rank into the stop's collective calls (the checkpoint's gather) while the others sat in the step's:
+        ``mpirun -n 2`` hung without a word until ``timeout 120``.  After ``OUTPUT_PATIENCE_S`` that rank says why
+        in one line and aborts the job; the checkpoint before that step is whole and continues the run.
+        """
+        if self.comm.size == 1 or (isinstance(exc, KeyboardInterrupt) and INTERRUPTS.count > 1):
+            return  # a second signal: the ranks may be anywhere, and _stop makes no collective call then
+        try:
+            lowest_rank_where(self._outputs_comm(), True, OUTPUT_PATIENCE_S)
+        except RanksMissing:
+            self._abort_alone(f"{self._stop_status(exc)} (on rank {self.comm.rank} alone: the other ranks were "
+                              f"still in the step after {OUTPUT_PATIENCE_S:g} s)")
+
+    def _abort_alone(self, status: str) -> None:
+        """This rank cannot go on and the others are stuck where it will never join them: say ``status`` in one
+        line, mark the summary with it (rank 0, which writes it, may be stuck) and end the job (MPI_Abort, exit
+        status 2).  The last checkpoint is whole (written atomically) and continues the run."""
         import sys
 
         from mpi4py import MPI
 
-        status = (f"stopped at t = {self.time:g}: output '{output.name}' failed on rank {self.comm.rank} "
-                  f"({moment}): {failure}, and the other ranks were still inside it after {patience:g} s (a "
-                  f"collective call this rank never reached)")
         restart = (f"; continue it from its last checkpoint with: primordia run --restart {self.out_dir}"
                    if (self.out_dir / checkpoint_file.CHECKPOINT_FILE).exists() else "")
         print(f"primordia: error: {status}; the run is aborted{restart}", file=sys.stderr, flush=True)

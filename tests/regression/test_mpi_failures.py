@@ -147,3 +147,48 @@ def test_kinetics_failing_on_one_rank_is_one_line(mode, message, tmp_path, small
                     tmp_path / "out", "--no-progress", ranks=2, env={"KIN_MODE": mode}, timeout=60)
     assert result.returncode == 2, result.stderr[-2000:]
     assert rc.primordia_lines(result.stderr) == [f"primordia: error: {message}"], result.stderr[-2000:]
+
+
+#: A physics module (the chemotaxis, renamed) whose ``before_step`` fails on rank 1 only, from the step to t = 0.4.
+FLAKY_PHYSICS = """\
+from mpi4py import MPI
+
+import primordia.coupling.orchestrator
+from primordia.core.plugins import hookimpl
+from primordia.physics.chemotaxis import Chemotaxis
+
+primordia.coupling.orchestrator.OUTPUT_PATIENCE_S = 3.0  # the test's patience, not a user's 300 s
+
+
+class Flaky(Chemotaxis):
+    name = "flaky_chemotaxis"
+
+    def before_step(self, t, dt):
+        super().before_step(t, dt)
+        if MPI.COMM_WORLD.rank == 1 and t > 0.3:
+            raise RuntimeError("flaky before_step")
+
+
+@hookimpl
+def primordia_physics():
+    return [Flaky]
+"""
+
+
+def test_a_step_failing_on_one_rank_ends_the_job_in_one_line(tmp_path, small_config):
+    """Rank 1 raised in its step and went into the stop's checkpoint gather while rank 0 sat in the step's
+    collective calls: the job hung without a word until ``timeout``."""
+    plugin = tmp_path / "flaky_physics.py"
+    plugin.write_text(FLAKY_PHYSICS)
+    config = small_config(small_config.text.replace('physics = ["chemotaxis"]', 'physics = ["flaky_chemotaxis"]'))
+    out = tmp_path / "out"
+    result = rc.run("-p", plugin, "run", config, "--set", "checkpoint.every_steps=1", "--out", out, "--no-progress",
+                    ranks=2, timeout=60)
+    assert result.returncode == 2, result.stderr[-2000:]
+    lines = rc.primordia_lines(result.stderr)
+    assert len(lines) == 1, result.stderr[-2000:]
+    assert lines[0].startswith("primordia: error: stopped at t = 0.2: physics flaky_chemotaxis"), lines[0]
+    assert "before_step failed: RuntimeError: flaky before_step" in lines[0]
+    assert "(on rank 1 alone: the other ranks were still in the step after 3 s)" in lines[0]
+    assert rc.summary(out)["status"].startswith("stopped at t = 0.2: physics flaky_chemotaxis")
+    assert rc.checkpointed_step(out) == 1  # the step 0.2 -> 0.4 failed (before_step is given its end)
