@@ -340,7 +340,26 @@ class Simulation:
 
     def solver_for(self, subproblem) -> SubproblemSolver:
         """A solver for ``subproblem`` with the config's ``[solver.PREFIX]`` options."""
+        self._refuse_forms_differing_across_ranks(subproblem)
         return SubproblemSolver(self.backend, subproblem, overrides=self.model.solver.get(subproblem.prefix[:-1]))
+
+    def _refuse_forms_differing_across_ranks(self, subproblem) -> None:
+        """One line, on every rank, when ``subproblem``'s forms are not the same on every rank.
+
+        Each rank builds the forms from the modules' and plugins' answers; one that answers otherwise on some
+        rank (a NaN there, a value read from a file only one rank sees) makes forms whose evaluation takes other
+        collective calls there: ``mpirun -n 2`` with kinetics whose production of m was NaN on rank 1 alone hung
+        until ``timeout`` killed it.  UFL's signatures hold the forms' literals; FFCx computes them to compile
+        the forms anyway, and they are kept on the forms.
+        """
+        if self.comm.size == 1:
+            return
+        mine = f"{subproblem.residual.signature()} {subproblem.jacobian.signature()}"
+        ranks = [rank for rank, theirs in enumerate(self.comm.allgather(mine)) if theirs != mine]
+        if ranks:
+            raise PluginError(f"{subproblem.name}: its equations differ between MPI ranks (rank {self.comm.rank} and "
+                              f"rank {ranks[0]}): a plugin answers otherwise on some rank (a NaN there, or a value "
+                              f"read from a file only one rank sees)")
 
     def _choose_splitting(self):
         from primordia.coupling.splitting import SplittingScheme

@@ -124,6 +124,10 @@ class Flaky(Painter2018):
         if MPI.COMM_WORLD.rank == 1:
             if MODE == "raise":
                 raise RuntimeError("flaky kinetics")
+            if MODE == "nan":  # a value only rank 1 holds: the forms differ, and so did their collective calls
+                production, loss = rates["m"]
+                rates["m"] = (production * float("nan"), loss)
+                return rates
             rates.pop("b")
         return rates
 
@@ -137,7 +141,9 @@ def primordia_kinetics():
 @pytest.mark.parametrize("mode, message", [
     ("raise", "kinetics flaky_kinetics: split_rates failed: RuntimeError: flaky kinetics"),
     ("shape", "kinetics flaky_kinetics: split_rates must return {species: (production, loss_rate)} for its species "
-              "m, e, f, b, got m, e, f")])
+              "m, e, f, b, got m, e, f"),
+    ("nan", "chemotaxis.m: its equations differ between MPI ranks (rank 0 and rank 1): a plugin answers otherwise "
+            "on some rank (a NaN there, or a value read from a file only one rank sees)")])
 def test_kinetics_failing_on_one_rank_is_one_line(mode, message, tmp_path, small_config):
     """The error was rank 1's alone: rank 1 printed nothing (only rank 0 prints errors) and waited in MPI_Finalize
     while rank 0 waited in a collective call of the set-up, until ``timeout`` killed the job."""
