@@ -30,7 +30,6 @@ rows), so the Newton update lands exactly on the prescribed values.
 
 from __future__ import annotations
 
-import warnings
 import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -41,7 +40,7 @@ from petsc4py import PETSc
 from primordia.core.backend import sub_elements
 from primordia.core.clocks import add_since, no_time
 from primordia.core.clocks import now as clock_now
-from primordia.core.errors import ConfigError, SolverError
+from primordia.core.errors import ConfigError, SolverError, warn
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
     FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, depends_on_step,
@@ -347,7 +346,7 @@ class _Solver:
         pc = ksp.getPC()
         if pc.getType() != "lu" or pc.getFactorSolverType() == "mumps":
             return False
-        warnings.warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS", stacklevel=4)
+        warn(f"{self.sub.name}: PETSc's unpivoted LU met a zero pivot, switching to MUMPS")
         operators = ksp.getOperators()
         self.options = mumps_orders_itself({**self.options, PACKAGE: "mumps"}, self._user_keys)  # as combine does
         write_options(self.sub.prefix, self.options)

@@ -22,7 +22,6 @@ solver layer adds its matrix and its action without knowing what it is.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -31,6 +30,7 @@ from petsc4py import PETSc
 from scipy.sparse import csr_matrix as _csr
 
 from primordia.core import compiled
+from primordia.core.errors import warn
 from primordia.core.petsc_library import update_mpiaij_values
 from primordia.core.reductions import largest, smallest
 from primordia.physics.base import AlgebraicOperator
@@ -91,9 +91,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._compiled = None  # the compiled loops, False for numpy's (decided at the first update, collectively)
         self._midpoints = self._addresses = None  # the species at the edge midpoints, and the loops' arrays
         if self.negative_weights and not self._moving:
-            warnings.warn("the mesh has obtuse angles (positive off-diagonal stiffness entries): "
-                          "the exponentially fitted flux no longer guarantees a non-negative density",
-                          stacklevel=3)
+            warn(f"the mesh has obtuse angles (positive off-diagonal stiffness entries): the exponentially fitted "
+                 f"flux of {species} no longer guarantees a non-negative density")
 
     def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
