@@ -393,7 +393,6 @@ class Model:
         out = out if isinstance(out, str) else _path(out, "out")  # a str as given: Simulation refuses "" (not ".")
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
         sim.setup()
-        self.warn_about_inert_settings()  # once the run is set up: a refused input is one line, the error's
         sim.run(progress=progress)
         return sim
 

@@ -149,6 +149,7 @@ class Simulation:
             self._snapshot()  # the checkpoint at the end says it is written: the next restart skips it
         self._first_step = self.step_index
         self._set_up = True
+        self.model.warn_about_inert_settings()  # once set up (a refused input is one line), however it is run
         return self
 
     def check_choices(self) -> None:

@@ -306,3 +306,19 @@ def test_a_refused_input_is_one_line_even_with_a_setting_left_without_effect(cap
         lines = capsys.readouterr().err.splitlines()
         assert status == 2 and len(lines) == 1 and "unknown splitting scheme 'nope'" in lines[0], lines
 
+
+
+def test_a_simulation_set_up_from_python_says_what_the_model_leaves_without_effect(capsys, tmp_path):
+    """Only Model.run and the command line said it: Simulation(model).setup(), the README's loop, said nothing."""
+    from primordia.coupling.orchestrator import Simulation
+    from primordia.core.meshes import rectangle
+    from primordia.model import Model
+
+    model = Model(physics=["chemotaxis"], kinetics="painter2018", mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.2,
+                  t_final=0.4, physics_options={"chemotaxis": {"preconditioner": "lu"}}, output={"pictures": False})
+    capsys.readouterr()
+    Simulation(model, out_dir=tmp_path / "run").setup()
+    assert capsys.readouterr().err.count('primordia: warning: physics.chemotaxis.preconditioner = "lu" has no '
+                                         'effect') == 1
+    model.run(out=tmp_path / "again")
+    assert capsys.readouterr().err.count("has no effect") == 1
