@@ -146,7 +146,7 @@ class Simulation:
             self._restore(checkpoint)
         self._attach_outputs(checkpoint)
         if checkpoint is not None and self._missed_snapshot():  # an output time added where the run is
-            self._snapshot()  # the checkpoint at the end says it is written: the next restart skips it
+            self._write_missed_snapshot()
         self._first_step = self.step_index
         self._set_up = True
         self.model.warn_about_inert_settings()  # once set up (a refused input is one line), however it is run
@@ -389,9 +389,27 @@ class Simulation:
                 else:
                     self._call_output(output, "resume", states.get(output.name, {}))
         except BaseException as exc:  # what started must say why the run did not
-            with INTERRUPTS.mode_of("shielded"):
-                self._finish(self._stop_status(exc))
+            self._stopped_in_setup(exc)
             raise
+
+    def _write_missed_snapshot(self) -> None:
+        """The fields at the output time a restart is at and the run did not write (the checkpoint at the end says
+        it is written: the next restart skips it).  The outputs have started: a failure here says why in
+        ``summary.json``, which said "running" (a full disk's StorageError left it so, and the next run into the
+        folder called the run killed without a word)."""
+        try:
+            self._snapshot()
+        except BaseException as exc:
+            self._stopped_in_setup(exc)
+            raise
+
+    def _stopped_in_setup(self, exc: BaseException) -> None:
+        """The outputs have started and ``exc`` stops the run before its first step: they finish saying why, and a
+        full disk's line says where the run is and how it goes on, as it does in :meth:`run`."""
+        with INTERRUPTS.mode_of("shielded"):
+            self._finish(self._stop_status(exc))
+        if isinstance(exc, StorageError):
+            raise StorageError(self._stopped_by_storage(str(exc))) from None
 
     # -- checkpoints ----------------------------------------------------------------------
     def write_checkpoint(self) -> None:

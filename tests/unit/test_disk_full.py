@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -292,3 +293,46 @@ def test_primordia_analyse_on_a_full_disk_says_so_in_one_line(tmp_path, small_co
     assert not list((copy / "run").glob(".*tmp-*"))
     with xr.open_dataset(copy / "run" / "metrics.nc") as written_before:  # whole
         assert written_before.sizes
+
+
+def test_a_restart_whose_missed_snapshot_fills_the_disk_says_why_it_stopped(tmp_path, monkeypatch):
+    """A restart at an output time the run did not write (here one it adds, 0.4) writes those fields in setup();
+    a full disk there raised out of setup() with summary.json still saying "running", and the next run into the
+    folder called the run "killed without a word".  Whichever write of the restart's set-up the disk refuses,
+    the summary says why the run stopped, and a restart once there is room writes the fields at 0.4."""
+    from primordia.coupling.orchestrator import Simulation
+
+    def model(t_final, times):
+        return Model(physics=["chemotaxis"], parameters={"m0": 0.75},
+                     mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4)), dt=0.2, t_final=t_final,
+                     output={"pictures": False, "times": times}, checkpoint={"every_steps": 2, "every_minutes": 0})
+
+    every_row_written(monkeypatch)
+    first = tmp_path / "first"
+    model(0.4, [0.2]).run(out=first)
+    disk = FillingDisk(monkeypatch, None)
+    counted = Simulation(model(0.8, [0.4, 0.8]), out_dir=tmp_path / "counted", existing="restart")
+    shutil.copytree(first, tmp_path / "counted")
+    counted.setup()
+    setup_writes = disk.written
+    assert 0.4 in counted.snapshot_times and setup_writes >= 5, setup_writes  # the missed snapshot's writes counted
+    stopped_in_snapshot = 0
+    for room in range(setup_writes):
+        out = tmp_path / f"room{room}"
+        shutil.copytree(first, out)
+        disk = FillingDisk(monkeypatch, room, once=True)
+        sim = Simulation(model(0.8, [0.4, 0.8]), out_dir=out, existing="restart")
+        with pytest.raises(StorageError, match=f"cannot write {out}/.*: no space left on device") as stopped:
+            sim.setup()
+        assert_whole(out)
+        status = json.loads((out / "summary.json").read_text())["status"]
+        assert status.startswith("stopped at t = 0.4: cannot write "), (room, status)
+        assert "killed" not in outputs.existing_run(out)
+        assert "continues it from its checkpoint at t = 0.4" in str(stopped.value), stopped.value
+        stopped_in_snapshot += "fields" in str(stopped.value)
+        disk.room = None  # space freed
+        model(0.8, [0.4, 0.8]).run(out=out, restart=True)
+        with meshio.xdmf.TimeSeriesReader(out / "fields.xdmf") as reader:
+            reader.read_points_cells()
+            assert [reader.read_data(k)[0] for k in range(reader.num_steps)] == pytest.approx([0.2, 0.4, 0.8])
+    assert stopped_in_snapshot >= 2, stopped_in_snapshot  # fields.h5 and fields.xdmf at 0.4
