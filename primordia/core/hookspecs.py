@@ -140,7 +140,9 @@ def primordia_outputs() -> list[type]:
     A rank that raised before a collective call the other ranks are inside cannot be
     told from a slow one: it waits for them (at least 300 s, ``OUTPUT_PATIENCE_S`` of
     ``primordia.coupling.orchestrator``),
-    then ends the job with one line and MPI_Abort, exit status 2.
+    then ends the job with one line and MPI_Abort, exit status 2.  Before that abort (and when a second
+    signal stops a parallel run at once) each output's optional ``flush(run)`` writes, on its own rank and
+    without collective calls, what it holds in memory (series.nc's waiting rows).
     """
 
 

@@ -104,6 +104,11 @@ class Output:
     def finish(self, run, status: str) -> None:
         """After the last step, or when the run stops early (``status`` says why)."""
 
+    def flush(self, run) -> None:
+        """Write now what waits in memory, on this rank alone: the run ends without :meth:`finish` (an MPI_Abort
+        after a failure on one rank, or a second signal under MPI, when the ranks may be anywhere).  No collective
+        call; a failure is ignored."""
+
     def state(self) -> dict:
         """What this output must remember across a restart (numbers, strings, lists, dicts, numpy arrays)."""
         return {}
@@ -205,6 +210,9 @@ class ScalarSeriesNetcdf(Output):
             self.series.restore(state)
 
     def finish(self, run, status):
+        self.flush(run)
+
+    def flush(self, run):
         if self.series is not None:  # None also when a signal stopped the run before start
             self.series.flush()
 

@@ -293,3 +293,125 @@ def test_a_killed_run_is_named_killed_and_a_restart_refuses_another_model(primor
     assert "parameters.D_m differs from the checkpointed run" in other.stderr
     empty = primordia_cli("run", "--restart", tmp_path / "nothing", "--no-progress")
     assert empty.returncode == 2 and "holds no checkpoint" in empty.stderr, empty.stderr
+
+
+def _series_times(out) -> list[float]:
+    with xr.open_dataset(out / "series.nc") as series:
+        return [float(t) for t in series["time"].values]
+
+
+@pytest.mark.parametrize("stop", ["sigterm", "solver-error", "full-disk"])
+def test_every_row_recorded_before_a_stop_is_in_the_series(stop, tmp_path, monkeypatch):
+    """series.nc is rewritten at most every SERIES_INTERVAL seconds (2 s): the rows of a fast run wait in memory.
+    A run that stops (a signal, a failed step, a full disk) must still leave every row it recorded; here the
+    interval is an hour, so that every row after the first waits for the stop's flush."""
+    import errno
+    import os
+
+    from primordia.core import outputs
+    from primordia.core.atomic_files import StorageError
+    from primordia.core.errors import InterruptedRun, SolverError
+    from primordia.core.meshes import rectangle
+    from primordia.core.signals import INTERRUPTS
+    from primordia.coupling import orchestrator
+    from primordia.model import Model
+
+    monkeypatch.setattr(outputs, "SERIES_INTERVAL", 3600.0)
+    inadmissible, write_checkpoint = orchestrator.Simulation._inadmissible, orchestrator.checkpoint_file.write
+
+    def failing(sim, t):  # the step to t = 1.0 (the fifth) meets its stop
+        if t > 0.9 and stop == "sigterm" and sim.step_index == 4 and sim.step_done == 0.0:
+            os.kill(os.getpid(), signal.SIGTERM)  # deferred: the step ends, then the run stops
+        if t > 0.9 and stop == "solver-error":  # no rejection event, which would rewrite the file
+            raise SolverError("chemotaxis.m: a failure no smaller step mends", depends_on_step=False)
+        return inadmissible(sim, t)
+
+    def full(path, tree):
+        if stop == "full-disk":
+            raise StorageError(f"cannot write {path}: {os.strerror(errno.ENOSPC).lower()}")
+        write_checkpoint(path, tree)
+
+    monkeypatch.setattr(orchestrator.Simulation, "_inadmissible", failing)
+    monkeypatch.setattr(orchestrator.checkpoint_file, "write", full)
+    model = Model(physics=["chemotaxis"], parameters={"m0": 0.75}, mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4)),
+                  dt=0.2, t_final=2.0, adaptive=False, output={"pictures": False, "series_every": 1},
+                  checkpoint={"every_steps": 5, "every_minutes": 0})
+    stopped_by = {"sigterm": InterruptedRun, "solver-error": SolverError, "full-disk": StorageError}[stop]
+    try:
+        with pytest.raises(stopped_by):
+            model.run(out=tmp_path / "out")
+    finally:
+        INTERRUPTS.reset()  # the signal is this run's: the next test's must not stop on it
+    reached = {"sigterm": 1.0, "solver-error": 0.8, "full-disk": 1.0}[stop]
+    assert _series_times(tmp_path / "out") == pytest.approx([0.2 * k for k in range(round(reached / 0.2) + 1)])
+    assert rc.summary(tmp_path / "out")["time"] == pytest.approx(reached)
+
+
+#: An output that stops a 2-rank run at step 3 (t = 0.6) as ``STOP`` says, every row of series.nc after the first
+#: waiting in memory for an hour (the test's interval, not a user's 2 s): "rank 0 alone" raises on rank 0 before an
+#: allreduce rank 1 is inside (rank 0 waits 3 s for it, then aborts); "two signals" holds every rank still for the
+#: test's two SIGUSR1s, of which the second stops the run at once.
+STOP_AT_STEP_3 = """\
+import os
+import time
+
+import primordia.core.outputs
+import primordia.coupling.orchestrator
+from primordia.core.outputs import Output
+from primordia.core.plugins import hookimpl
+
+primordia.core.outputs.SERIES_INTERVAL = 3600.0
+primordia.coupling.orchestrator.OUTPUT_PATIENCE_S = 3.0  # the test's patience, not a user's 300 s
+
+
+class StopAtThree(Output):
+    name = "stop_at_three"
+
+    def record(self, run):
+        if run.step_index != 3:
+            return
+        if os.environ["STOP"] == "rank 0 alone":
+            if run.comm.rank == 0:
+                raise RuntimeError("rank 0's record")
+            run.comm.allreduce(1.0)
+        else:
+            if run.is_root:
+                (run.out_dir / "holding").touch()
+            time.sleep(60)
+
+
+@hookimpl
+def primordia_outputs():
+    return [StopAtThree]
+"""
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("stop", ["rank 0 alone", "two signals"])
+def test_a_parallel_run_stopped_at_once_keeps_the_rows_its_series_held(stop, small_config, tmp_path):
+    """A failure on rank 0 alone ends the job with MPI_Abort, and a second SIGUSR1 stops a parallel run at once
+    (the ranks may be anywhere: rank 0 only patches summary.json): the rows of series.nc waiting in memory were
+    lost, and the series held t = 0 alone."""
+    plugin = tmp_path / "stop_at_three.py"
+    plugin.write_text(STOP_AT_STEP_3)
+    out = tmp_path / "out"
+    process = rc.start("-p", plugin, "run", small_config(), "--set", "output.series_every=1", "--no-progress",
+                       "--out", out, ranks=2, env={"STOP": stop})
+    try:
+        if stop == "two signals":
+            deadline = time.monotonic() + 120
+            while not (out / "holding").exists():
+                assert process.poll() is None and time.monotonic() < deadline, process.stderr.read()[-2000:]
+                time.sleep(0.05)
+            process.send_signal(signal.SIGUSR1)  # noted: the run would stop after this step
+            time.sleep(1.0)
+            process.send_signal(signal.SIGUSR1)  # at once, in the held output
+        status, stderr = rc.finish(process, timeout=60)
+    finally:
+        rc.stop(process)
+    assert status == (2 if stop == "rank 0 alone" else 128 + signal.SIGUSR1), stderr[-3000:]
+    assert rc.summary(out)["status"] == ("interrupted at t = 0.6 (SIGUSR1)" if stop == "two signals" else
+                                         "stopped at t = 0.6: output 'stop_at_three' failed on rank 0 (record): "
+                                         "RuntimeError: rank 0's record, and the other ranks were still inside it "
+                                         "after 3 s (a collective call this rank never reached)")
+    assert _series_times(out) == pytest.approx([0.0, 0.2, 0.4, 0.6])
