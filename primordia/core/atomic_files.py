@@ -46,10 +46,17 @@ def storage_error(path: str | Path, error: BaseException, doing: str = "write") 
         if isinstance(error, StorageError):
             return error
         if isinstance(error, OSError) and error.errno in STORAGE_ERRNOS:
-            reason = os.strerror(error.errno)
-            return StorageError(f"cannot {doing} {path}: {reason[:1].lower()}{reason[1:]}")
+            return StorageError(f"cannot {doing} {path}: {reason_of(error)}")
         error = error.__cause__ or error.__context__
     return None
+
+
+def reason_of(error: OSError) -> str:
+    """Why the system refused, as primordia's lines say it: ``no space left on device`` (its strerror, which
+    starts with a capital: "cannot create the directory out: No space left on device" stood beside the writes'
+    "no space left on device")."""
+    text = os.strerror(error.errno) if error.errno else str(error)
+    return text[:1].lower() + text[1:]
 
 
 @contextlib.contextmanager
@@ -142,5 +149,5 @@ def make_directory(directory: str | Path) -> Path:
         storage = storage_error(directory, error, doing="create the directory")
         if storage is not None:
             raise storage from None
-        raise PrimordiaError(f"cannot create output directory {directory}: {error.strerror}") from None
+        raise PrimordiaError(f"cannot create the directory {directory}: {reason_of(error)}") from None
     return directory

@@ -36,6 +36,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from primordia.core.atomic_files import reason_of
 from primordia.core.checkpoint import CHECKPOINT_FILE
 from primordia.core.errors import ConfigError, PluginError
 from primordia.core.json_toml import write_json, write_toml
@@ -588,5 +589,5 @@ def directory_problem(directory: str | Path) -> str | None:
         try:
             os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=parent))
         except OSError as error:
-            return f"the output directory {directory} cannot be created in {parent} ({error.strerror or error})"
+            return f"the output directory {directory} cannot be created in {parent} ({reason_of(error)})"
     return None

@@ -36,7 +36,7 @@ import numpy as np
 import ufl
 
 from primordia.core import checkpoint as checkpoint_file
-from primordia.core.atomic_files import StorageError, storage_error
+from primordia.core.atomic_files import StorageError, make_directory, storage_error
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import existing_run, time_label
@@ -206,9 +206,9 @@ class Simulation:
                      f"restart; run primordia analyse {self.out_dir} again when it ends")
             if problem is None:
                 try:
-                    self.out_dir.mkdir(parents=True, exist_ok=True)
-                except OSError as error:
-                    problem = f"cannot create the output directory {self.out_dir}: {error.strerror or error}"
+                    make_directory(self.out_dir)
+                except PrimordiaError as error:  # in the words of every other directory primordia creates
+                    problem = str(error)
         problem = self.comm.bcast(problem, root=0)
         if problem is not None:
             raise ConfigError(problem)

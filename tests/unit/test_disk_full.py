@@ -336,3 +336,46 @@ def test_a_restart_whose_missed_snapshot_fills_the_disk_says_why_it_stopped(tmp_
             reader.read_points_cells()
             assert [reader.read_data(k)[0] for k in range(reader.num_steps)] == pytest.approx([0.2, 0.4, 0.8])
     assert stopped_in_snapshot >= 2, stopped_in_snapshot  # fields.h5 and fields.xdmf at 0.4
+
+
+def test_an_output_directory_a_full_disk_refuses_is_one_line_in_the_words_of_the_writes(tmp_path, small_config):
+    """A tmpfs without a free inode (nr_inodes=1: its root): creating the run's folder said "(No space left on
+    device)", with a capital, where a refused write says "no space left on device"."""
+    from small_disk import small_disks_available
+
+    if small_disks_available() is not None:
+        pytest.skip(small_disks_available())
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    script = 'mount -t tmpfs -o size=64k,nr_inodes=1 tmpfs "$1" || exit 90; shift; exec "$@"'
+    result = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script, "sh", str(disk),
+                             *primordia_command(), "run", str(small_config()), "--out", str(disk / "run"),
+                             "--no-progress"], capture_output=True, text=True, timeout=300)
+    if result.returncode == 90:
+        pytest.skip(f"cannot mount a tmpfs here: {result.stderr.strip()}")
+    assert_one_line_error(result, f"the output directory {disk / 'run'} cannot be created in {disk} "
+                                  f"(no space left on device)")
+
+
+@pytest.mark.parametrize("code, reason", [(errno.ENOSPC, "no space left on device"),
+                                          (errno.EACCES, "permission denied")])
+def test_a_folder_that_cannot_be_created_is_said_alike_wherever_it_is_created(tmp_path, monkeypatch, code, reason):
+    """The run's claim of its folder said "cannot create the output directory ...: No space left on device",
+    make_directory "cannot create the directory ...: no space left on device", or "cannot create output
+    directory ...: Permission denied": one wording now, the writes' ("no space left on device")."""
+    from primordia.core.errors import PrimordiaError
+
+    real = type(tmp_path).mkdir
+
+    def refused(path, *args, **kwargs):
+        if path.name == "refused":
+            raise OSError(code, os.strerror(code), str(path))
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(type(tmp_path), "mkdir", refused)
+    with pytest.raises(PrimordiaError) as made:
+        atomic_files.make_directory(tmp_path / "refused")
+    assert str(made.value) == f"cannot create the directory {tmp_path / 'refused'}: {reason}"
+    with pytest.raises(PrimordiaError) as claimed:  # the folder test creates (and removes) a probe beside it
+        small_model().run(out=tmp_path / "refused")
+    assert str(claimed.value) == str(made.value)
