@@ -868,10 +868,17 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
          "reason": (names, reason.astype(str), {"long_name": "why the run failed (empty if it completed)"}),
          "wall_time_s": (names, wall, {"long_name": "wall time of the run and its metrics", "units": "s"}),
          "run_dir": (names, np.array([str(p.directory) for p in points], dtype=str).reshape(shape)),
-         "predicted_wavenumber": (names, predicted["k_max"], {"long_name": "linear analysis: fastest stationary k"}),
-         "predicted_wavelength": (names, predicted["wavelength"], {"long_name": "linear analysis: 2 pi / k_max"}),
-         "predicted_growth_rate": (names, predicted["rate"], {"long_name": "linear analysis: Re phi at k_max"})},
+         # the seed's dimensionless k, lengths and rates: UDUNITS-2's "1", as metrics.nc writes them
+         "predicted_wavenumber": (names, predicted["k_max"], {"long_name": "linear analysis: fastest stationary k",
+                                                              "units": "1"}),
+         "predicted_wavelength": (names, predicted["wavelength"], {"long_name": "linear analysis: 2 pi / k_max",
+                                                                   "units": "1"}),
+         "predicted_growth_rate": (names, predicted["rate"], {"long_name": "linear analysis: Re phi at k_max",
+                                                              "units": "1"})},
         coords={name: (name, list(values)) for name, values in dims},
+        # no Conventions, as metrics.nc states none: the configuration and species dimensions (and a text-valued
+        # varied key's) are labelled by text, which CF's coordinate variables cannot be (cfchecks: "Possible
+        # incorrect declaration of a coordinate variable")
         attrs={"title": f"primordia sweep of {sweep.config.name} over {', '.join(names)}",
                "config": str(sweep.config), "fixed_overrides": " ".join(sweep.fixed),
                "varied": " ".join(f"{a.key}" for a in sweep.axes) + (f" {SEED_KEY}" if sweep.seeds else "")},

@@ -541,6 +541,9 @@ def test_runs_measured_at_other_times_keep_their_metrics(small_config, tmp_path)
     assert np.isfinite(prominence.diagonal()).all()  # each run at its own t_final
     assert np.isnan([prominence[0, 1], prominence[1, 0]]).all()  # and at no other time
     assert ds["wall_time_s"].attrs["units"] == "s"  # had none
+    # metrics.nc's units, and like metrics.nc no Conventions: its configuration and species are labelled by text
+    assert [ds[f"predicted_{name}"].attrs["units"] for name in ("wavenumber", "wavelength", "growth_rate")] == ["1"] * 3
+    assert ds["spectral_prominence"].attrs["units"] == "1" and "Conventions" not in ds.attrs
 
 
 def test_a_backend_no_run_can_use_is_one_line_before_any_run(small_config, primordia_cli, tmp_path):
