@@ -466,8 +466,50 @@ class Summary(Output):
         if run.is_root:
             if status == "running":
                 summary["process"] = {"pid": os.getpid(), "host": socket.gethostname()}
-            write_json(run.out_dir / "summary.json", summary)
+                write_json(run.out_dir / "summary.json", summary)
+                if self._written_at is None:
+                    reserve_room(run.out_dir)
+            else:
+                write_last_summary(run.out_dir, summary)
             self._written_at = time.monotonic()
+
+
+#: A scratch file of the run's folder holding room for the last rewrite of summary.json.  On a disk that fills the
+#: refused write's temporary file is removed, but an atomic rewrite of the summary needs room beside the old one:
+#: on a 100 kB tmpfs a restart's fields.xdmf was refused, then the summary saying so, which kept saying "running"
+#: (the next run into the folder called the run "killed without a word").  Removed when the run ends.
+SUMMARY_RESERVE = ".summary.reserve"
+#: Its size (bytes): twice example 1a's summary.json (2.6 kB), in whole 4 kB blocks.
+SUMMARY_RESERVE_BYTES = 8192
+
+
+def reserve_room(directory: Path) -> None:
+    """Hold :data:`SUMMARY_RESERVE_BYTES` in :data:`SUMMARY_RESERVE` (a disk too full for it holds less, or none)."""
+    path = Path(directory) / SUMMARY_RESERVE
+    try:
+        with open(path, "wb") as reserve:  # written out, not sparse: its blocks are allocated
+            reserve.write(bytes(SUMMARY_RESERVE_BYTES))
+            reserve.flush()
+            os.fsync(reserve.fileno())
+    except OSError:
+        pass  # what was written holds what room it could
+
+
+def write_last_summary(directory: Path, summary: dict) -> None:
+    """Write the summary that says why the run stopped, into the room :func:`reserve_room` held if the disk has
+    none left; the reserve goes either way."""
+    from primordia.core.atomic_files import StorageError
+
+    reserve = Path(directory) / SUMMARY_RESERVE
+    try:
+        write_json(Path(directory) / "summary.json", summary)
+    except StorageError:
+        if not reserve.exists():
+            raise
+        reserve.unlink()
+        write_json(Path(directory) / "summary.json", summary)
+    finally:
+        reserve.unlink(missing_ok=True)
 
 
 @hookimpl
@@ -516,7 +558,7 @@ ANALYSIS_FILE = "metrics.nc"
 #: What a run (and ``primordia analyse`` of it) writes besides: removed with it by :func:`clear_run`.  Its
 #: pictures by their names (:class:`Pictures`, ``metrics_<species>.png``): ``*.png`` also took the user's own.
 RUN_LEFTOVERS = ("fields_h5", "*_t[0-9]*.png", "*_t-[0-9]*.png", "*_snapshots.png", "final_fields.png",
-                 "metrics_*.png", ANALYSIS_FILE, ".*.tmp-*")
+                 "metrics_*.png", ANALYSIS_FILE, ".*.tmp-*", SUMMARY_RESERVE)
 
 
 def existing_run(directory: str | Path) -> str | None:

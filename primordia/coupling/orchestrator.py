@@ -741,14 +741,13 @@ class Simulation:
             return
         import json
 
-        from primordia.core.json_toml import write_json
+        from primordia.core.outputs import write_last_summary
 
-        path = self.out_dir / "summary.json"
         try:
-            summary = json.loads(path.read_text())
+            summary = json.loads((self.out_dir / "summary.json").read_text())
             summary.update(status=status, steps=self.step_index, time=self.time)
             summary.pop("process", None)
-            write_json(path, summary)
+            write_last_summary(self.out_dir, summary)
         except (OSError, ValueError, PrimordiaError):
             pass
 

@@ -179,6 +179,11 @@ def test_a_run_whose_disk_fills_stops_in_one_line_and_continues_once_there_is_ro
     for room in range(0, writes, 3 if once else 1):  # a third of them: what a full disk adds is the summary's word
         out = tmp_path / f"room{room}"
         disk = FillingDisk(monkeypatch, room, once)
+        if once and room == writes - 1:  # the summary saying "completed": written into the room the run held for it
+            small_model().run(out=out)
+            assert json.loads((out / "summary.json").read_text())["status"] == "completed"
+            assert_whole(out)
+            continue
         with pytest.raises(StorageError, match=f"cannot write {out}/.*: no space left on device") as stopped:
             small_model().run(out=out)
         assert "\n" not in str(stopped.value)
@@ -379,3 +384,29 @@ def test_a_folder_that_cannot_be_created_is_said_alike_wherever_it_is_created(tm
     with pytest.raises(PrimordiaError) as claimed:  # the folder test creates (and removes) a probe beside it
         small_model().run(out=tmp_path / "refused")
     assert str(claimed.value) == str(made.value)
+
+
+#: kB of disk for a restart of a run at t = 0.4 (92 kB of files) that adds the output time 0.4 and goes on to 0.8
+#: (measured 2026-12-05: 100 refuses the fields at 0.4, 108 fields.xdmf at 0.4, 112 the fields at 0.8, 116
+#: fields.xdmf at 0.8): whichever write is refused, no room was left for the summary saying so after it
+@pytest.mark.parametrize("kilobytes", [100, 104, 108, 112, 116])
+def test_a_restart_on_a_disk_that_fills_leaves_a_summary_saying_why(tmp_path, small_config, kilobytes):
+    """summary.json is rewritten atomically, which needs room beside the old one: the write the disk refused
+    left none, and summary.json kept saying "running" (at 100 and 108 kB: the next run called the run "killed
+    without a word").  The run holds room for that last rewrite (SUMMARY_RESERVE), and gives it back."""
+    first = tmp_path / "first"
+    ran = subprocess.run([*primordia_command(), "run", str(small_config()), "--out", str(first), "--no-progress",
+                          "--set", "time.t_final=0.4", "--set", "output.times=[0.2]"],
+                         capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    disk, copy = tmp_path / "disk", tmp_path / "copy"
+    copied = f'cp -a "{first}" "{disk}/run" && exec "$@"'
+    result = on_a_small_disk(kilobytes, disk, copy, ["sh", "-c", copied, "sh", *primordia_command(), "run",
+                                                     "--restart", str(disk / "run"), "--no-progress",
+                                                     "--set", "time.t_final=0.8", "--set", "output.times=[0.4,0.8]"])
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith(f"primordia: error: cannot write {disk / 'run'}/"), result.stderr
+    status = json.loads((copy / "run" / "summary.json").read_text())["status"]
+    assert status.startswith("stopped at t = ") and "no space left on device" in status, status
+    assert not [path.name for path in (copy / "run").iterdir() if path.name.startswith(".")]  # nor the reserve
+    assert_whole(copy / "run")
