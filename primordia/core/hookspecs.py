@@ -44,7 +44,9 @@ hookspec = pluggy.HookspecMarker("primordia")
 #: 1.6: the optional Physics.check_scheme (refuse a splitting scheme), Output.finishes_last, Discretisation.span.
 #: 1.7: the optional Physics.fourier_symbol and Physics.provides, Discretisation.at_balance,
 #: Kinematics.volume_ratio_of.
-CONTRACT_VERSION = (1, 7)
+#: 1.8: the optional Physics.inert_options / inert_solver_tables (settings a model leaves without effect) and
+#: Output.flush (what waits in memory, written when a run ends without finish).
+CONTRACT_VERSION = (1, 8)
 
 
 @hookspec
