@@ -16,6 +16,7 @@ import numpy as np
 
 from primordia.core.atomic_files import atomic_path, writable_target
 from primordia.core.errors import PrimordiaError
+from primordia.core.signals import INTERRUPTS
 from primordia.core.validation import is_number
 
 #: netCDF variable names primordia writes: letters, digits and a few safe signs.
@@ -76,11 +77,14 @@ class ScalarSeries:
         t = self._check_time(t)
         values = {key: _scalar(key, value) for key, value in row.items()}
         self._add_attrs(attrs)
-        for key in values:
-            self._columns.setdefault(key, [math.nan] * len(self._times))
-        self._times.append(t)
-        for key, column in self._columns.items():
-            column.append(values.get(key, math.nan))
+        # whole or not at all: a second Ctrl-C raises where the program is, and one between the time and its
+        # columns left rows of different lengths in the stop's checkpoint (its restart disabled the series)
+        with INTERRUPTS.mode_of("shielded"):
+            for key in values:
+                self._columns.setdefault(key, [math.nan] * len(self._times))
+            self._times.append(t)
+            for key, column in self._columns.items():
+                column.append(values.get(key, math.nan))
         if self._written_at is not None and time.monotonic() - self._written_at < self.min_interval:
             self._pending = True
         else:

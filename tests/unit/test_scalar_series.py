@@ -166,3 +166,32 @@ def test_rows_appended_soon_after_a_rewrite_wait_for_the_next_one_or_a_flush(tmp
     written = path.stat().st_mtime_ns
     series.flush()  # nothing waits: no rewrite
     assert path.stat().st_mtime_ns == written
+
+
+def test_a_second_signal_inside_a_row_leaves_the_series_whole(tmp_path):
+    """A second Ctrl-C raises where the program is (signals' "deferred" mode): one that came between a row's time and
+    its columns left columns shorter than the times in the stop's checkpoint, and the restart disabled the series."""
+    import os
+    import signal
+
+    from primordia.core.errors import InterruptedRun
+    from primordia.core.signals import INTERRUPTS
+
+    class SignalledTimes(list):
+        def append(self, value):  # the signal arrives just after the time is added
+            super().append(value)
+            os.kill(os.getpid(), signal.SIGINT)
+
+    series = ScalarSeries(tmp_path / "series.nc")
+    series.append(0.0, {"m": 1.0})
+    series._times = SignalledTimes(series._times)
+    INTERRUPTS.reset()
+    with INTERRUPTS.installed(), INTERRUPTS.mode_of("deferred"):
+        INTERRUPTS.count = 1  # the run is already stopping: the next signal raises at once
+        try:
+            series.append(0.2, {"m": 2.0})
+        except InterruptedRun:
+            pass
+    INTERRUPTS.reset()
+    state = series.state()
+    assert len(state["times"]) == len(state["columns"]["m"]) == 2
