@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from primordia.core.atomic_files import reason_of
 from primordia.core.errors import ConfigError, warn
 from primordia.core.validation import is_flag, is_integer, is_number
 
@@ -71,7 +72,7 @@ def load_config(path: str | Path) -> dict:
         with path.open("rb") as stream:
             data = stream.read(MAX_CONFIG_BYTES + 1)
     except OSError as error:
-        raise ConfigError(f"cannot read config file {path}: {error.strerror or error}") from None
+        raise ConfigError(f"cannot read config file {path}: {reason_of(error)}") from None
     if len(data) > MAX_CONFIG_BYTES:
         raise ConfigError(f"config file {path} is larger than {MAX_CONFIG_BYTES >> 20} MB: not a configuration")
     try:

@@ -298,7 +298,7 @@ def _fifo(path):
     (_binary, ["is not UTF-8 text", "binary"]), (_latin1, ["is not UTF-8 text"]),
     (_folder, ["is a folder"]), (_fifo, ["is not a regular file"]),
     (lambda path: Path("/dev/zero"), ["/dev/zero", "not a regular file"]),
-    (lambda path: Path("/proc/1/mem"), ["cannot read config file"]),
+    (lambda path: Path("/proc/1/mem"), ["cannot read config file /proc/1/mem: permission denied"]),
 ], ids=["binary", "latin-1", "folder", "fifo", "dev-zero", "unreadable"])
 def test_a_config_that_is_no_text_file(capsys, tmp_path, make, fragments):
     assert_one_line(*in_process(capsys, "run", make(tmp_path / "config.toml")), *fragments)
