@@ -328,7 +328,35 @@ def _junk(kind: str, pieces, taken: dict) -> str | None:
         if name in taken or name in names:
             owner = taken[name][1] if name in taken else "the same hook"
             return f"reuses the name '{name}', taken by {owner}"
+        twice = _parameter_declared_twice(piece)
+        if twice is not None:
+            return f"returned {name!r}, which {twice}"
         names.append(name)
+    return None
+
+
+def _parameter_declared_twice(piece) -> str | None:
+    """What is wrong when one piece declares one parameter name twice (None: it does not).
+
+    Told as "declared by physics X (default 1) and by physics X (default 2)" only once a model composed it
+    (``primordia.model._declarations`` compares owners, not declarations), and not at all when both defaults
+    agreed: the model then held the name twice, with two descriptions.  Refused here, with the other checks of
+    a hook's answer, the piece is listed as broken by ``primordia plugins`` and named by any config using it.
+    """
+    declared = getattr(piece, "parameters", ())
+    if not isinstance(declared, (list, tuple)):
+        return None  # not a tuple of Parameter: the model's composition names that
+    seen: dict[str, object] = {}
+    for parameter in declared:
+        name = getattr(parameter, "name", None)
+        if not isinstance(name, str):
+            continue
+        if name in seen:
+            defaults = [getattr(p, "default", None) for p in (seen[name], parameter)]
+            told = (f"default {defaults[0]!r}" if defaults[0] == defaults[1]
+                    else f"defaults {defaults[0]!r} and {defaults[1]!r}")
+            return f"declares parameter {name} twice ({told}): one name is one parameter, so rename or drop one"
+        seen[name] = parameter
     return None
 
 

@@ -1,0 +1,66 @@
+"""``primordia run --dry-run`` refuses what the run's set-up refuses.
+
+A user checks a config with ``--dry-run`` before submitting a cluster job: an input it passes that the run
+then refuses at set-up costs a queue slot.  Each case here is a plugin given by ``-p`` and a config on a
+2 x 2 mesh on scikit-fem, through the real command: the dry run and the run must both refuse it, in one line.
+"""
+
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from cli_checks import assert_one_line_error
+
+
+def _inputs(small_config, tmp_path, plugin: str, physics: list[str]):
+    """The plugin file and the config of one case: the small config's run of ``physics`` on 2 x 2 squares, on
+    scikit-fem (a kinetics and its parameters only for chemotaxis)."""
+    plugin_file = tmp_path / "case_plugin.py"
+    plugin_file.write_text(textwrap.dedent(plugin))
+    text = small_config.text.replace('physics = ["chemotaxis"]', f"physics = {physics}\nbackend = \"skfem\"")
+    text = text.replace("cells = [8, 8]", "cells = [2, 2]").replace("'", '"')
+    if "chemotaxis" not in physics:
+        for section in ('[kinetics]\nname = "painter2018"\n', "[parameters]\nm0 = 0.75\nD_m = 0.03\n"):
+            text = text.replace(section, "")
+    return plugin_file, small_config(text)
+
+
+def _both_refuse(primordia_cli, tmp_path, plugin_file, config, *fragments: str) -> None:
+    """The dry run and the run refuse the input with the same one line."""
+    dry = primordia_cli("-p", plugin_file, "run", config, "--out", tmp_path / "out", "--dry-run")
+    ran = primordia_cli("-p", plugin_file, "run", config, "--out", tmp_path / "out", "--no-progress")
+    assert assert_one_line_error(dry, *fragments) == assert_one_line_error(ran, *fragments)
+
+
+TWICE = """\
+from primordia.core.parameters import Parameter
+from primordia.core.plugins import hookimpl
+from primordia.physics.base import Coupling
+
+
+class Twice(Coupling):
+    name = "twice"
+    parameters = (Parameter("k_t", 1.0, "a rate (1/time)"), Parameter("k_t", {second}, "a rate (1/time)"))
+
+    def setup(self, disc):
+        pass
+
+
+@hookimpl
+def primordia_physics():
+    return [Twice]
+"""
+
+
+@pytest.mark.parametrize("second, told", [(2.0, "(defaults 1.0 and 2.0)"), (1.0, "(default 1.0)")])
+def test_a_parameter_one_module_declares_twice_is_told_as_such(primordia_cli, small_config, tmp_path, second,
+                                                              told):
+    """"parameter k_t is declared by physics twice (default 1) and by physics twice (default 2)" named the module
+    as two owners, and with equal defaults the model took the name twice, two descriptions, without a word."""
+    plugin_file, config = _inputs(small_config, tmp_path, TWICE.format(second=second), ["chemotaxis", "twice"])
+    _both_refuse(primordia_cli, tmp_path, plugin_file, config, "returned 'twice', which declares parameter k_t twice",
+                 told)
+    listed = primordia_cli("-p", plugin_file, "plugins")
+    assert_one_line_error(listed, "declares parameter k_t twice")
