@@ -188,7 +188,9 @@ def _report_dry_run(model, out: Path, restart: bool) -> int:
     if problem is not None:
         raise ConfigError(problem)
     existing = "restart" if restart else "reuse"  # a restart: and what its checkpoint lets it change
-    Simulation(model, backend=model.backend, out_dir=out, existing=existing).check_choices()  # backend, scheme
+    sim = Simulation(model, backend=model.backend, out_dir=out, existing=existing)
+    sim.check_choices()  # backend, scheme
+    sim.check_forms()  # what the modules state to each other: a term added to a law that reads none
     check_table_values(model.solver)
     model.warn_about_inert_settings()  # once the input passed: a refused one is one line
     found = existing_run(out)

@@ -168,6 +168,28 @@ class Simulation:
             self._read_checkpoint()
         self.backend = self.scheme = None
 
+    def check_forms(self) -> None:
+        """What :meth:`setup` refuses once the modules state their forms to each other, with nothing solved,
+        no solver made and nothing written (``primordia run --dry-run``): the mesh on the backend, the fields
+        grouped by the scheme, every module's ``setup`` and (initial) subproblems, and whether every term a
+        module contributes is read by the balance law it is added to.
+
+        A term added to a field whose owner reads no contributed terms passed ``--dry-run`` and stopped the
+        run at set-up.  It costs 0.2-0.7 s: examples 1a at the seed's 58,482 triangles (fenicsx) 0.2 s, 2a
+        0.7 s (0.2 s of it the exponential fitting's stiffness matrix, its only assembly), 4 at 20 x 20 x 2
+        boxes 0.3 s.
+        """
+        self._choose_backend()
+        self._choose_splitting()
+        self._discretise()
+        self._create_fields()
+        self._setup_physics()
+        for physics in self.model.physics_objects:
+            subproblems_of(physics)
+            subproblems_of(physics, initial=True)
+        self.disc.check_contributions()
+        self.backend = self.scheme = self.disc = None
+
     def _choose_backend(self):
         from primordia.core.backend import Backend
 

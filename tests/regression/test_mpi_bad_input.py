@@ -61,13 +61,16 @@ def test_bad_input_under_two_ranks(case, small_config, tmp_path):
         assert "retried" not in rc.primordia_lines(result.stderr)[0]
 
 
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]], ids=["run", "dry-run"])
 @pytest.mark.parametrize("example", ["ex01a", "ex01b"])
-def test_more_ranks_than_the_mesh_has_cells_for_is_one_line(example, tmp_path):
+def test_more_ranks_than_the_mesh_has_cells_for_is_one_line(example, dry_run, tmp_path):
     """A mesh of 2 triangles on 3 ranks leaves a rank without a cell, on which dolfinx 0.5.2 cannot work (its
     collapse of a vector field's component crashes there, an empty dofmap broke the vertex maps): it was a
-    traceback of every rank and an MPI_ABORT."""
+    traceback of every rank and an MPI_ABORT.  ``--dry-run``, which did not partition the mesh, said "the input
+    is valid"."""
     result = rc.run("run", rc.EXAMPLES / f"{example}.toml", "--set", "mesh.cells=[1,1]", "--set", "time.t_final=0.4",
-                    "--set", "output.times=[0.4]", "--no-progress", "--out", tmp_path / "out", ranks=3, timeout=180)
+                    "--set", "output.times=[0.4]", "--no-progress", "--out", tmp_path / "out", *dry_run, ranks=3,
+                    timeout=180)
     _assert_one_line_on_every_rank(result, "2 cells", "3 ranks", "own none", "fewer ranks")
 
 

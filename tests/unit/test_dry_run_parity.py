@@ -64,3 +64,63 @@ def test_a_parameter_one_module_declares_twice_is_told_as_such(primordia_cli, sm
                  told)
     listed = primordia_cli("-p", plugin_file, "plugins")
     assert_one_line_error(listed, "declares parameter k_t twice")
+
+
+QUIET = """\
+import ufl
+
+from primordia.core.plugins import hookimpl
+from primordia.physics.base import Coupling, FieldSpec, Physics, Subproblem
+
+
+class Quiet(Physics):
+    '''Owns q, whose balance law reads no contributed terms.'''
+
+    name = "quiet"
+
+    def fields(self):
+        return [FieldSpec("q")]
+
+    def setup(self, disc):
+        self.disc = disc
+
+    def initialise(self, disc):
+        disc.interpolate("q", 0.0)
+
+    def subproblems(self):
+        disc = self.disc
+        residual = (disc.field("q") - disc.previous("q")) / disc.dt * disc.test("q") * disc.dx
+        unknown = disc.unknown("q")
+        return [Subproblem(name="quiet", unknown=unknown, residual=residual,
+                           jacobian=ufl.derivative(residual, unknown))]
+
+
+class Push(Coupling):
+    '''Adds a source to the balance law of ``target``.'''
+
+    name = "push"
+    target = "{target}"
+    requires = (target,)
+
+    def setup(self, disc):
+        disc.contribute(self.target, lambda v: 1.0 * v * disc.dx, by=self.name)
+
+
+@hookimpl
+def primordia_physics():
+    return [Quiet, Push]
+"""
+
+
+def test_a_term_added_to_a_law_that_reads_none_is_refused_by_the_dry_run(primordia_cli, small_config, tmp_path):
+    """--dry-run said "the input is valid" and the run stopped at set-up: the modules' forms were not stated."""
+    plugin_file, config = _inputs(small_config, tmp_path, QUIET.format(target="q"), ["quiet", "push"])
+    _both_refuse(primordia_cli, tmp_path, plugin_file, config,
+                 "push adds a term to the balance law of 'q', but quiet does not read contributed terms")
+
+
+def test_a_term_added_to_a_law_that_reads_it_passes_the_dry_run(primordia_cli, small_config, tmp_path):
+    plugin_file, config = _inputs(small_config, tmp_path, QUIET.format(target="m"), ["chemotaxis", "push"])
+    dry = primordia_cli("-p", plugin_file, "run", config, "--out", tmp_path / "out", "--dry-run")
+    assert dry.returncode == 0 and "the input is valid" in dry.stdout, dry.stderr
+    assert not (tmp_path / "out").exists()  # nothing written
