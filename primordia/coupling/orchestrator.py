@@ -184,9 +184,10 @@ class Simulation:
         self._discretise()
         self._create_fields()
         self._setup_physics()
+        subproblems = [subproblems_of(physics) for physics in self.model.physics_objects]
         for physics in self.model.physics_objects:
-            subproblems_of(physics)
             subproblems_of(physics, initial=True)
+        self.scheme.check_subproblems(subproblems)  # e.g. strang with one module that solves anything
         self.disc.check_contributions()
         self.backend = self.scheme = self.disc = None
 

@@ -60,9 +60,16 @@ class SplittingScheme(Configured, ABC):
                 groups.setdefault(spec.group or spec.name, []).append(spec)
         return groups
 
+    def check_subproblems(self, subproblems: list[list[Subproblem]]) -> None:
+        """Refuse, in one line (:class:`ConfigError`), modules' subproblems this scheme cannot solve
+        (``subproblems``: each module's, in model order): before any solver is made, by :meth:`build` and by
+        ``primordia run --dry-run``, which makes none."""
+
     def build(self, sim) -> None:
         """Create the solvers, one per subproblem, grouped in sub-flows (one per module)."""
-        self.flows = [[sim.solver_for(sub) for sub in subproblems_of(module)] for module in self.physics]
+        subproblems = [subproblems_of(module) for module in self.physics]
+        self.check_subproblems(subproblems)
+        self.flows = [[sim.solver_for(sub) for sub in own] for own in subproblems]
         self.flows = [flow for flow in self.flows if flow]
         sim.solvers = [solver for flow in self.flows for solver in flow]
         self.check_solver_tables(sim)
@@ -108,10 +115,12 @@ class Strang(SplittingScheme):
 
     name = "strang"
 
+    def check_subproblems(self, subproblems):
+        if sum(1 for own in subproblems if own) < 2:
+            raise ConfigError("the strang scheme needs at least two physics modules with subproblems")
+
     def build(self, sim):
         super().build(sim)
-        if len(self.flows) < 2:
-            raise ConfigError("the strang scheme needs at least two physics modules with subproblems")
         self.first = self.flows[0]
         self.rest = [solver for flow in self.flows[1:] for solver in flow]
 
@@ -190,12 +199,16 @@ class Monolithic(SplittingScheme):
     def field_groups(self, physics):
         return {"monolithic": [spec for module in physics for spec in module.fields()]}
 
-    def build(self, sim):
-        subproblems = [sub for module in self.physics for sub in subproblems_of(module)]
-        for sub in subproblems:
+    def check_subproblems(self, subproblems):
+        for sub in (sub for own in subproblems for sub in own):
             if sub.operator is not None:
                 raise ConfigError(f"the monolithic scheme cannot include {sub.name}: its algebraic operator "
                                   f"acts on its own field alone (choose a form without one in its module's options)")
+
+    def build(self, sim):
+        own = [subproblems_of(module) for module in self.physics]
+        self.check_subproblems(own)
+        subproblems = [sub for module_subproblems in own for sub in module_subproblems]
         unknown = subproblems[0].unknown
         residual = sum((sub.residual for sub in subproblems[1:]), subproblems[0].residual)
         stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]

@@ -124,3 +124,11 @@ def test_a_term_added_to_a_law_that_reads_it_passes_the_dry_run(primordia_cli, s
     dry = primordia_cli("-p", plugin_file, "run", config, "--out", tmp_path / "out", "--dry-run")
     assert dry.returncode == 0 and "the input is valid" in dry.stdout, dry.stderr
     assert not (tmp_path / "out").exists()  # nothing written
+
+
+def test_strang_with_one_module_that_solves_anything_is_refused_by_the_dry_run(primordia_cli, small_config, tmp_path):
+    """Refused by the scheme once its solvers were made (the forms compiled): --dry-run said "the input is valid"."""
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    for dry_run in (["--dry-run"], ["--no-progress"]):
+        result = primordia_cli("run", config, "--out", tmp_path / "out", "--set", 'coupling.scheme="strang"', *dry_run)
+        assert_one_line_error(result, "the strang scheme needs at least two physics modules with subproblems")
