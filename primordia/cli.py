@@ -121,7 +121,8 @@ def command_run(args) -> int:
         if not str(args.out if args.out is not None else out).strip():
             raise ConfigError("--out needs a directory name")
     if args.dry_run:
-        return _report_dry_run(model, out, restart=args.restart is not None)
+        existing = "restart" if args.restart is not None else "overwrite" if args.overwrite else "refuse"
+        return _report_dry_run(model, out, existing)
     _warn_about_a_slow_blas()
     sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
                     restart=args.restart is not None)
@@ -179,7 +180,9 @@ def _checkpointed_config(out: Path) -> dict:
     return config
 
 
-def _report_dry_run(model, out: Path, restart: bool) -> int:
+def _report_dry_run(model, out: Path, existing: str) -> int:
+    """Check what the run would, as far as its forms (``existing``: what the run does with a run already in
+    ``out``, as :class:`~primordia.coupling.orchestrator.Simulation` takes it), and say so in one line."""
     from primordia.core.outputs import directory_problem, existing_run
     from primordia.coupling.orchestrator import Simulation
     from primordia.coupling.solver_options import check_table_values
@@ -187,17 +190,17 @@ def _report_dry_run(model, out: Path, restart: bool) -> int:
     problem = directory_problem(out)
     if problem is not None:
         raise ConfigError(problem)
-    existing = "restart" if restart else "reuse"  # a restart: and what its checkpoint lets it change
     sim = Simulation(model, backend=model.backend, out_dir=out, existing=existing)
     sim.check_choices()  # backend, scheme
     sim.check_forms()  # what the modules state to each other: a term added to a law that reads none
     check_table_values(model.solver)
     model.warn_about_inert_settings()  # once the input passed: a refused one is one line
     found = existing_run(out)
+    replaced = ", which --overwrite replaces" if existing == "overwrite" else ""
     if is_root_process():
         print(f"primordia: the input is valid: {model.mesh_data.num_cells} cells, {model.num_steps} steps of "
               f"dt = {model.dt:g} to t = {model.t_final:g} on {model.backend}"
-              + (f"; {out} already holds {found}" if found else "") + "; nothing was run")
+              + (f"; {out} already holds {found}{replaced}" if found else "") + "; nothing was run")
     return 0
 
 

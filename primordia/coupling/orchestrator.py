@@ -161,10 +161,13 @@ class Simulation:
         self.model.check_affordable()
         self._choose_backend()
         self._choose_splitting()
+        # the run already in out_dir, refused in the words of setup(), on every rank: "the input is valid; OUT
+        # already holds a run that ended" passed where the run, without --overwrite, stopped at once
+        problem = self._refusal_of(existing_run(self.out_dir)) if self.is_root else None
+        problem = self.comm.bcast(problem, root=0)
+        if problem is not None:
+            raise ConfigError(problem)
         if self.existing == "restart":
-            missing = self.is_root and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file()
-            if self.comm.bcast(missing, root=0):  # in the words of setup(), on every rank
-                raise ConfigError(self._no_checkpoint(existing_run(self.out_dir) if self.is_root else None))
             self._read_checkpoint()
         self.backend = self.scheme = None
 
@@ -214,15 +217,8 @@ class Simulation:
         if self.is_root:
             problem = directory_problem(self.out_dir)
             found = existing_run(self.out_dir) if problem is None else None
-            if found and "in progress" in found:
-                problem = f"{self.out_dir} holds {found}; stop it first"
-            elif found and self.existing == "refuse":
-                problem = (f"{self.out_dir} already holds {found}; use --overwrite to replace it, or "
-                           f"--restart {self.out_dir} to continue it (from Python: Model.run(..., overwrite=True) "
-                           f"or restart=True)")
-            elif self.existing == "restart" and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file():
-                problem = self._no_checkpoint(found)
-            elif found and self.existing == "overwrite":
+            problem = problem or self._refusal_of(found)
+            if problem is None and found and self.existing == "overwrite":
                 clear_run(self.out_dir)
             if problem is None and self.existing == "restart" and (self.out_dir / ANALYSIS_FILE).is_file():
                 warn(f"{self.out_dir / ANALYSIS_FILE} (primordia analyse) measures the run as it was before this "
@@ -235,6 +231,18 @@ class Simulation:
         problem = self.comm.bcast(problem, root=0)
         if problem is not None:
             raise ConfigError(problem)
+
+    def _refusal_of(self, found: str | None) -> str | None:
+        """Why this run may not take ``out_dir``, which holds ``found`` (:func:`existing_run`), as ``existing``
+        says (None: it may)."""
+        if found and "in progress" in found:
+            return f"{self.out_dir} holds {found}; stop it first"
+        if found and self.existing == "refuse":
+            return (f"{self.out_dir} already holds {found}; use --overwrite to replace it, or --restart "
+                    f"{self.out_dir} to continue it (from Python: Model.run(..., overwrite=True) or restart=True)")
+        if self.existing == "restart" and not (self.out_dir / checkpoint_file.CHECKPOINT_FILE).is_file():
+            return self._no_checkpoint(found)
+        return None
 
     def _no_checkpoint(self, found: str | None) -> str:
         return (f"{self.out_dir} holds no checkpoint to restart from" + (f" ({found})" if found else "")

@@ -132,3 +132,19 @@ def test_strang_with_one_module_that_solves_anything_is_refused_by_the_dry_run(p
     for dry_run in (["--dry-run"], ["--no-progress"]):
         result = primordia_cli("run", config, "--out", tmp_path / "out", "--set", 'coupling.scheme="strang"', *dry_run)
         assert_one_line_error(result, "the strang scheme needs at least two physics modules with subproblems")
+
+
+def test_an_output_directory_holding_a_run_is_refused_by_the_dry_run_as_by_the_run(primordia_cli, small_config,
+                                                                                   tmp_path):
+    """--dry-run said "the input is valid ...; OUT already holds a run that ended ...", exit 0, where the run
+    (without --overwrite or --restart) stopped at once."""
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    out = tmp_path / "out"
+    assert primordia_cli("run", config, "--out", out, "--no-progress").returncode == 0
+    dry = primordia_cli("run", config, "--out", out, "--dry-run")
+    ran = primordia_cli("run", config, "--out", out, "--no-progress")
+    fragments = ("already holds a run that ended: completed", "use --overwrite to replace it")
+    assert assert_one_line_error(dry, *fragments) == assert_one_line_error(ran, *fragments)
+    replacing = primordia_cli("run", config, "--out", out, "--dry-run", "--overwrite")
+    assert replacing.returncode == 0 and "which --overwrite replaces; nothing was run" in replacing.stdout
+    assert (out / "summary.json").is_file()  # the dry run removed nothing
