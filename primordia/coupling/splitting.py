@@ -84,14 +84,23 @@ class SplittingScheme(Configured, ABC):
         """
         if self._tables_checked:
             return
-        initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
-        inert = getattr(sim.model, "inert_solver_tables", {})  # told by the model, in one warning each
-        check_tables({name: table for name, table in sim.model.solver.items() if name not in inert},
-                     [solver.sub.prefix for solver in sim.solvers] + initial)
+        self.check_table_names(sim.model, [solver.sub.prefix for solver in sim.solvers])
         # the types and values of a table no solver of this process reads (a restart does not solve the initial
         # state again): pc_type = "hypr" under [solver.poroelastic_growth_initial] was taken without a word
         check_table_values(sim.model.solver)
         self._tables_checked = True
+
+    def check_table_names(self, model, prefixes: list[str]) -> None:
+        """Every ``[solver.NAME]`` table of ``model``'s config names one of the solvers' ``prefixes`` or an initial
+        solve's, or one line naming it (a table another setting makes is told by the model, in one warning)."""
+        initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
+        inert = getattr(model, "inert_solver_tables", {})
+        check_tables({name: table for name, table in model.solver.items() if name not in inert}, prefixes + initial)
+
+    def solver_prefixes(self, subproblems: list[list[Subproblem]]) -> list[str]:
+        """The options prefixes of the solvers :meth:`build` makes of the modules' ``subproblems``: what
+        ``primordia run --dry-run``, which makes none, checks the ``[solver.*]`` tables against."""
+        return [sub.prefix for own in subproblems for sub in own]
 
     @abstractmethod
     def advance(self, sim, t0: float, dt: float) -> dict:
@@ -195,6 +204,8 @@ class Monolithic(SplittingScheme):
 
     name = "monolithic"
     options = {}
+    #: The one subproblem, and options prefix, of the Newton solve of every field.
+    SOLVE = "monolithic"
 
     def field_groups(self, physics):
         return {"monolithic": [spec for module in physics for spec in module.fields()]}
@@ -205,6 +216,9 @@ class Monolithic(SplittingScheme):
                 raise ConfigError(f"the monolithic scheme cannot include {sub.name}: its algebraic operator "
                                   f"acts on its own field alone (choose a form without one in its module's options)")
 
+    def solver_prefixes(self, subproblems):
+        return [f"{self.SOLVE}_"]
+
     def build(self, sim):
         own = [subproblems_of(module) for module in self.physics]
         self.check_subproblems(own)
@@ -213,7 +227,7 @@ class Monolithic(SplittingScheme):
         residual = sum((sub.residual for sub in subproblems[1:]), subproblems[0].residual)
         stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]
         combined = Subproblem(
-            name="monolithic", unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
+            name=self.SOLVE, unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
             bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False,
             petsc_options=grouped_direct(sub.petsc_options for sub in subproblems),
             fields=sim.disc.unknown_fields(sim.disc.field_names()[0]),

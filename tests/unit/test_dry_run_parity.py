@@ -148,3 +148,29 @@ def test_an_output_directory_holding_a_run_is_refused_by_the_dry_run_as_by_the_r
     replacing = primordia_cli("run", config, "--out", out, "--dry-run", "--overwrite")
     assert replacing.returncode == 0 and "which --overwrite replaces; nothing was run" in replacing.stdout
     assert (out / "summary.json").is_file()  # the dry run removed nothing
+
+
+@pytest.mark.parametrize("assignments, fragments", [
+    (['solver.chemotaxis_mm.ksp_type="cg"'],
+     ["unknown solver table [solver.chemotaxis_mm]", "did you mean chemotaxis_m"]),
+    (['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"', 'solver.chemotaxis_m.ksp_type="cg"'],
+     ["unknown solver table [solver.chemotaxis_m]", "(known: monolithic)"]),
+], ids=["misspelt", "another-scheme-s"])
+def test_a_solver_table_naming_no_subproblem_is_refused_by_the_dry_run(primordia_cli, small_config, tmp_path,
+                                                                       assignments, fragments):
+    """The subproblems' options prefixes exist once the modules state their forms: --dry-run said "the input is
+    valid" to a misspelt [solver.NAME] table, and the run stopped at set-up."""
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    settings = [argument for assignment in assignments for argument in ("--set", assignment)]
+    dry = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", *settings)
+    ran = primordia_cli("run", config, "--out", tmp_path / "out", "--no-progress", *settings)
+    assert assert_one_line_error(dry, *fragments) == assert_one_line_error(ran, *fragments)
+
+
+def test_the_solver_tables_of_a_scheme_s_subproblems_pass_the_dry_run(primordia_cli, small_config, tmp_path):
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    for settings in (["--set", 'solver.chemotaxis_m.ksp_type="cg"'],
+                     ["--set", 'coupling.scheme="monolithic"', "--set", 'physics.chemotaxis.flux_scheme="galerkin"',
+                      "--set", 'solver.monolithic.ksp_type="gmres"']):
+        dry = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", *settings)
+        assert dry.returncode == 0 and "the input is valid" in dry.stdout, dry.stderr
