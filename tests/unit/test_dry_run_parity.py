@@ -174,3 +174,11 @@ def test_the_solver_tables_of_a_scheme_s_subproblems_pass_the_dry_run(primordia_
                       "--set", 'solver.monolithic.ksp_type="gmres"']):
         dry = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", *settings)
         assert dry.returncode == 0 and "the input is valid" in dry.stdout, dry.stderr
+
+
+def test_a_module_whose_initialise_fails_is_refused_by_the_dry_run(primordia_cli, small_config, tmp_path):
+    """The run sets the fields' values (``initialise``) before any solve: a plugin's slip there passed --dry-run."""
+    plugin = QUIET.format(target="q").replace('disc.interpolate("q", 0.0)', 'disc.interpolate("qq", 0.0)')
+    plugin_file, config = _inputs(small_config, tmp_path, plugin, ["quiet"])
+    _both_refuse(primordia_cli, tmp_path, plugin_file, config,
+                 "physics quiet: initialise: field 'qq' is required but no physics module of this model provides it")
