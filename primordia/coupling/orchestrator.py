@@ -175,9 +175,9 @@ class Simulation:
         """What :meth:`setup` refuses once the modules state their forms to each other, with nothing solved,
         no solver made and nothing written (``primordia run --dry-run``): the mesh on the backend, the fields
         grouped by the scheme, every module's ``setup``, ``initialise`` (not the initial solves: they would
-        assemble and solve) and (initial) subproblems, whether the scheme can solve them and every
-        ``[solver.NAME]`` table names one, and whether every term a module contributes is read by the balance
-        law it is added to.
+        assemble and solve) and (initial) subproblems, the same on every rank, whether the scheme can solve
+        them and every ``[solver.NAME]`` table names one, and whether every term a module contributes is read
+        by the balance law it is added to.
 
         A term added to a field whose owner reads no contributed terms passed ``--dry-run`` and stopped the
         run at set-up.  It costs 0.2-0.7 s: examples 1a at the seed's 58,482 triangles (fenicsx) 0.2 s, 2a
@@ -192,6 +192,8 @@ class Simulation:
         if self.existing != "restart":  # a restart takes the fields from its checkpoint
             self._set_initial_values()
         subproblems = [subproblems_of(physics) for physics in self.model.physics_objects]
+        for subproblem in (sub for own in subproblems for sub in own):
+            self._refuse_forms_differing_across_ranks(subproblem)
         self.scheme.check_subproblems(subproblems)  # e.g. strang with one module that solves anything
         # a misspelt [solver.NAME] table (the initial subproblems are built for their names here)
         self.scheme.check_table_names(self.model, self.scheme.solver_prefixes(subproblems))

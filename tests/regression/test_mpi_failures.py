@@ -144,13 +144,15 @@ def primordia_kinetics():
               "m, e, f, b, got m, e, f"),
     ("nan", "chemotaxis.m: its equations differ between MPI ranks (rank 0 and rank 1): a plugin answers otherwise "
             "on some rank (a NaN there, or a value read from a file only one rank sees)")])
-def test_kinetics_failing_on_one_rank_is_one_line(mode, message, tmp_path, small_config):
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]], ids=["run", "dry-run"])
+def test_kinetics_failing_on_one_rank_is_one_line(mode, message, dry_run, tmp_path, small_config):
     """The error was rank 1's alone: rank 1 printed nothing (only rank 0 prints errors) and waited in MPI_Finalize
-    while rank 0 waited in a collective call of the set-up, until ``timeout`` killed the job."""
+    while rank 0 waited in a collective call of the set-up, until ``timeout`` killed the job.  ``--dry-run``, which
+    did not build the forms, said "the input is valid"."""
     plugin = tmp_path / "flaky_kinetics.py"
     plugin.write_text(FLAKY_KINETICS)
     result = rc.run("-p", plugin, "run", small_config(), "--set", "kinetics.name=flaky_kinetics", "--out",
-                    tmp_path / "out", "--no-progress", ranks=2, env={"KIN_MODE": mode}, timeout=60)
+                    tmp_path / "out", "--no-progress", *dry_run, ranks=2, env={"KIN_MODE": mode}, timeout=60)
     assert result.returncode == 2, result.stderr[-2000:]
     assert rc.primordia_lines(result.stderr) == [f"primordia: error: {message}"], result.stderr[-2000:]
 
