@@ -168,7 +168,7 @@ class Simulation:
         if problem is not None:
             raise ConfigError(problem)
         if self.existing == "restart":
-            self._read_checkpoint()
+            self._checked_checkpoint = self._read_checkpoint()  # its fields are taken by check_forms
         self.backend = self.scheme = None
 
     def check_forms(self) -> None:
@@ -177,7 +177,7 @@ class Simulation:
         grouped by the scheme, every module's ``setup``, ``initialise`` (not the initial solves: they would
         assemble and solve) and (initial) subproblems, the same on every rank, whether the scheme can solve
         them and every ``[solver.NAME]`` table names one, and whether every term a module contributes is read
-        by the balance law it is added to.
+        by the balance law it is added to; a restart's checkpoint holds every state function, laid out alike.
 
         A term added to a field whose owner reads no contributed terms passed ``--dry-run`` and stopped the
         run at set-up.  It costs 0.2-0.7 s: examples 1a at the seed's 58,482 triangles (fenicsx) 0.2 s, 2a
@@ -198,7 +198,9 @@ class Simulation:
         # a misspelt [solver.NAME] table (the initial subproblems are built for their names here)
         self.scheme.check_table_names(self.model, self.scheme.solver_prefixes(subproblems))
         self.disc.check_contributions()
-        self.backend = self.scheme = self.disc = None
+        if self.existing == "restart":  # after the subproblems: they make some of the state (Discretisation.at_balance)
+            self._restore_fields(getattr(self, "_checked_checkpoint", None) or self._read_checkpoint())
+        self.backend = self.scheme = self.disc = self._checked_checkpoint = None
 
     def _choose_backend(self):
         from primordia.core.backend import Backend
@@ -557,6 +559,31 @@ class Simulation:
 
     def _restore(self, tree: dict) -> None:
         """Put the run back where the checkpoint left it (every rank takes its own part of each field)."""
+        self._restore_fields(tree)
+        states = tree["physics"]  # one per rank of the checkpointed run, all alike if their number is not ours
+        for physics in self.model.physics_objects:
+            physics.restore_state(states[self.comm.rank if len(states) == self.comm.size else 0].get(physics.name, {}))
+        run = tree["run"]
+        self.step_index, self.time, self.last_dt = int(run["step"]), float(run["time"]), float(run["last_dt"])
+        self.step_begin, self.step_done = float(run.get("step_begin", self.time)), float(run.get("step_done", 0.0))
+        self.controller.restore(run["controller"])
+        self.iterations = {k: [int(i) for i in v] for k, v in run["iterations"].items()}
+        self.newton = {k: [tuple(int(i) for i in r) for r in v] for k, v in run["newton"].items()}
+        self.coupling_iterations = {k: [int(i) for i in v] for k, v in run["coupling_iterations"].items()}
+        self.rejections = list(run["rejections"])
+        self.snapshot_times = [float(t) for t in run.get("snapshot_times", self.model.output["times"])
+                               if self.model.step_of(t) <= self.step_index]
+        self.restarts = int(run["restarts"]) + 1
+        self._wall_before = float(run["wall_time_s"])
+        self._solver_dt = self.last_dt
+        self._checkpoint_step = self.step_index
+        self.disc.set_time(self.time, self.last_dt)
+        self.disc.restore_spans(self.last_dt)  # what a module reading another's field before it runs divides by
+        self._state_version += 1
+
+    def _restore_fields(self, tree: dict) -> None:
+        """Every state function's values from the checkpoint ``tree``, or one line saying why it holds none for
+        this run (``--restart --dry-run`` too: it takes them into the discretisation it drops)."""
         wrong = False
         missing = [key for key in self.disc.state_functions() if key not in tree["fields"]]
         if missing:  # e.g. the displacement at the species' last balance, kept since 2026-12-05
@@ -579,26 +606,6 @@ class Simulation:
         if largest(self.comm, wrong):
             raise ConfigError(f"cannot restart from {self.out_dir / checkpoint_file.CHECKPOINT_FILE}: its fields are "
                               f"laid out differently (another mesh partition or another discretisation)")
-        states = tree["physics"]  # one per rank of the checkpointed run, all alike if their number is not ours
-        for physics in self.model.physics_objects:
-            physics.restore_state(states[self.comm.rank if len(states) == self.comm.size else 0].get(physics.name, {}))
-        run = tree["run"]
-        self.step_index, self.time, self.last_dt = int(run["step"]), float(run["time"]), float(run["last_dt"])
-        self.step_begin, self.step_done = float(run.get("step_begin", self.time)), float(run.get("step_done", 0.0))
-        self.controller.restore(run["controller"])
-        self.iterations = {k: [int(i) for i in v] for k, v in run["iterations"].items()}
-        self.newton = {k: [tuple(int(i) for i in r) for r in v] for k, v in run["newton"].items()}
-        self.coupling_iterations = {k: [int(i) for i in v] for k, v in run["coupling_iterations"].items()}
-        self.rejections = list(run["rejections"])
-        self.snapshot_times = [float(t) for t in run.get("snapshot_times", self.model.output["times"])
-                               if self.model.step_of(t) <= self.step_index]
-        self.restarts = int(run["restarts"]) + 1
-        self._wall_before = float(run["wall_time_s"])
-        self._solver_dt = self.last_dt
-        self._checkpoint_step = self.step_index
-        self.disc.set_time(self.time, self.last_dt)
-        self.disc.restore_spans(self.last_dt)  # what a module reading another's field before it runs divides by
-        self._state_version += 1
 
     def _checkpoint_order(self, key: str, function) -> tuple[np.ndarray, np.ndarray] | None:
         """:attr:`_DofLayout.order` of ``key``'s group.  Collective the first time for a layout, then kept: the

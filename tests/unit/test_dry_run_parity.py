@@ -182,3 +182,25 @@ def test_a_module_whose_initialise_fails_is_refused_by_the_dry_run(primordia_cli
     plugin_file, config = _inputs(small_config, tmp_path, plugin, ["quiet"])
     _both_refuse(primordia_cli, tmp_path, plugin_file, config,
                  "physics quiet: initialise: field 'qq' is required but no physics module of this model provides it")
+
+
+@pytest.mark.parametrize("change, fragment", [
+    (lambda fields: fields.pop("m/previous"), "it holds no m/previous, which this run reads"),
+    (lambda fields: fields.update({"m/previous": fields["m/previous"][:-1]}), "its fields are laid out differently"),
+], ids=["older-primordia", "other-layout"])
+def test_a_checkpoint_whose_fields_do_not_fit_is_refused_by_the_dry_run_of_its_restart(primordia_cli, small_config,
+                                                                                       tmp_path, change, fragment):
+    """The restart takes the fields once the model is discretised: --restart --dry-run said "the input is valid"
+    to a checkpoint of an older primordia, which the restart then refused."""
+    from primordia.core import checkpoint
+
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    out = tmp_path / "out"
+    assert primordia_cli("run", config, "--out", out, "--no-progress").returncode == 0
+    tree = checkpoint.read(out / checkpoint.CHECKPOINT_FILE)
+    change(tree["fields"])
+    change(tree["layout"])
+    checkpoint.write(out / checkpoint.CHECKPOINT_FILE, tree)
+    dry = primordia_cli("run", "--restart", out, "--dry-run", "--set", "time.t_final=1.4")
+    ran = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.4")
+    assert assert_one_line_error(dry, fragment) == assert_one_line_error(ran, fragment)
