@@ -1,8 +1,8 @@
 """``primordia run --dry-run`` refuses what the run's set-up refuses.
 
 A user checks a config with ``--dry-run`` before submitting a cluster job: an input it passes that the run
-then refuses at set-up costs a queue slot.  Each case here is a plugin given by ``-p`` and a config on a
-2 x 2 mesh on scikit-fem, through the real command: the dry run and the run must both refuse it, in one line.
+then refuses at set-up costs a queue slot.  Each case here is a config on a 2 x 2 mesh (with a plugin given by
+``-p``, on scikit-fem), through the real command: the dry run and the run must both refuse it, in the same line.
 """
 
 from __future__ import annotations
