@@ -204,3 +204,24 @@ def test_a_checkpoint_whose_fields_do_not_fit_is_refused_by_the_dry_run_of_its_r
     dry = primordia_cli("run", "--restart", out, "--dry-run", "--set", "time.t_final=1.4")
     ran = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.4")
     assert assert_one_line_error(dry, fragment) == assert_one_line_error(ran, fragment)
+
+
+def test_an_algebraic_operator_under_the_monolithic_scheme_is_refused_by_the_dry_run(primordia_cli, small_config,
+                                                                                      tmp_path):
+    """Refused by the scheme once the modules' subproblems were built at set-up: --dry-run said "the input is
+    valid"."""
+    plugin = QUIET.format(target="q").replace(
+        "from primordia.physics.base import", "from primordia.physics.base import AlgebraicOperator,").replace(
+        "unknown))]", "unknown), operator=Nothing())]") + textwrap.dedent('''
+
+        class Nothing(AlgebraicOperator):
+            def update(self):
+                pass
+
+            def matrix(self):
+                raise AssertionError("not asked for before the solver is made")
+        ''')
+    plugin_file, config = _inputs(small_config, tmp_path, plugin, ["quiet"])
+    config.write_text(config.read_text() + '\n[coupling]\nscheme = "monolithic"\n')
+    _both_refuse(primordia_cli, tmp_path, plugin_file, config,
+                 "the monolithic scheme cannot include quiet: its algebraic operator acts on its own field alone")
