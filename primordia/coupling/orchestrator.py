@@ -183,7 +183,7 @@ class Simulation:
         run at set-up.  It costs 0.2-0.7 s: examples 1a at the seed's 58,482 triangles (fenicsx) 0.2 s, 2a
         0.7 s (0.2 s of it the exponential fitting's stiffness matrix, its only assembly), 4 at 20 x 20 x 2
         boxes 0.7 s, at 60 x 60 x 6 (129,600 tetrahedra) 3.3 s, of which the mesh 0.9 s and the growth's
-        failure hint (whether the boundary conditions enclose the tissue) 1.1 s.
+        failure hint (whether the boundary conditions enclose the tissue) 1.1 s, found once a set-up since.
         """
         self._choose_backend()
         self._choose_splitting()

@@ -132,6 +132,9 @@ def _parameters(*names):
     return tuple(p for p in POROELASTICITY if p.name in names)
 
 
+_UNKNOWN = object()  # a value not yet found
+
+
 class PoroelasticGrowth(Physics):
     """Seed eqs. (4.11), (4.12a)-(4.12c) with a growth-law plugin and boundary conditions (4.16a)-(4.16b)."""
 
@@ -221,6 +224,7 @@ class PoroelasticGrowth(Physics):
         self.dx = disc.dx_degree(self.settings["quadrature_degree"])
         self.dx_inertia = disc.dx_degree(4)  # the P2 mass matrix, exactly
         self.conditions = conditions_from_config(self.settings["boundary"], disc.mesh_data, disc.gdim)
+        self._hint = _UNKNOWN  # see _failure_hint
         self.velocity = disc.rate("u")
         u, u_previous = disc.field("u"), disc.previous("u")
         kinematics = finite_strain_kinematics(u, u_previous, self.settings["quadrature_degree"])  # (4.17a-d)
@@ -288,12 +292,18 @@ class PoroelasticGrowth(Physics):
                 "rigid_body": "u", "preconditioner": stabilisation}
 
     def _failure_hint(self) -> str | None:
-        """Why a solve may have no solution: a tissue held on all sides cannot change its volume."""
-        if encloses(self.conditions, self.disc.mesh_data):
-            return ("every boundary holds the normal displacement, so the volume of Omega_0 cannot change, "
-                    "while J_e = 1 (seed (4.12c)) asks J = J_g: the growth cannot be accommodated; "
-                    "free a boundary or hold it with robin springs")
-        return None
+        """Why a solve may have no solution: a tissue held on all sides cannot change its volume.
+
+        Found once a set-up (the conditions and the mesh stay): the subproblems are made again at every
+        checkpoint and rejected step, and ``encloses`` took 1.1 s on example 4 at 129,600 tetrahedra.
+        """
+        if self._hint is _UNKNOWN:
+            self._hint = None
+            if encloses(self.conditions, self.disc.mesh_data):
+                self._hint = ("every boundary holds the normal displacement, so the volume of Omega_0 cannot change, "
+                              "while J_e = 1 (seed (4.12c)) asks J = J_g: the growth cannot be accommodated; "
+                              "free a boundary or hold it with robin springs")
+        return self._hint
 
     def initial_subproblems(self):
         """The static equilibrium of the initial growth (no inertia, p = 0), reached by growth continuation.
