@@ -12,8 +12,8 @@
 physics, kinetics, parameters or options, wrong signs and impossible meshes are
 reported in one line naming the culprit.  The backend and the splitting scheme are
 chosen by hooks a plugin may answer, for a run: they are checked when the run is
-set up, or at once, with nothing run, by
-``Simulation(model, backend=model.backend).check_choices()`` (what ``--dry-run`` does).
+set up, or at once, with nothing solved or written, by ``check_choices()`` and
+``check_forms()`` of ``Simulation(model, backend=model.backend)`` (what ``--dry-run`` does).
 """
 
 from __future__ import annotations
