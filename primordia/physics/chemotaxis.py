@@ -418,13 +418,19 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # ranks 8.5 against 9.2 iterations.  Two layers of overlap: over 1,200 steps of example 1a at 171
         # on 2 ranks 7.52 GMRES iterations a solve against 8.47 with one (7.2 in serial), 2.83-2.97
         # against 3.21-3.30 ms/step; at 342 over 400 steps 11.3 against 12.3 iterations, 18.1-19.2
-        # against 20.0-21.0 ms; three layers 7.36 iterations at 171, no faster
+        # against 20.0-21.0 ms; three layers 7.36 iterations at 171, no faster.  One level of fill (ILU(1)):
+        # example 1a in serial at 43, 86, 171, 342 cells per side 3.2, 4.0, 5.7, 8.3 GMRES iterations
+        # against 4.0, 4.9, 6.8, 10.9 with ILU(0), the solve 0.20, 0.82, 4.2-4.3, 24.6 against 0.19, 0.85,
+        # 4.6-4.9, 32.2 ms/step (skfem at 171 4.38 against 4.88); on 2 ranks at 171 6.2 against 7.5
+        # iterations, 2.9-3.2 against 3.0-4.0 ms, at 342 8.5 against 10.9, 15.1 against 19.2 ms (the step
+        # 37.9 against 47.8); peak memory the same to 1% (session of 2026-12-05, 40-1,000 steps a size)
         if ranks > 1:
             preconditioner = {"pc_type": "asm", "pc_asm_overlap": 2}
         else:
             preconditioner = {"pc_type": "bjacobi"}
         return {"ksp_type": "gmres", **preconditioner, "ksp_rtol": 1e-12, "ksp_atol": 1e-14,
-                "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm"}
+                "rebuild_preconditioner_after": "fresh+1", "sub_pc_factor_mat_ordering_type": "rcm",
+                "sub_pc_factor_levels": 1}
     cg = {"ksp_type": "cg", "ksp_rtol": 1e-12, "ksp_atol": 1e-14}
     if ranks > GATHERED_RANKS:
         return {**cg, "pc_type": "hypre"}
