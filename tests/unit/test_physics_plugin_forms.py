@@ -11,10 +11,10 @@ import dataclasses
 import pytest
 import ufl
 
+from mms import PhysicsPlugin
 from primordia import Model
 from primordia.core.errors import PluginError
 from primordia.core.meshes import rectangle
-from primordia.core.plugins import hookimpl
 from primordia.physics.base import FieldSpec, Physics, Subproblem
 from primordia.testing import registered
 
@@ -50,17 +50,8 @@ class TwoScalars(Physics):
         return [self.solve("s"), self.solve("r")]
 
 
-class Plugin:
-    def __init__(self, physics):
-        self.physics = physics
-
-    @hookimpl
-    def primordia_physics(self):
-        return [self.physics]
-
-
 def _run(physics, backend, tmp_path):
-    with registered(Plugin(physics)):
+    with registered(PhysicsPlugin(physics)):
         model = Model(physics=[physics.name], mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2,
                       output={"pictures": False})
         return model.run(backend=backend, out=tmp_path / "out")
