@@ -170,7 +170,7 @@ class Sweep:
     fixed: tuple[str, ...] = ()
     out: Path | None = None  #: default out/sweep_<config name>, as the command's
     config_text: str = field(init=False, repr=False)  #: the configuration file as read, for earlier fingerprints
-    config_table: dict = field(init=False, repr=False)  #: the configuration file as TOML reads it, for fingerprints
+    given: dict = field(init=False, repr=False)  #: what every run is given (the file, the fixed --set), by value
     base_config: dict = field(init=False, repr=False)  #: resolved configuration with the fixed overrides
     inert_settings: list = field(init=False, repr=False)  #: what the runs leave without effect (Model.inert_settings)
 
@@ -192,7 +192,8 @@ class Sweep:
             twice = sorted({k for k in keys if keys.count(k) > 1})
             raise ConfigError(f"a key is varied twice: {', '.join(twice)}"
                               + (" (--seeds varies it)" if SEED_KEY in twice else ""))
-        model = Model.from_file(self.config, list(self.fixed))  # missing config, bad --set: one line
+        table = apply_overrides(load_config(self.config), list(self.fixed))  # missing config, bad --set: one line
+        model = Model.from_config(table)
         for text in self.fixed:  # a --set the --vary would override without a word
             for key in set(_assigned_keys(text)) & set(keys):
                 raise ConfigError(f"{key} is both fixed (--set {text}) and varied "
@@ -213,7 +214,7 @@ class Sweep:
                 raise ConfigError(f"--vary {key}: not a number of the resolved configuration of {self.config}"
                                   + (" (--seeds needs physics = [\"chemotaxis\", ...])" if key == SEED_KEY else ""))
         self.config_text = self.config.read_text()
-        self.config_table = load_config(self.config)
+        self.given = _by_value(table)  # the fingerprints' (see _fingerprint)
         self.base_config = resolved
         self.inert_settings = model.inert_settings + _inert_axes(model, keys)  # said once the runs' check passed
 
@@ -231,7 +232,6 @@ class Sweep:
     def points(self) -> list[Point]:
         keys, ranges = self.keys, [values for _, values in self.dimensions]
         labels = [axis.labels for axis in self.axes] + ([tuple(str(seed) for seed in self.seeds)] if self.seeds else [])
-        given = _by_value(apply_overrides(self.config_table, list(self.fixed)))  # what every run is given
         paths = [parse_assignment(f"{key}=0")[0] for key in keys]  # as --set reads the key ("a"."b" is a.b)
         points = []
         for index in itertools.product(*(range(len(values)) for values in ranges)):
@@ -241,7 +241,7 @@ class Sweep:
             overrides = tuple(self.fixed) + assignments
             written = hashlib.sha256("\n".join((self.config_text, *overrides)).encode()).hexdigest()[:16]
             points.append(Point(index, overrides, self.out / "runs" / name,
-                                _fingerprint(given, sorted(zip(paths, map(float, values)))), written))
+                                _fingerprint(self.given, sorted(zip(paths, map(float, values)))), written))
         return points
 
 
