@@ -132,9 +132,6 @@ def _parameters(*names):
     return tuple(p for p in POROELASTICITY if p.name in names)
 
 
-_UNKNOWN = object()  # a value not yet found
-
-
 class PoroelasticGrowth(Physics):
     """Seed eqs. (4.11), (4.12a)-(4.12c) with a growth-law plugin and boundary conditions (4.16a)-(4.16b)."""
 
@@ -224,7 +221,9 @@ class PoroelasticGrowth(Physics):
         self.dx = disc.dx_degree(self.settings["quadrature_degree"])
         self.dx_inertia = disc.dx_degree(4)  # the P2 mass matrix, exactly
         self.conditions = conditions_from_config(self.settings["boundary"], disc.mesh_data, disc.gdim)
-        self._hint = _UNKNOWN  # see _failure_hint
+        # why a solve may have no solution, found once (the subproblems are made again at every checkpoint and
+        # rejected step, and ``encloses`` took 1.1 s on example 4 at 129,600 tetrahedra)
+        self.failure_hint = _enclosed_hint(self.conditions, disc.mesh_data)
         self.velocity = disc.rate("u")
         u, u_previous = disc.field("u"), disc.previous("u")
         kinematics = finite_strain_kinematics(u, u_previous, self.settings["quadrature_degree"])  # (4.17a-d)
@@ -280,7 +279,7 @@ class PoroelasticGrowth(Physics):
         unknown = disc.unknown("u")
         return [Subproblem(name=self.name, unknown=unknown, residual=residual,
                            jacobian=ufl.derivative(residual, unknown), bcs=self.conditions.dirichlet(disc), linear=False,
-                           **self._solver(), failure_hint=self._failure_hint())]
+                           **self._solver(), failure_hint=self.failure_hint)]
 
     def _solver(self) -> dict:
         """Solver defaults, the fields of the unknown and the preconditioning form (seed section 5.2)."""
@@ -290,20 +289,6 @@ class PoroelasticGrowth(Physics):
                                                    disc.test("psi"), disc.trial("p"), disc.test("p"), self.dx)
         return {"petsc_options": _solver_defaults(self.settings["preconditioner"], disc.gdim), "fields": disc.unknown_fields("u"),
                 "rigid_body": "u", "preconditioner": stabilisation}
-
-    def _failure_hint(self) -> str | None:
-        """Why a solve may have no solution: a tissue held on all sides cannot change its volume.
-
-        Found once a set-up (the conditions and the mesh stay): the subproblems are made again at every
-        checkpoint and rejected step, and ``encloses`` took 1.1 s on example 4 at 129,600 tetrahedra.
-        """
-        if self._hint is _UNKNOWN:
-            self._hint = None
-            if encloses(self.conditions, self.disc.mesh_data):
-                self._hint = ("every boundary holds the normal displacement, so the volume of Omega_0 cannot change, "
-                              "while J_e = 1 (seed (4.12c)) asks J = J_g: the growth cannot be accommodated; "
-                              "free a boundary or hold it with robin springs")
-        return self._hint
 
     def initial_subproblems(self):
         """The static equilibrium of the initial growth (no inertia, p = 0), reached by growth continuation.
@@ -319,7 +304,7 @@ class PoroelasticGrowth(Physics):
         equilibrium = Subproblem(name=f"{self.name}.initial", unknown=unknown, residual=static,
                                  jacobian=ufl.derivative(static, unknown), bcs=self.conditions.dirichlet(disc), linear=False,
                                  continuation=(self.ramp, self.settings["initial_load_steps"]),
-                                 **self._solver(), failure_hint=self._failure_hint())
+                                 **self._solver(), failure_hint=self.failure_hint)
         return [equilibrium, self._initial_velocity()]
 
     def _static_residual(self, F_g):
@@ -413,6 +398,15 @@ REUSED_LU = {
 
 #: Values of option ``preconditioner``: "auto" is "lu" in 2D and "schur" in 3D.
 PRECONDITIONERS = ("auto", "lu", "schur")
+
+
+def _enclosed_hint(conditions, mesh_data) -> str | None:
+    """Why a solve may have no solution: a tissue held on all sides cannot change its volume."""
+    if not encloses(conditions, mesh_data):
+        return None
+    return ("every boundary holds the normal displacement, so the volume of Omega_0 cannot change, while J_e = 1 "
+            "(seed (4.12c)) asks J = J_g: the growth cannot be accommodated; free a boundary or hold it with robin "
+            "springs")
 
 
 def _solver_defaults(preconditioner: str, gdim: int) -> dict:
