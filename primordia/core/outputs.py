@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from primordia.core.atomic_files import reason_of
+from primordia.core.atomic_files import StorageError, reason_of
 from primordia.core.checkpoint import CHECKPOINT_FILE
 from primordia.core.errors import ConfigError, PluginError
 from primordia.core.json_toml import write_json, write_toml
@@ -498,8 +498,6 @@ def reserve_room(directory: Path) -> None:
 def write_last_summary(directory: Path, summary: dict) -> None:
     """Write the summary that says why the run stopped, into the room :func:`reserve_room` held if the disk has
     none left; the reserve goes either way."""
-    from primordia.core.atomic_files import StorageError
-
     reserve = Path(directory) / SUMMARY_RESERVE
     try:
         write_json(Path(directory) / "summary.json", summary)

@@ -119,6 +119,7 @@ class Simulation:
         self._first_step = 0  # the step this process started from (a restart's checkpoint)
         self._wall_after_first: float | None = None  # when this process's first step (and its outputs) ended
         self._unwritten: str | None = None  # a write a full disk refused while the run ended (outputs' finish)
+        self._checked_checkpoint: dict | None = None  # read by check_choices, its fields taken by check_forms
 
     def __repr__(self) -> str:
         """Where the run is: its model, backend, status, time and step, and its output folder."""
@@ -168,7 +169,7 @@ class Simulation:
         if problem is not None:
             raise ConfigError(problem)
         if self.existing == "restart":
-            self._checked_checkpoint = self._read_checkpoint()  # its fields are taken by check_forms
+            self._checked_checkpoint = self._read_checkpoint()
         self.backend = self.scheme = None
 
     def check_forms(self) -> None:
@@ -200,7 +201,7 @@ class Simulation:
         self.scheme.check_table_names(self.model, self.scheme.solver_prefixes(subproblems))
         self.disc.check_contributions()
         if self.existing == "restart":  # after the subproblems: they make some of the state (Discretisation.at_balance)
-            self._restore_fields(getattr(self, "_checked_checkpoint", None) or self._read_checkpoint())
+            self._restore_fields(self._checked_checkpoint or self._read_checkpoint())
         self.backend = self.scheme = self.disc = self._checked_checkpoint = None
 
     def _choose_backend(self):

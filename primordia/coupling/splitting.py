@@ -94,8 +94,8 @@ class SplittingScheme(Configured, ABC):
         """Every ``[solver.NAME]`` table of ``model``'s config names one of the solvers' ``prefixes`` or an initial
         solve's, or one line naming it (a table another setting makes is told by the model, in one warning)."""
         initial = [sub.prefix for module in self.physics for sub in subproblems_of(module, initial=True)]
-        inert = getattr(model, "inert_solver_tables", {})
-        check_tables({name: table for name, table in model.solver.items() if name not in inert}, prefixes + initial)
+        check_tables({name: table for name, table in model.solver.items() if name not in model.inert_solver_tables},
+                     prefixes + initial)
 
     def solver_prefixes(self, subproblems: list[list[Subproblem]]) -> list[str]:
         """The options prefixes of the solvers :meth:`build` makes of the modules' ``subproblems``: what
