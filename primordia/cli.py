@@ -358,20 +358,17 @@ def _stop_together(line: str) -> None:
     The ranks agree without blocking, on a communicator of their own; after ``ERROR_PATIENCE_S`` this rank
     prints ``line`` (rank 0, which prints, may be one of those waiting) and aborts the job, exit status 2.
     """
+    from primordia.core.reductions import every_rank_stops
+
     comm = _errors_comm()
-    if comm is None:
+    if comm is None or every_rank_stops(comm, ERROR_PATIENCE_S):
         return
-    from primordia.core.reductions import RanksMissing, lowest_rank_where
+    if not is_root_process():
+        print(line, file=sys.stderr, flush=True)
+    sys.stderr.flush()
+    from mpi4py import MPI
 
-    try:
-        lowest_rank_where(comm, True, ERROR_PATIENCE_S)
-    except RanksMissing:
-        if not is_root_process():
-            print(line, file=sys.stderr, flush=True)
-        sys.stderr.flush()
-        from mpi4py import MPI
-
-        MPI.COMM_WORLD.Abort(EXIT_USAGE)
+    MPI.COMM_WORLD.Abort(EXIT_USAGE)
 
 
 def _abort_other_ranks(exc: Exception) -> None:

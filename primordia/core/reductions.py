@@ -73,3 +73,15 @@ def lowest_rank_where(comm, flag: bool, patience: float | None = None) -> int | 
             time.sleep(pause)
             pause = min(2 * pause, 0.1)  # a prompt answer costs no 0.1 s, a long wait no busy core
     return int(lowest[0]) if lowest[0] < comm.size else None
+
+
+def every_rank_stops(comm, patience: float) -> bool:
+    """Whether every rank of ``comm`` came to this call within ``patience`` seconds, each rank calling it as it
+    stops on an error: False when the others are still elsewhere (in a collective call this rank never makes,
+    after an error met by this rank alone), which only ending the job resolves.  ``comm`` as for
+    :func:`lowest_rank_where`: a duplicate no other code calls collectives on."""
+    try:
+        lowest_rank_where(comm, True, patience)
+    except RanksMissing:
+        return False
+    return True

@@ -41,7 +41,8 @@ from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import existing_run, time_label
 from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
-from primordia.core.reductions import RanksMissing, largest, largest_in_place, lowest_rank_where, on_every_rank
+from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, largest_in_place, lowest_rank_where,
+                                      on_every_rank)
 from primordia.core.signals import INTERRUPTS, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
@@ -1060,9 +1061,7 @@ class Simulation:
         """
         if self.comm.size == 1 or (isinstance(exc, KeyboardInterrupt) and INTERRUPTS.count > 1):
             return  # a second signal: the ranks may be anywhere, and _stop makes no collective call then
-        try:
-            lowest_rank_where(self._outputs_comm(), True, OUTPUT_PATIENCE_S)
-        except RanksMissing:
+        if not every_rank_stops(self._outputs_comm(), OUTPUT_PATIENCE_S):
             self._abort_alone(f"{self._stop_status(exc)} (on rank {self.comm.rank} alone: the other ranks were "
                               f"still in the step after {OUTPUT_PATIENCE_S:g} s)")
 

@@ -28,6 +28,8 @@ def test_one_rank_answers_with_its_own_values_without_messages():
     assert reductions.smallest(comm, -2) == -2
     assert reductions.on_every_rank(comm, 1) is True and reductions.on_every_rank(comm, 0) is False
     assert reductions.extrema(comm, -1.0, 4.0) == (-1.0, 4.0)
+    assert reductions.lowest_rank_where(comm, True) == 0 and reductions.lowest_rank_where(comm, False) is None
+    assert reductions.every_rank_stops(comm, 0.0) is True
     values = np.array([1.0, -np.inf, 2.0])
     reductions.largest_in_place(comm, values)
     assert values.tolist() == [1.0, -np.inf, 2.0]
@@ -45,6 +47,16 @@ assert r.on_every_rank(comm, True) is True and r.on_every_rank(comm, rank == 0) 
 values = np.array([float(rank), -float(rank), np.inf if rank else -np.inf])
 r.largest_in_place(comm, values)
 assert values.tolist() == [1.0, 0.0, np.inf], values
+agreeing = comm.Dup()
+assert r.lowest_rank_where(agreeing, rank == 1) == 1 and r.lowest_rank_where(agreeing, False, 30.0) is None
+assert r.every_rank_stops(agreeing, 30.0) is True
+if rank == 0:  # rank 1 is late: rank 0 gives up, then waits in a collective of the world as after an abort's print
+    assert r.every_rank_stops(agreeing, 0.2) is False
+else:
+    import time
+    time.sleep(1.0)
+    assert r.every_rank_stops(agreeing, 30.0) is True  # rank 0's abandoned request is still there to meet
+comm.Barrier()
 ranks = comm.gather(rank, root=0)  # one line from rank 0: two ranks writing at once can interleave
 if rank == 0:
     print("agreed on ranks", sorted(ranks))
