@@ -23,8 +23,10 @@ here: the module that declares the coupling adds them (``disc.contribute``).
 Time discretisation (implicit-explicit, one linear solve per species)
 -----------------------------------------------------------------------
 Each reaction is split by the kinetics as R_s = P_s - L_s c_s with P_s, L_s >= 0;
-production is explicit, loss implicit.  With M_L the lumped P1 mass matrix
-(vertex quadrature) and S the P1 stiffness matrix, one step t_n -> t_{n+1}
+production is explicit, loss implicit: P_s and L_s read c_s at the start of its solve
+(and the other species as they stand), so each solve is linear and c_s stays >= 0 for
+any dt.  With M_L the lumped P1 mass matrix (vertex quadrature) and S the P1
+stiffness matrix, one step t_n -> t_{n+1}
 solves the species in the kinetics' order (Gauss-Seidel: each solve sees the
 species already updated); for painter2018:
 
@@ -247,8 +249,17 @@ class Chemotaxis(Physics):
             shape *= np.cos(k * points[:, axis])
         return shape
 
-    def _reactions(self):
+    def _reactions(self, lagged: str | None = None):
+        """Every species' (production, loss rate); ``lagged``: that species read at the start of its own solve.
+
+        The split solve treats production explicitly and the loss implicitly (module docstring): a species'
+        own production and loss rate must not read its unknown.  They did, through the current fields: the
+        solve was then one Newton step of the fully implicit reaction (Schnakenberg's u^2 v, the activator's
+        own production), whose matrix M_L (1/dt + L - dP/du) loses its diagonal once dt dP/du > 1 + dt L,
+        and with it the non-negativity the split promises for any dt."""
         state = {s.name: self.disc.field(s.name) for s in self.species}
+        if lagged is not None:
+            state[lagged] = self.disc.previous(lagged)
         with kinetics_code(self.kinetics, "split_rates"):
             return self.kinetics.split_rates(state, self.disc.t, UFL.at(self.disc.x))
 
@@ -319,13 +330,12 @@ class Chemotaxis(Physics):
         return species.attractant is not None and self.settings["flux_scheme"] == "exponential_fitting"
 
     def subproblems(self):
-        reactions = self._reactions()
         if self.settings["solve"] == "coupled":
-            return [self._coupled(reactions)]
+            return [self._coupled(self._reactions())]
         problems = []
         for species in self.species:
             unknown = self.disc.unknown(species.name)
-            residual = self.species_residual(species, reactions)
+            residual = self.species_residual(species, self._reactions(lagged=species.name))
             jacobian = ufl.derivative(residual, unknown)
             operator = None
             if self._fitted(species):
