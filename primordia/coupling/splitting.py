@@ -34,7 +34,7 @@ from primordia.core.plugins import hookimpl
 from primordia.core.validation import number
 from primordia.coupling.solver_options import check_table_values, check_tables
 from primordia.coupling.solvers import accumulate, solve_in_turn
-from primordia.physics.base import Subproblem, module_code, subproblems_of
+from primordia.physics.base import Subproblem, check_affine, module_code, subproblems_of
 
 
 class SplittingScheme(Configured, ABC):
@@ -63,7 +63,12 @@ class SplittingScheme(Configured, ABC):
     def check_subproblems(self, subproblems: list[list[Subproblem]]) -> None:
         """Refuse, in one line (:class:`ConfigError`), modules' subproblems this scheme cannot solve
         (``subproblems``: each module's, in model order): before any solver is made, by :meth:`build` and by
-        ``primordia run --dry-run``, which makes none."""
+        ``primordia run --dry-run``, which makes none.  Here: a subproblem marked linear whose residual is not
+        affine (:func:`~primordia.physics.base.check_affine`), for the schemes that solve each as it is; a
+        scheme overriding this calls it too unless it solves them otherwise."""
+        for module, own in zip(self.physics, subproblems):
+            for sub in own:
+                check_affine(module, sub)
 
     def build(self, sim) -> None:
         """Create the solvers, one per subproblem, grouped in sub-flows (one per module)."""
@@ -125,6 +130,7 @@ class Strang(SplittingScheme):
     name = "strang"
 
     def check_subproblems(self, subproblems):
+        super().check_subproblems(subproblems)
         if sum(1 for own in subproblems if own) < 2:
             raise ConfigError("the strang scheme needs at least two physics modules with subproblems")
 

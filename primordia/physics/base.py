@@ -374,6 +374,21 @@ def subproblems_of(module: Physics, initial: bool = False) -> list[Subproblem]:
     return list(subproblems)
 
 
+def check_affine(module: Physics, sub: Subproblem) -> None:
+    """A subproblem marked ``linear`` has a residual affine in its unknown, or one line naming the module.
+
+    Its solve is one Newton step from the start of the step (:class:`~primordia.coupling.solvers.LinearSolver`):
+    on a residual that is not affine that is a silently inexact answer.  The split chemotaxis gave one to the
+    schnakenberg activator, whose own production u^2 v it read at the unknown, and lost the step's non-negativity.
+    Checked by the splitting schemes that solve each module's subproblems as they are (not ``monolithic``,
+    whose one Newton solve is nonlinear whatever its parts say)."""
+    if sub.linear and sub.unknown in expand_derivatives(ufl.derivative(sub.residual, sub.unknown)).coefficients():
+        raise PluginError(f"physics {module.name}: subproblem {sub.name} says linear=True, but its residual is "
+                          f"not affine in its unknown (its derivative still reads it), so one linear solve would "
+                          f"not solve it; set linear=False (Newton's method) or read the unknown's nonlinear "
+                          f"terms at disc.previous(name)")
+
+
 def _check_arguments(module: Physics, sub: Subproblem) -> None:
     """The residual is linear in one test function and the Jacobian bilinear in a test and a trial function,
     all of the unknown's space, or one line naming the module.

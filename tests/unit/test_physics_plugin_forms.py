@@ -130,3 +130,23 @@ def test_a_constant_jacobian_that_reads_a_field_is_refused(tmp_path):
         _run(_s_solve(claims_constant), "skfem", tmp_path)
     assert str(error.value).startswith("physics qa_broken: subproblem qa_broken.s says constant_jacobian=True, but "
                                        "its jacobian reads fields"), str(error.value)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_linear_subproblem_whose_residual_is_not_affine_is_refused(backend, tmp_path):
+    """linear=True (the default) on ds/dt = -s^2: one Newton step from s^n was taken for the solve without a word
+    (how the split chemotaxis stepped Schnakenberg's u^2 v); with linear=False the same residual is solved."""
+    def quadratic(module, disc, sub):
+        s = disc.field("s")
+        return module.solve("s", ((s - disc.previous("s")) / disc.dt + s**2) * disc.test("s") * disc.dx)
+
+    with pytest.raises(PluginError) as error:
+        _run(_s_solve(quadratic), backend, tmp_path)
+    assert str(error.value).startswith("physics qa_broken: subproblem qa_broken.s says linear=True, but its residual "
+                                       "is not affine in its unknown"), str(error.value)
+    newton = _s_solve(lambda module, disc, sub: dataclasses.replace(quadratic(module, disc, sub), linear=False))
+    s = _run(newton, backend, tmp_path / "newton").vertex_values()["s"]
+    expected = 1.0
+    for _ in range(2):  # s + dt s^2 = s^n, the positive root
+        expected = (-1 + (1 + 4 * 0.1 * expected) ** 0.5) / (2 * 0.1)
+    assert abs(s - expected).max() < 1e-7  # to the Newton solve's tolerance
