@@ -194,7 +194,7 @@ class Simulation:
         self._setup_physics()
         if self.existing != "restart":  # a restart takes the fields from its checkpoint
             self._set_initial_values()
-        subproblems = [subproblems_of(physics) for physics in self.model.physics_objects]
+        subproblems = [subproblems_of(physics, disc=self.disc) for physics in self.model.physics_objects]
         for subproblem in (sub for own in subproblems for sub in own):
             self._refuse_forms_differing_across_ranks(subproblem)
         self.scheme.check_subproblems(subproblems)  # e.g. strang with one module that solves anything

@@ -72,7 +72,7 @@ class SplittingScheme(Configured, ABC):
 
     def build(self, sim) -> None:
         """Create the solvers, one per subproblem, grouped in sub-flows (one per module)."""
-        subproblems = [subproblems_of(module) for module in self.physics]
+        subproblems = [subproblems_of(module, disc=sim.disc) for module in self.physics]
         self.check_subproblems(subproblems)
         self.flows = [[sim.solver_for(sub) for sub in own] for own in subproblems]
         self.flows = [flow for flow in self.flows if flow]
@@ -226,7 +226,7 @@ class Monolithic(SplittingScheme):
         return [f"{self.SOLVE}_"]
 
     def build(self, sim):
-        own = [subproblems_of(module) for module in self.physics]
+        own = [subproblems_of(module, disc=sim.disc) for module in self.physics]
         self.check_subproblems(own)
         subproblems = [sub for module_subproblems in own for sub in module_subproblems]
         unknown = subproblems[0].unknown

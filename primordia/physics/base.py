@@ -349,9 +349,10 @@ def fields_of(module: Physics) -> list[FieldSpec]:
     return list(specs)
 
 
-def subproblems_of(module: Physics, initial: bool = False) -> list[Subproblem]:
+def subproblems_of(module: Physics, initial: bool = False, disc: "Discretisation | None" = None) -> list[Subproblem]:
     """``module.subproblems()`` (``initial``: ``initial_subproblems()``), refused in one line naming the module
-    unless it is a list of :class:`Subproblem` whose residual and Jacobian are UFL forms."""
+    unless it is a list of :class:`Subproblem` whose residual and Jacobian are UFL forms; given the run's
+    ``disc``, also unless each solves for a field the module declares (:func:`_check_owned`)."""
     method = "initial_subproblems" if initial else "subproblems"
     with module_code(module, method):
         subproblems = getattr(module, method)()
@@ -365,6 +366,8 @@ def subproblems_of(module: Physics, initial: bool = False) -> list[Subproblem]:
                                   f"(a sum of integrals; the jacobian ufl.derivative(residual, unknown)), got "
                                   f"{getattr(sub, what)!r}")
         _check_arguments(module, sub)
+        if disc is not None:
+            _check_owned(module, sub, disc)
         if sub.constant_jacobian and expand_derivatives(sub.jacobian).coefficients():
             # kept from the first solve where no split residual refreshes it (Dirichlet conditions): a cue
             # with a fixed boundary value decaying at a rate k m ended 4e-5 off after 10 steps, without a word
@@ -372,6 +375,21 @@ def subproblems_of(module: Physics, initial: bool = False) -> list[Subproblem]:
                               f"jacobian reads fields, so a matrix kept from the first step would go stale; set it "
                               f"with primordia.physics.base.jacobian_is_constant(jacobian, disc)")
     return list(subproblems)
+
+
+def _check_owned(module: Physics, sub: Subproblem, disc: Discretisation) -> None:
+    """``sub`` solves for a field ``module`` declares in ``fields()``, or one line naming the module.
+
+    A module that solved another's field (``disc.unknown("m")`` with ``disc.test("m")``, to add a term to the
+    cells' balance) had it solved twice a step, once by each balance law, without a word.  Under ``monolithic``
+    every field is one unknown, so this holds there whatever the module solves."""
+    if any(sub.unknown is disc.unknown(spec.name) for spec in fields_of(module)):
+        return
+    solved = [name for name in disc.field_names() if disc.unknown(name) is sub.unknown]
+    raise PluginError(f"physics {module.name}: subproblem {sub.name} solves for "
+                      f"{'field ' + ', '.join(solved) if solved else 'a function that is no field of the model'}, "
+                      f"which is not one of the fields {module.name} declares in fields(); a module solves its "
+                      f"own fields, and adds terms to another's balance law with disc.contribute")
 
 
 def check_affine(module: Physics, sub: Subproblem) -> None:

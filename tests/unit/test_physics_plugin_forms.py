@@ -150,3 +150,35 @@ def test_a_linear_subproblem_whose_residual_is_not_affine_is_refused(backend, tm
     for _ in range(2):  # s + dt s^2 = s^n, the positive root
         expected = (-1 + (1 + 4 * 0.1 * expected) ** 0.5) / (2 * 0.1)
     assert abs(s - expected).max() < 1e-7  # to the Newton solve's tolerance
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_subproblem_solving_another_module_s_field_is_refused(backend, tmp_path):
+    """A second module solving s again (ds/dt = -2 s, say, to add a term to its balance): s was solved twice a
+    step, once by each balance law, without a word."""
+    class Meddler(Physics):
+        name = "qa_meddler"
+        requires = ("s",)
+
+        def fields(self):
+            return []
+
+        def setup(self, disc):
+            self.disc = disc
+
+        def initialise(self, disc):
+            pass
+
+        def subproblems(self):
+            disc, s = self.disc, self.disc.field("s")
+            residual = ((s - disc.previous("s")) / disc.dt + 2 * s) * disc.test("s") * disc.dx
+            return [Subproblem(name="qa_meddler.s", unknown=disc.unknown("s"), residual=residual,
+                               jacobian=ufl.derivative(residual, disc.unknown("s")))]
+
+    with registered(PhysicsPlugin(TwoScalars), PhysicsPlugin(Meddler)):
+        model = Model(physics=[TwoScalars.name, Meddler.name], mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1,
+                      t_final=0.2, output={"pictures": False})
+        with pytest.raises(PluginError) as error:
+            model.run(backend=backend, out=tmp_path / "out")
+    assert str(error.value).startswith("physics qa_meddler: subproblem qa_meddler.s solves for field s, which is "
+                                       "not one of the fields qa_meddler declares in fields()"), str(error.value)
