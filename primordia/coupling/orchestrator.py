@@ -133,6 +133,9 @@ class Simulation:
         if self._set_up:  # again: claiming out_dir again cleared the finished run's fields and checkpoint
             raise ConfigError(f"this Simulation is set up already ({self.status}, t = {self.time:g}): a Simulation "
                               f"runs once; make a new one, or continue its run with Model.run(out=..., restart=True)")
+        # a signal an earlier run of the process received (stopped by it, or counted while it ended) is not this
+        # run's: it stopped every later run from Python after its first step, "interrupted (Ctrl-C)"
+        INTERRUPTS.reset()
         self.model.check_affordable()  # before the directory is claimed: nothing written for a run that cannot fit
         self._choose_backend()
         self._claim_directory()

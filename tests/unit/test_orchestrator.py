@@ -556,3 +556,37 @@ def test_a_checkpoint_is_written_whole_whatever_signals_arrive_meanwhile(complet
         INTERRUPTS.reset()
     meta = checkpoint.read_meta(completed.out_dir / checkpoint.CHECKPOINT_FILE)
     assert meta["run"]["step"] == completed.step_index
+
+
+@pytest.mark.parametrize("when", ["in a step", "while the run ends"])
+def test_a_signal_one_run_received_does_not_stop_the_next_run_in_the_process(watching, tmp_path, monkeypatch, when):
+    """A Ctrl-C that stopped a run from Python (a notebook's interrupt), or one that came while a run wrote its
+    last outputs (counted, not raised), stayed noted: every later run in the process stopped after its first
+    step, "interrupted at t = 0.2 (Ctrl-C)"."""
+    import signal
+
+    from primordia.core.errors import InterruptedRun
+    from primordia.core.signals import INTERRUPTS
+
+    def signal_in_a_step(self, t, dt):
+        if abs(t - 2 * DT) < 1e-9:
+            INTERRUPTS._handle(signal.SIGINT, None)
+
+    def signal_while_ending(self, run, status):
+        INTERRUPTS._handle(signal.SIGINT, None)
+
+    try:
+        if when == "in a step":
+            monkeypatch.setattr(Recorder, "before_step", signal_in_a_step)
+            with pytest.raises(InterruptedRun, match=r"^interrupted at t = 0\.4 \(Ctrl-C\)"):
+                model(t_final=1.0).run(out=tmp_path / "first")
+        else:
+            monkeypatch.setattr(Recording, "finish", signal_while_ending)
+            assert model(t_final=0.4).run(out=tmp_path / "first").status == "completed"
+        monkeypatch.undo()
+        second = model(t_final=0.6).run(out=tmp_path / "second")
+    except InterruptedRun as stopped:  # a KeyboardInterrupt would end the test session
+        pytest.fail(f"the second run stopped: {stopped}")
+    finally:
+        INTERRUPTS.reset()
+    assert (second.status, second.step_index) == ("completed", 3)
