@@ -119,6 +119,7 @@ class Simulation:
         self._solve_seconds: dict[str, dict[str, float]] = {}
         self._first_step = 0  # the step this process started from (a restart's checkpoint)
         self._wall_after_first: float | None = None  # when this process's first step (and its outputs) ended
+        self._wall_end: float | None = None  # when the run ended: its summary's times stop there
         self._unwritten: str | None = None  # a write a full disk refused while the run ended (outputs' finish)
         self._checked_checkpoint: dict | None = None  # read by check_choices, its fields taken by check_forms
 
@@ -1096,6 +1097,7 @@ class Simulation:
 
     def _finish(self, status: str):
         self.status = status
+        self._wall_end = clock.perf_counter()
         self.wall_time = self._wall_time()
         self._notify("finish")
         if self._output_comm is not None:  # every rank is here: the finish's failures were just agreed on
@@ -1103,7 +1105,12 @@ class Simulation:
             self._output_comm = None
 
     def _wall_time(self) -> float:
-        return self._wall_before + clock.perf_counter() - self.wall_start
+        return self._wall_before + self._clock_of_the_run() - self.wall_start
+
+    def _clock_of_the_run(self) -> float:
+        """Now, or when the run ended: the summary of a finished run asked later (a notebook's next cell) counted
+        the time since as the run's, its wall_time_s and ms per step growing as the Simulation waited."""
+        return self._wall_end if self._wall_end is not None else clock.perf_counter()
 
     # -- what outputs read ------------------------------------------------------------------
     def field_specs(self) -> dict:
@@ -1224,7 +1231,7 @@ class Simulation:
         later = self.step_index - self._first_step - 1
         if self._wall_after_first is None or later < 1:
             return None
-        return 1e3 * (clock.perf_counter() - self._wall_after_first) / later
+        return 1e3 * (self._clock_of_the_run() - self._wall_after_first) / later
 
     def summary(self, status: str) -> dict:
         wall = self._wall_time()

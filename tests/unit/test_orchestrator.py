@@ -179,10 +179,9 @@ def test_outputs_are_called_at_start_at_series_steps_at_snapshot_times_and_at_th
 
 def test_the_summary_states_the_run(completed):
     summary = json.loads((completed.out_dir / "summary.json").read_text())
-    assert summary == completed.summary("completed") | {"wall_time_s": summary["wall_time_s"],
-                                                         "ms_per_step": summary["ms_per_step"],
-                                                         "ms_per_step_after_first": summary["ms_per_step_after_first"],
-                                                         "peak_memory_mb": summary["peak_memory_mb"]}
+    # the times too, asked after the run ended (a notebook's next cell): they counted the time since as the run's
+    assert summary == completed.summary("completed") | {"peak_memory_mb": summary["peak_memory_mb"]}
+    assert summary["wall_time_s"] == completed.wall_time
     assert (summary["status"], summary["backend"], summary["mpi_ranks"]) == ("completed", "fenicsx", 1)
     assert (summary["steps"], summary["time"], summary["dt"]) == (5, 5 * DT, DT)
     assert summary["cells"] == 32
