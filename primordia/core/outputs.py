@@ -465,7 +465,8 @@ class Summary(Output):
         summary = run.summary(status)
         if run.is_root:
             if status == "running":
-                summary["process"] = {"pid": os.getpid(), "host": socket.gethostname()}
+                summary["process"] = {"pid": os.getpid(), "host": socket.gethostname(),
+                                      "started": process_start(os.getpid())}
                 write_json(run.out_dir / "summary.json", summary)
                 if self._written_at is None:
                     reserve_room(run.out_dir)
@@ -583,7 +584,13 @@ def existing_run(directory: str | Path) -> str | None:
 
 
 def run_is_alive(process: dict) -> bool:
-    """Whether the process that wrote a "running" summary is still running (on this host)."""
+    """Whether the process that wrote a "running" summary is still running (on this host).
+
+    A recycled pid belongs to a process started at another time (``started``, :func:`process_start`).  A summary
+    without it (written before 2026-12-05) is told by the program's command line, which names primordia for the
+    command alone: a run from Python (a script, a Jupyter kernel) was called killed while it ran, and another
+    process's --overwrite cleared its folder under it.
+    """
     pid = process.get("pid")
     if not isinstance(pid, int) or process.get("host") != socket.gethostname() or pid == os.getpid():
         return False
@@ -596,9 +603,20 @@ def run_is_alive(process: dict) -> bool:
     with contextlib.suppress(OSError, IndexError):  # a zombie (killed, not yet reaped) is not running
         if Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] in "ZX":
             return False
+    started = process_start(pid)
+    if process.get("started") is not None and started is not None:
+        return started == process.get("started")
     with contextlib.suppress(OSError):  # a recycled pid belongs to some other program
         return b"primordia" in Path(f"/proc/{pid}/cmdline").read_bytes()
     return True
+
+
+def process_start(pid: int) -> int | None:
+    """When process ``pid`` started, in clock ticks since the boot (Linux's /proc; None elsewhere, or if it is gone):
+    with the pid, it names one process, a recycled pid another."""
+    with contextlib.suppress(OSError, IndexError, ValueError):
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19])  # field 22, starttime
+    return None
 
 
 def clear_run(directory: str | Path) -> None:

@@ -300,6 +300,42 @@ def test_an_output_directory_that_is_a_file(watching, tmp_path):
     assert one_line(caught) == f"the output directory {tmp_path / 'file'} is a file, not a directory"
 
 
+def test_a_run_from_python_is_in_progress_while_its_process_runs(watching, tmp_path):
+    """A run's process was told from a recycled pid by its command line naming primordia, which a script's or a
+    Jupyter kernel's does not: its run was called "killed without a word" while it ran, and another process's
+    overwrite (or restart) was let into its folder."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    from primordia.core.outputs import existing_run
+
+    out = tmp_path / "live"
+    script = ("from primordia import Model\nfrom primordia.core.meshes import rectangle\n"
+              "Model(physics=['chemotaxis'], parameters={'m0': 0.75}, mesh=rectangle((0, 0), (4, 4), cells=(4, 4)), "
+              f"dt=0.2, t_final=1e5, output={{'pictures': False}}).run(out={str(out)!r})\n")
+    (tmp_path / "notebook.py").write_text(script)  # a command line without the word primordia
+    process = subprocess.Popen([sys.executable, "notebook.py"], cwd=tmp_path, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / "summary.json").is_file():  # written whole (atomically), saying "running"
+            assert process.poll() is None and time.monotonic() < deadline, process.stderr.read().decode()
+            time.sleep(0.1)
+        assert existing_run(out) == f"a run in progress (process {process.pid} on {socket.gethostname()})"
+        with pytest.raises(ConfigError) as caught:
+            Simulation(model(), out_dir=out, existing="overwrite").setup()
+        assert one_line(caught).endswith("; stop it first")
+        summary = json.loads((out / "summary.json").read_text())
+        summary["process"]["started"] += 1  # the same pid, another process: the run's was recycled
+        (out / "summary.json").write_text(json.dumps(summary))
+        assert existing_run(out).startswith("a run that was killed without a word")
+    finally:
+        process.kill()
+        process.wait()
+
+
 @pytest.mark.parametrize("changes, fragment", [
     ({"backend": "fenics"}, "fenics"),
     ({"coupling": "leapfrog"}, "leapfrog"),
