@@ -112,6 +112,14 @@ class ParameterSet(Mapping):
         except KeyError:
             raise AttributeError(f"no parameter named {name!r}") from None
 
+    def __setattr__(self, name: str, value) -> None:
+        # read-only: params.m0 = 1.0 made an attribute that params.m0 read back, while params["m0"], the run,
+        # its config.toml and the linear analysis kept the value the model was built with
+        if not name.startswith("_"):
+            raise AttributeError(f"parameters are read-only: to change {name}, build a new Model with "
+                                 f"parameters=model.parameters.replace({name}=...)")
+        super().__setattr__(name, value)
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._values)
 

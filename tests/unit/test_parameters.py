@@ -27,6 +27,19 @@ def test_defaults_and_overrides():
     assert set(params) == {"D_m", "D_f", "alpha", "tau", "nu"} and len(params) == 5
 
 
+def test_a_parameter_set_is_read_only_by_attribute_too():
+    """params.D_m = 0.05 was taken: params.D_m read 0.05 back while params["D_m"], and a model's run, its
+    config.toml and its linear analysis, kept 0.03 (a notebook's "change a parameter, run again" did nothing)."""
+    params = ParameterSet(DECLARED, {"D_m": 0.03})
+    with pytest.raises(AttributeError, match=r"^parameters are read-only: to change D_m, build a new Model with "
+                                             r"parameters=model\.parameters\.replace\(D_m=\.\.\.\)$"):
+        params.D_m = 0.05
+    with pytest.raises(AttributeError, match="parameters are read-only"):
+        params.unknown = 1.0
+    assert params.D_m == params["D_m"] == 0.03
+    assert params.replace(D_m=0.05).D_m == 0.05  # the way to another value
+
+
 @pytest.mark.parametrize("name, value, phrase", [
     ("D_m", 0.0, "must be > 0"),
     ("D_m", -1.0, "must be > 0"),
