@@ -7,6 +7,7 @@ Serial: draw on one MPI rank.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from itertools import combinations
 from pathlib import Path
@@ -109,8 +110,8 @@ def plot_fields_grid(
     nrows = rows_per_view * len(views)
     # each view's rows as tall as its drawn extent needs (a slice of a thin slab is a thin strip)
     heights = [max(0.25, view.aspect(mesh)) for view in views for _ in range(rows_per_view)]
-    figure = Figure(figsize=(4.2 * ncols + (0.8 if shared_colour_scale else 0.0), 0.6 + 3.6 * sum(heights)),
-                    layout="constrained")
+    width = 4.2 * ncols + (0.8 if shared_colour_scale else 0.0)
+    figure = Figure(figsize=(width, 0.6 + 3.6 * sum(heights)), layout="constrained")
     axes = figure.subplots(nrows, ncols, squeeze=False, gridspec_kw={"height_ratios": heights})
     slots = [axes[v * rows_per_view + i // ncols, i % ncols] for v in range(len(views)) for i in range(len(fields))]
     used = {id(ax) for ax in slots}
@@ -130,8 +131,9 @@ def plot_fields_grid(
         _share_extent(same_view)
     if shared_colour_scale:
         figure.colorbar(image, ax=slots, shrink=0.85)
-    if title:
-        figure.suptitle(title)
+    if title:  # wrapped to the picture's width, about 10 characters an inch at 12 points: the title of a run
+        # that failed holds its error, and ran off both sides of final_fields.png
+        figure.suptitle(textwrap.fill(title, width=int(10 * width)))
     with atomic_path(target) as temporary:
         figure.savefig(temporary, format="png", dpi=110)
     return target

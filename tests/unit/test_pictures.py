@@ -156,3 +156,32 @@ def test_the_snapshots_of_a_growing_tissue_are_drawn_to_one_scale_inside_the_pic
     for ax in panels:
         drawn_box = ax.get_tightbbox(renderer)  # with its title and axis labels
         assert drawn_box.y0 >= 0 and drawn_box.x0 >= 0 and drawn_box.y1 <= figure.bbox.y1, ax.get_title()
+
+
+def test_a_long_title_is_wrapped_inside_the_picture(tmp_path, square, monkeypatch):
+    """final_fields.png of a run that failed is titled by its error: one line of 250 characters ran off both
+    sides of the picture (example 2a's Newton failure: "t = 0 (stopped at t = 0: step 1 ... options under
+    -poroelast" was what showed of it)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    drawn = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda figure, *args, **kwargs: (drawn.append(figure),
+                                                                             save(figure, *args, **kwargs))[1])
+    status = ("stopped at t = 0: step 1 (t = 0 -> 40): poroelastic_growth (fields u, psi, p): Newton did not "
+              "converge: DIVERGED_MAX_IT after 2 iterations, residual 6.409e+02 from 9.312e+02; options under "
+              "-poroelastic_growth_")
+    for count in (1, 4):
+        fields = {f"field {i}": bump(square, i / 10) for i in range(count)}
+        plot_fields_grid(tmp_path / f"final_fields_{count}.png", square, fields, shared_colour_scale=False,
+                         title=f"all fields at t = 0 ({status})")
+    for figure in drawn:
+        renderer = FigureCanvasAgg(figure).get_renderer()
+        figure.draw(renderer)
+        title = figure._suptitle
+        assert title.get_text().replace("\n", " ") == f"all fields at t = 0 ({status})"
+        drawn_box = title.get_window_extent(renderer)
+        assert drawn_box.x0 >= 0 and drawn_box.x1 <= figure.bbox.x1 and drawn_box.y1 <= figure.bbox.y1
+        for ax in figure.axes:  # the panels make room for it
+            assert ax.get_tightbbox(renderer).y1 <= drawn_box.y0 + 1
