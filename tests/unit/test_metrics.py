@@ -398,3 +398,26 @@ def test_a_sweep_map_panel_without_any_value_has_no_colour_bar(tmp_path, monkeyp
     assert len(figure.axes) - len(panels) == 1, "a colour bar for the spot count only"
     assert [ax.get_title() for ax in panels] == ["spot spacing (nearest neighbour): no run has one", "spot count",
                                                  "dominant wavelength (spectrum): no run has one"]
+
+
+def test_the_metrics_picture_draws_the_field_to_its_own_extent_with_spots_on_the_walls(tmp_path, monkeypatch):
+    """The circles of spots the walls halve reached past the domain and widened the field's panel: example 1a at
+    60 x 60 squares, t = 400, drew its field with white margins beside it, the t = 200 panel edge to edge."""
+    from primordia.analysis.patterns import figures
+    from primordia.analysis.patterns.run import Measurement, PredictedMode
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
+    spacing = 3.0
+    centres = hexagonal_lattice(spacing, margin=0.0)  # rows on the walls y = 0 and x = 0
+    metrics, grid = mesh_pattern_metrics(MESH.points, MESH.cells, gaussian_spots(MESH.points, centres, spacing / 6))
+    assert metrics.spot_count == len(centres)
+    figures.metrics_figure([Measurement(20.0, "reference", "m", metrics, grid)],
+                           PredictedMode(2.78, 2.26, 0.1, "linear analysis"), tmp_path / "metrics_m.png")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    (figure,) = drawn
+    figure.draw(FigureCanvasAgg(figure).get_renderer())
+    field = figure.axes[0]
+    assert field.get_xlim() == pytest.approx(grid.extent[:2]) and field.get_ylim() == pytest.approx(grid.extent[2:])

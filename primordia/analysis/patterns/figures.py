@@ -54,6 +54,10 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
             for (x, y), r in zip(metrics.spot_centres, radii):
                 top.add_patch(_circle((x, y), r))
             top.plot(*metrics.spot_centres.T, "r+", markersize=5)
+        # the field's own extent: the circle of a spot the walls halve widened this panel past the domain, white
+        # margins beside a field its neighbours drew edge to edge
+        top.set_xlim(grid.extent[:2])
+        top.set_ylim(grid.extent[2:])
         top.set_title(f"{m.species}, t = {m.time:g} ({m.configuration}): {metrics.kind}\n"
                       f"{metrics.spot_count} spots, spacing {metrics.spacing_mean:.3g} +- {metrics.spacing_std:.2g}, "
                       f"|psi6| {metrics.hexatic_order:.2f}", fontsize=8)
