@@ -421,3 +421,22 @@ def test_the_metrics_picture_draws_the_field_to_its_own_extent_with_spots_on_the
     figure.draw(FigureCanvasAgg(figure).get_renderer())
     field = figure.axes[0]
     assert field.get_xlim() == pytest.approx(grid.extent[:2]) and field.get_ylim() == pytest.approx(grid.extent[2:])
+
+
+def test_the_spot_count_of_a_sweep_map_is_drawn_from_zero(tmp_path, monkeypatch):
+    """A sweep where no run formed spots drew its spot counts, all 0, on a colour bar from -0.1 to 0.1 (example 1a
+    at 30 x 30 over alpha and m0 to t = 200): a scale of negative counts."""
+    from primordia.analysis.patterns import figures
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
+    grid = {"m0": [0.5, 1.0], "alpha": [2.0, 4.0]}
+    for counts in ([[0.0, 0.0], [0.0, 0.0]], [[0.0, 3.0], [12.0, np.nan]]):
+        count = xr.DataArray(counts, coords=grid, dims=("m0", "alpha"))
+        ds = xr.Dataset({"spacing_mean": count * np.nan, "spot_count": count, "dominant_wavelength": count * np.nan,
+                         "pattern_name": count.astype(object).fillna("none"), "failed": count.isnull()})
+        figures.sweep_figure(ds, None, tmp_path / "sweep_map.png", "m0", "alpha")
+    for figure, top in zip(drawn, (1.0, 12.0)):
+        (bar,) = [ax for ax in figure.axes if ax.get_label() == "<colorbar>"]
+        assert bar.get_ylim() == (0.0, top)

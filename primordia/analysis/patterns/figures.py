@@ -113,7 +113,10 @@ def sweep_figure(ds: xr.Dataset, linear: xr.Dataset | None, path, x: str, y: str
     xs, ys = ds[x].values, ds[y].values
     for ax, (name, title) in zip(axes, SWEEP_PANELS):
         values = ds[name].transpose(y, x).values
-        mesh = ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_invalid(values), cmap="viridis", shading="flat")
+        # a count's scale starts at 0: a sweep without a spot drew its zeros on a colour bar from -0.1 to 0.1
+        limits = {"vmin": 0.0, "vmax": max(1.0, np.nanmax(values, initial=0.0))} if name == "spot_count" else {}
+        mesh = ax.pcolormesh(_edges(xs), _edges(ys), np.ma.masked_invalid(values), cmap="viridis", shading="flat",
+                             **limits)
         if np.isfinite(values).any():  # a panel with no value at all had a colour bar from -0.1 to 0.1
             figure.colorbar(mesh, ax=ax, shrink=0.85)
         else:
