@@ -347,7 +347,8 @@ class Pictures(Output):
             fields = dict(self._drawn(name, v) for name, v in values.items())
             displacement = values.get(run.displacement_field)
             yield len(fields), plot_fields_grid, run.out_dir / "final_fields.png", dict(
-                fields=fields, title=f"all fields at t = {time_label(run.time)} ({status})", shared_colour_scale=False,
+                fields=fields, title=f"all fields at t = {step_time_label(run.time)} ({status})",
+                shared_colour_scale=False,
                 displacements=None if displacement is None else {key: displacement for key in fields},
                 displacement_scale=scale)
 
@@ -381,6 +382,13 @@ def time_label(t: float) -> str:
     """``t`` on a picture: ``%g`` when that is the time, else every digit (1.0000001 is not ``1``)."""
     t = float(t)
     return f"{t:g}" if float(f"{t:g}") == t else repr(t)
+
+
+def step_time_label(t: float) -> str:
+    """A time the run stepped to, t_start + k dt, on a picture: :func:`time_label` of it to 15 significant digits,
+    without the round-off of the sum (a run stopped by SIGTERM after 629 steps of 0.2 was drawn "at t =
+    125.80000000000001", beside its status "interrupted at t = 125.8"); 1.0000001 is still not ``1``."""
+    return time_label(float(f"{float(t):.15g}"))
 
 
 def _draw_shared(run, pictures: Callable[[], Iterable[tuple]]) -> None:

@@ -384,6 +384,22 @@ def test_a_failure_listing_the_pictures_still_hands_the_other_ranks_their_share(
     assert comm.shares == [[], []]
 
 
+def stop_with_ctrl_c(sim, monkeypatch, before_step: int) -> None:
+    """Run ``sim`` to a Ctrl-C at the start of step ``before_step`` (0-based: after that many steps)."""
+    from primordia.coupling.orchestrator import Simulation
+
+    step = Simulation.step
+
+    def interrupted(self):
+        if self.step_index == before_step:
+            raise KeyboardInterrupt
+        step(self)
+
+    monkeypatch.setattr(Simulation, "step", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        sim.run()
+
+
 def test_a_run_stopped_early_draws_the_grid_of_the_snapshots_it_reached(tmp_path, monkeypatch):
     """The grid of the snapshot times is drawn when the run ends, and a run that stops (here a Ctrl-C
     after its third step) ends too: its grid holds the snapshots before the stop."""
@@ -392,22 +408,30 @@ def test_a_run_stopped_early_draws_the_grid_of_the_snapshots_it_reached(tmp_path
     model = Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03}, mesh=MESH, dt=0.2, t_final=1.0,
                   output={"times": [0.2, 0.4, 0.8], "pictures": True})
     sim = Simulation(model, backend="skfem", out_dir=tmp_path).setup()
-    step = Simulation.step
-
-    def interrupted(self):
-        if self.step_index == 3:
-            raise KeyboardInterrupt
-        step(self)
-
-    monkeypatch.setattr(Simulation, "step", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        sim.run()
+    stop_with_ctrl_c(sim, monkeypatch, before_step=3)
     assert sim.status.startswith("interrupted at t = 0.6")
     pictures = {path.name for path in tmp_path.glob("*.png")}
     assert pictures == {"m_t0000.20.png", "m_t0000.40.png", "m_snapshots.png", "final_fields.png"}
     (output,) = [o for o in sim.outputs if o.name == "pictures"]
     assert list(output.snapshots["m"]) == ["m, t = 0.2", "m, t = 0.4"]
 
+
+
+def test_a_run_stopped_between_output_times_titles_its_last_fields_by_the_time_of_its_step(tmp_path, monkeypatch):
+    """A run stopped after three steps of 0.1 is at 0.1 + 0.1 + 0.1 = 0.30000000000000004: final_fields.png
+    said "all fields at t = 0.30000000000000004 (interrupted at t = 0.3 (Ctrl-C))" (example 1a stopped by
+    SIGTERM after 629 steps: "t = 125.80000000000001")."""
+    from primordia.core import outputs
+    from primordia.coupling.orchestrator import Simulation
+
+    titles = []
+    monkeypatch.setattr(outputs, "plot_fields_grid", lambda path, mesh, **drawn: titles.append(drawn["title"]))
+    model = Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03}, mesh=MESH, dt=0.1, t_final=1.0,
+                  output={"times": [1.0], "pictures": True})
+    sim = Simulation(model, backend="skfem", out_dir=tmp_path).setup()
+    stop_with_ctrl_c(sim, monkeypatch, before_step=3)
+    assert sim.time == 0.1 + 0.1 + 0.1 != 0.3
+    assert titles == ["all fields at t = 0.3 (interrupted at t = 0.3 (Ctrl-C))"]
 
 
 def test_a_vector_snapshot_is_titled_by_the_magnitude_it_shows(tmp_path):
@@ -433,16 +457,7 @@ def test_the_summary_says_why_the_run_stopped_before_the_last_pictures_are_drawn
 
     monkeypatch.setattr(Pictures, "finish", draw_the_final_grids)
     sim = Simulation(small_model(pictures=True), backend="skfem", out_dir=tmp_path).setup()
-    step = Simulation.step
-
-    def interrupted(self):
-        if self.step_index == 2:
-            raise KeyboardInterrupt
-        step(self)
-
-    monkeypatch.setattr(Simulation, "step", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        sim.run()
+    stop_with_ctrl_c(sim, monkeypatch, before_step=2)
     assert statuses == ["interrupted at t = 0.4 (Ctrl-C)"]
     built_in = [output.name for output in sim.outputs if output.name in ("pictures", "summary")]  # not a plugin's
     assert built_in == ["pictures", "summary"], "the other moments keep their order"
@@ -472,10 +487,11 @@ def test_output_times_that_agree_to_two_decimals_get_pictures_of_their_own(tmp_p
     (0.5, [0.5, 123456.25], "000000.50"),
 ])
 def test_a_picture_s_time_has_the_digits_its_output_times_need(t, times, stamp):
-    from primordia.core.outputs import picture_time, time_label
+    from primordia.core.outputs import picture_time, step_time_label, time_label
 
     assert picture_time(t, times) == stamp
     assert time_label(1.0) == "1" and time_label(1.0000001) == "1.0000001"  # %g would print 1
+    assert step_time_label(629 * 0.2) == "125.8" and step_time_label(1.0000001) == "1.0000001"
 
 
 def test_a_vector_field_s_series_names_the_extrema_it_holds(tmp_path):
