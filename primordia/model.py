@@ -115,6 +115,16 @@ class Model:
             with module_code(module, "check_inputs"):
                 module.check_inputs(self.mesh_data, self.sample_times())
         self.inert_settings = self._inert_settings()
+        self._built = True
+
+    def __setattr__(self, name: str, value) -> None:
+        # read-only once built: model.dt = 0.1 was taken and read back, while its output times, its physics objects
+        # and config.toml kept what the model was built with (see ParameterSet.__setattr__ for its parameters)
+        if not name.startswith("_") and vars(self).get("_built"):
+            raise AttributeError(f"a Model is read-only once built (model.{name} = ... would change no run "
+                                 f"consistently): build another Model with the new value, Model(...) or "
+                                 f"Model.from_file(config, ['section.key=value'])")
+        super().__setattr__(name, value)
 
     def __repr__(self) -> str:
         """What the model is, in one line: its composition, mesh and time span (not the default object repr)."""

@@ -35,7 +35,7 @@ def _linearised(symbol):
                   mesh=rectangle((0.0, 0.0), (1.0, 1.0), (2, 2)), dt=0.1, t_final=0.1)
     stranger = type("Stranger", (), {"name": "stranger", "finite_strain": False,
                                      "fourier_symbol": lambda self, context: symbol})()
-    model.physics_objects = model.physics_objects + [stranger]
+    object.__setattr__(model, "physics_objects", model.physics_objects + [stranger])  # Model is read-only
     return linearise_model(model)
 
 

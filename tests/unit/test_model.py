@@ -399,3 +399,15 @@ def test_a_run_into_an_empty_out_is_refused(tmp_path, monkeypatch):
         with pytest.raises(ConfigError, match="a run's out needs a directory name"):
             Simulation(small(), out_dir=out)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_built_model_is_read_only_by_attribute():
+    """model.dt = 0.1 was taken and read back, while the run's output times and physics objects, and its
+    config.toml, kept what the model was built with."""
+    model = Model(physics=["chemotaxis"], parameters={"m0": 0.75, "D_m": 0.03},
+                  mesh=rectangle((0.0, 0.0), (1.0, 1.0), (2, 2)), dt=0.2, t_final=0.4)
+    for name, value in (("dt", 0.1), ("t_final", 1.0), ("physics_objects", []), ("a_new_one", 1)):
+        with pytest.raises(AttributeError, match=r"^a Model is read-only once built \(model\." + name):
+            setattr(model, name, value)
+    assert model.dt == 0.2 and model.t_final == 0.4 and not hasattr(model, "a_new_one")
+    assert model.step_time(2) == 0.4  # its own caches still work
