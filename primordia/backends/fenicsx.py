@@ -232,7 +232,10 @@ class FenicsxBackend(Backend):
         os.environ.setdefault(SCOTCH_THREADS, "1")
         gdim = data.gdim
         cell = ufl.triangle if gdim == 2 else ufl.tetrahedron
-        domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
+        # equispaced, as FFCx makes the coordinate element of a form it compiles: it replaced the mesh's own
+        # in place, on the rank that compiled (rank 0, when the JIT cache lacked the form; the others read the
+        # cache), and the forms built after it differed between the ranks, refused as a plugin's doing
+        domain = ufl.Mesh(ufl.VectorElement(ufl.FiniteElement("Lagrange", cell, 1, variant="equispaced")))
         on_root = self.comm.rank == 0
         cells = data.cells if on_root else np.empty((0, gdim + 1), dtype=np.int64)
         points = data.points if on_root else np.empty((0, gdim))

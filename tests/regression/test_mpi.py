@@ -108,3 +108,18 @@ def test_the_fitted_operator_is_shifted_in_place_on_two_ranks():
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "ranks [2, 2]"
+
+
+@pytest.mark.mpi
+def test_a_first_run_with_an_empty_jit_cache_runs_on_two_ranks(tmp_path):
+    """FFCx replaced the mesh's coordinate element by an equispaced one in each form it compiled: on rank 0
+    alone when the JIT cache lacked the form (the other ranks then read it from the cache), so the forms built
+    after it differed between the ranks and the run was refused, "chemotaxis.m: its equations differ between
+    MPI ranks", at a batch job's first run with its own XDG_CACHE_HOME or with a growth parameter never run."""
+    env = {**ENV, "XDG_CACHE_HOME": str(tmp_path / "empty_cache"),
+           "PRIMORDIA_CACHE_DIR": os.environ.get("PRIMORDIA_CACHE_DIR") or str(Path.home() / ".cache/primordia")}
+    command = ["mpirun", "-n", "2", sys.executable, "-m", "primordia.cli", *ARGS, "--set", "mesh.cells=[4,4]",
+               "--set", "time.t_final=0.4", "--set", "output.times=[0.4]", "--out", str(tmp_path / "out")]
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["status"] == "completed"
