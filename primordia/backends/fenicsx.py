@@ -11,6 +11,7 @@ from __future__ import annotations
 import gc
 import logging
 import os
+import tempfile
 import weakref
 from collections.abc import Sequence
 
@@ -18,8 +19,9 @@ import numpy as np
 import ufl
 
 from primordia.core import reductions
+from primordia.core.atomic_files import reason_of
 from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, is_p1_scalar, sub_elements
-from primordia.core.errors import MeshError
+from primordia.core.errors import ConfigError, MeshError
 from primordia.core.mesh_data import MeshData
 
 import dolfinx  # noqa: E402  (import after the neutral modules: fails loudly if missing)
@@ -179,6 +181,23 @@ def jit_parameters() -> dict:
     return {"cffi_extra_compile_args": ["-O3", "-g0"]}
 
 
+def _refuse_an_unwritable_jit_cache(parameters: dict) -> None:
+    """One line when dolfinx's JIT cache (``~/.cache/fenics``, or ``$XDG_CACHE_HOME/fenics``) cannot be written.
+
+    FFCx writes every kernel it compiles there: a read-only home (a cluster's compute nodes) was a traceback
+    of FFCx's from the first function space, on every rank.
+    """
+    from dolfinx import jit
+
+    cache = jit.get_parameters(parameters)["cache_dir"]
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=cache))  # os.access says yes to root everywhere
+    except OSError as error:
+        raise ConfigError(f"dolfinx's JIT cache {cache} cannot be written ({reason_of(error)}): set XDG_CACHE_HOME "
+                          f"to a writable folder (the kernels are compiled into XDG_CACHE_HOME/fenics)") from None
+
+
 #: The fenicsx backends made in this process, in order, each with its communicators' keepers (``_petsc_comms``).
 _RUNS: list[tuple[weakref.ref, dict]] = []
 
@@ -221,6 +240,7 @@ class FenicsxBackend(Backend):
         _clean_up_after_earlier_runs(self.comm)
         _RUNS.append((weakref.ref(self), self._petsc_comms))
         self._jit = jit_parameters()
+        _refuse_an_unwritable_jit_cache(self._jit)
         _silence_jit_logging()
 
     # -- mesh, spaces, fields -----------------------------------------------------------

@@ -85,6 +85,17 @@ def test_missing_mesh_file(primordia_cli, small_config):
     assert_one_line_error(result, "mesh file", "missing.msh", "does not exist")
 
 
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]], ids=["run", "dry-run"])
+def test_a_jit_cache_that_cannot_be_written_is_one_line(primordia_cli, small_config, tmp_path, dry_run):
+    """A batch job's home is often read-only on the compute nodes: FFCx's traceback from the first function
+    space (OSError: Read-only file system: '.../.cache/fenics') was all it said.  A cache under a file stands in
+    for a read-only one here (root may write anywhere else)."""
+    (tmp_path / "a_file").write_text("")
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "a_file")}
+    result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress", *dry_run, env=env)
+    assert_one_line_error(result, "dolfinx's JIT cache", "a_file/fenics cannot be written", "XDG_CACHE_HOME")
+
+
 def test_unknown_command_and_missing_argument_are_usage_errors(primordia_cli):
     assert_one_line_error(primordia_cli("simulate"), "invalid choice", "simulate")
     assert_one_line_error(primordia_cli("run"), "config")
