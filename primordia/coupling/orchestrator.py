@@ -708,8 +708,9 @@ class Simulation:
                 self._stop(exc)
             if isinstance(exc, KeyboardInterrupt):
                 signum = getattr(exc, "signum", None) or INTERRUPTS.received or signal.SIGINT
-                raise InterruptedRun(signum, f"{self.status}; continue it with: primordia run --restart "
-                                             f"{self.out_dir}") from None
+                how = (f"continue it with: primordia run --restart {self.out_dir}"
+                       if self._checkpoint_step == self.step_index or not self.is_root else self._how_it_continues())
+                raise InterruptedRun(signum, f"{self.status}; {how}") from None
             if not raised_by_a_signal:  # the run has stopped, as the signal asked: the failure's line says why
                 INTERRUPTS.reset()
             if isinstance(exc, StorageError):
@@ -736,13 +737,16 @@ class Simulation:
         (rank 0's words: the other ranks print nothing)."""
         if not self.is_root:
             return failure
+        return f"{failure}; the run stopped at t = {time_label(self.time)} ({self._how_it_continues()})"
+
+    def _how_it_continues(self) -> str:
+        """How a run stopped before its last step was checkpointed goes on: from the checkpoint in its folder."""
         try:
             meta = checkpoint_file.read_meta(self.out_dir / checkpoint_file.CHECKPOINT_FILE)
-            how = (f"primordia run --restart {self.out_dir} continues it from its checkpoint at "
-                   f"t = {time_label(meta['run']['time'])}")
+            return (f"primordia run --restart {self.out_dir} continues it from its checkpoint at "
+                    f"t = {time_label(meta['run']['time'])}")
         except (PrimordiaError, KeyError, TypeError):
-            how = "it wrote no checkpoint to continue from"
-        return f"{failure}; the run stopped at t = {time_label(self.time)} ({how})"
+            return "it wrote no checkpoint to continue from"
 
     def _snapshot(self) -> None:
         self._notify("snapshot")
@@ -770,7 +774,8 @@ class Simulation:
         urgent_in_parallel = isinstance(exc, KeyboardInterrupt) and self.comm.size > 1 and INTERRUPTS.count > 1
         if urgent_in_parallel:  # ranks may be anywhere: no collective is safe, rank 0 only patches the summary
             self._flush_outputs()
-            self._patch_summary(self._stop_status(exc))
+            self.status = self._stop_status(exc)
+            self._patch_summary(self.status)
             return
         # every step is whole (a failed one was undone); a full disk keeps the last checkpoint written before it
         if (self._checkpoint_step != self.step_index and isinstance(exc, (KeyboardInterrupt, PrimordiaError))

@@ -410,6 +410,9 @@ def test_a_parallel_run_stopped_at_once_keeps_the_rows_its_series_held(stop, sma
     finally:
         rc.stop(process)
     assert status == (2 if stop == "rank 0 alone" else 128 + signal.SIGUSR1), stderr[-3000:]
+    if stop == "two signals":  # it said "primordia: running; continue it with: primordia run --restart OUT"
+        assert rc.primordia_lines(stderr) == ["primordia: interrupted at t = 0.6 (SIGUSR1); it wrote no checkpoint "
+                                              "to continue from"], stderr[-3000:]
     assert rc.summary(out)["status"] == ("interrupted at t = 0.6 (SIGUSR1)" if stop == "two signals" else
                                          "stopped at t = 0.6: output 'stop_at_three' failed on rank 0 (record): "
                                          "RuntimeError: rank 0's record, and the other ranks were still inside it "
