@@ -22,12 +22,28 @@ start-up is reported as interrupted, never as a mistake in the input.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
+import time
 
 from primordia.core.errors import InterruptedRun
 
 HANDLED = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
+
+
+
+def copy_window() -> float:
+    """Under mpirun, the same signal again within this many seconds of the first is a copy, not a second request
+    (:attr:`Interrupts.copy_window`).  A batch system that signals the whole job reaches every rank and mpirun,
+    which forwards its SIGTERM to the ranks ``odls_base_sigkill_timeout`` seconds later (1 by default, Open MPI
+    4.1) and SIGKILL as long after that.  Counted as a second signal, that copy stopped every run so signalled
+    at once, without the checkpoint the first one asked for."""
+    try:
+        delay = float(os.environ.get("OMPI_MCA_odls_base_sigkill_timeout", 1.0))
+    except ValueError:
+        delay = 1.0
+    return max(delay, 0.0) + 1.5
 
 
 def signal_name(signum: int | None) -> str:
@@ -43,6 +59,9 @@ class Interrupts:
         self.mode = "immediate"
         self.received: int | None = None
         self.count = 0
+        #: seconds within which the first signal repeated is its copy (a run on several MPI ranks: copy_window())
+        self.copy_window = 0.0
+        self._first_at = 0.0
         self._installed = 0
         self._previous: dict[int, object] = {}
 
@@ -85,9 +104,12 @@ class Interrupts:
         return self.received is not None and (self.count > 1 or self.mode == "immediate")
 
     def _handle(self, signum, frame):
+        now = time.monotonic()
+        if signum == self.received and now - self._first_at < self.copy_window:
+            return  # the same request, by another way (copy_window)
         self.count += 1
         if self.received is None:
-            self.received = signum
+            self.received, self._first_at = signum, now
         if self.mode == "shielded":
             return
         if self.mode == "immediate" or self.count > 1:

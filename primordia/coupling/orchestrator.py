@@ -43,7 +43,7 @@ from primordia.core.outputs import existing_run, time_label
 from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
 from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, largest_in_place, lowest_rank_where,
                                       on_every_rank)
-from primordia.core.signals import INTERRUPTS, signal_name
+from primordia.core.signals import INTERRUPTS, copy_window, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
 from primordia.coupling.solvers import SubproblemSolver, accumulate, independent_batches, solve_in_turn
@@ -685,6 +685,7 @@ class Simulation:
         bar = _progress_bar(self, progress)
         snapshot_steps = {self.model.step_of(t) for t in self.model.output["times"]}
         try:
+            INTERRUPTS.copy_window = copy_window() if self.comm.size > 1 else 0.0
             with INTERRUPTS.installed(), INTERRUPTS.mode_of("deferred"):
                 while self.step_index < self.model.num_steps:
                     self.step()

@@ -10,9 +10,11 @@ run, bit for bit, and the same series, on both backends and under
 
 from __future__ import annotations
 
+import os
 import random
 import signal
 import time
+from pathlib import Path
 
 import meshio
 import numpy as np
@@ -20,6 +22,7 @@ import pytest
 import xarray as xr
 
 import run_control as rc
+from primordia.core.signals import copy_window
 
 CASES = [pytest.param(example, backend, ranks, id=f"{example}-{backend}-np{ranks}",
                       marks=[pytest.mark.mpi] if ranks > 1 else [])
@@ -377,7 +380,7 @@ class StopAtThree(Output):
         else:
             if run.is_root:
                 (run.out_dir / "holding").touch()
-            time.sleep(60)
+            time.sleep(float(os.environ.get("HOLD", 60)))
 
 
 @hookimpl
@@ -399,12 +402,9 @@ def test_a_parallel_run_stopped_at_once_keeps_the_rows_its_series_held(stop, sma
                        "--out", out, ranks=2, env={"STOP": stop})
     try:
         if stop == "two signals":
-            deadline = time.monotonic() + 120
-            while not (out / "holding").exists():
-                assert process.poll() is None and time.monotonic() < deadline, process.stderr.read()[-2000:]
-                time.sleep(0.05)
+            _wait_until_holding(process, out)
             process.send_signal(signal.SIGUSR1)  # noted: the run would stop after this step
-            time.sleep(1.0)
+            time.sleep(copy_window() + 0.5)  # sooner, the same signal is the first one's copy (test_signals.py)
             process.send_signal(signal.SIGUSR1)  # at once, in the held output
         status, stderr = rc.finish(process, timeout=60)
     finally:
@@ -418,3 +418,38 @@ def test_a_parallel_run_stopped_at_once_keeps_the_rows_its_series_held(stop, sma
                                          "RuntimeError: rank 0's record, and the other ranks were still inside it "
                                          "after 3 s (a collective call this rank never reached)")
     assert _series_times(out) == pytest.approx([0.0, 0.2, 0.4, 0.6])
+
+
+def _wait_until_holding(process, out: Path) -> None:
+    """Until STOP_AT_STEP_3 holds the run in its step 3 (fails if the run ends first)."""
+    deadline = time.monotonic() + 120
+    while not (out / "holding").exists():
+        assert process.poll() is None and time.monotonic() < deadline, process.stderr.read()[-2000:]
+        time.sleep(0.05)
+
+
+@pytest.mark.mpi
+def test_a_sigterm_to_the_whole_job_stops_a_parallel_run_after_its_step_with_a_checkpoint(small_config, tmp_path):
+    """A batch system's SIGTERM to the whole job reaches every rank and mpirun, which forwards its own to the ranks
+    odls_base_sigkill_timeout seconds later: that copy counted as a second signal and stopped the run at once,
+    with no checkpoint (the line said "it wrote no checkpoint to continue from").  Here the timeout is 3 s, as
+    README advises batch scripts to raise it: the copy comes 3 s after the signal, inside the step held 4.5 s,
+    and SIGKILL at 6 s, after the checkpoint."""
+    plugin = tmp_path / "stop_at_three.py"
+    plugin.write_text(STOP_AT_STEP_3)
+    out = tmp_path / "out"
+    process = rc.start("-p", plugin, "run", small_config(), "--set", "output.series_every=1", "--no-progress",
+                       "--out", out, ranks=2, env={"STOP": "held", "HOLD": "4.5",
+                                                              "OMPI_MCA_odls_base_sigkill_timeout": "3"})
+    try:
+        _wait_until_holding(process, out)
+        ranks = [int(pid) for pid in Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()]
+        for pid in [process.pid, *ranks]:  # mpirun and both ranks, each in its own process group
+            os.kill(pid, signal.SIGTERM)
+        status, stderr = rc.finish(process, timeout=60)
+    finally:
+        rc.stop(process)
+    stopped = rc.summary(out)
+    assert stopped["status"] == "interrupted at t = 0.6 (SIGTERM)", stderr[-3000:]
+    assert rc.checkpointed_step(out) == stopped["steps"] == 3, stderr[-3000:]
+    assert "wrote no checkpoint" not in stderr, stderr[-3000:]
