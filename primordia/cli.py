@@ -259,6 +259,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             parser = build_parser()
             args = parser.parse_args(argv)
+            _refuse_an_unwritable_tmpdir()
             _broken_pipes_raise()
             _refuse_ranks_for_a_serial_command(args.command)
             _errors_comm()
@@ -282,6 +283,24 @@ def main(argv: list[str] | None = None) -> int:
                 return _interrupted(InterruptedRun(INTERRUPTS.received))
             _abort_other_ranks(exc)
             raise
+
+
+def _refuse_an_unwritable_tmpdir() -> None:
+    """One line when ``TMPDIR`` names a folder that cannot be written, before MPI starts (dolfinx and petsc4py
+    start it on import): Open MPI keeps its session files there, and a read-only one (or a file) gave some 50
+    lines of its banners and MPI_Init_thread's abort, for any command.  (Under ``mpirun``, mpirun itself says it first.)"""
+    import tempfile
+
+    folder = os.environ.get("TMPDIR")
+    if not folder or not os.path.exists(folder):  # unset, or missing: Open MPI makes it
+        return
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=folder))
+    except OSError as error:
+        from primordia.core.atomic_files import reason_of
+
+        raise ConfigError(f"TMPDIR {folder} cannot be written ({reason_of(error)}): MPI keeps its session files "
+                          f"there; set TMPDIR to a writable folder") from None
 
 
 def _refuse_ranks_for_a_serial_command(command: str) -> None:

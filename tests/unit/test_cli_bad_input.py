@@ -96,6 +96,17 @@ def test_a_jit_cache_that_cannot_be_written_is_one_line(primordia_cli, small_con
     assert_one_line_error(result, "dolfinx's JIT cache", "a_file/fenics cannot be written", "XDG_CACHE_HOME")
 
 
+@pytest.mark.parametrize("command", [["plugins"], ["run", "--dry-run"]], ids=["plugins", "run"])
+def test_a_tmpdir_that_cannot_be_written_is_one_line(primordia_cli, small_config, tmp_path, command):
+    """Open MPI keeps its session files in TMPDIR: a read-only one was some 50 lines of its banners and an abort
+    in MPI_Init_thread, for any command.  A file stands in for a read-only folder (root may write anywhere)."""
+    (tmp_path / "a_file").write_text("")
+    env = {**os.environ, "TMPDIR": str(tmp_path / "a_file")}
+    arguments = [*command, small_config(), "--out", tmp_path / "out"] if command[0] == "run" else command
+    result = primordia_cli(*arguments, env=env)
+    assert_one_line_error(result, f"TMPDIR {tmp_path / 'a_file'} cannot be written", "set TMPDIR to a writable")
+
+
 def test_unknown_command_and_missing_argument_are_usage_errors(primordia_cli):
     assert_one_line_error(primordia_cli("simulate"), "invalid choice", "simulate")
     assert_one_line_error(primordia_cli("run"), "config")
