@@ -201,6 +201,10 @@ class Simulation:
         subproblems = [subproblems_of(physics, disc=self.disc) for physics in self.model.physics_objects]
         for subproblem in (sub for own in subproblems for sub in own):
             self._refuse_forms_differing_across_ranks(subproblem)
+        if self.existing != "restart":  # the initial solves too (a restart does not solve them again)
+            for physics in self.model.physics_objects:
+                for subproblem in subproblems_of(physics, initial=True):
+                    self._refuse_forms_differing_across_ranks(self._holding_the_others(subproblem, physics))
         self.scheme.check_subproblems(subproblems)  # e.g. strang with one module that solves anything
         # a misspelt [solver.NAME] table (the initial subproblems are built for their names here)
         self.scheme.check_table_names(self.model, self.scheme.solver_prefixes(subproblems))

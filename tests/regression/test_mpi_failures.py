@@ -157,6 +157,48 @@ def test_kinetics_failing_on_one_rank_is_one_line(mode, message, dry_run, tmp_pa
     assert rc.primordia_lines(result.stderr) == [f"primordia: error: {message}"], result.stderr[-2000:]
 
 
+#: The chemotaxis, renamed, with an initial solve of e whose value is NaN on rank 1 only.
+FLAKY_INITIAL_SOLVE = """\
+import ufl
+from mpi4py import MPI
+
+from primordia.core.plugins import hookimpl
+from primordia.physics.base import Subproblem
+from primordia.physics.chemotaxis import Chemotaxis
+
+
+class Flaky(Chemotaxis):
+    name = "flaky_initial"
+
+    def initial_subproblems(self):
+        disc, value = self.disc, float("nan") if MPI.COMM_WORLD.rank == 1 else 0.5
+        residual = (disc.field("e") - value) * disc.test("e") * disc.dx
+        return [Subproblem(name="flaky_initial.e0", unknown=disc.unknown("e"), residual=residual,
+                           jacobian=ufl.derivative(residual, disc.unknown("e")))]
+
+
+@hookimpl
+def primordia_physics():
+    return [Flaky]
+"""
+
+
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]], ids=["run", "dry-run"])
+def test_an_initial_solve_differing_across_ranks_is_one_line(dry_run, tmp_path, small_config):
+    """--dry-run compared the ranks' forms of the steps' subproblems only: it said "the input is valid" to an
+    initial solve whose equations differed, which the run refuses."""
+    plugin = tmp_path / "flaky_initial.py"
+    plugin.write_text(FLAKY_INITIAL_SOLVE)
+    config = small_config(small_config.text.replace('physics = ["chemotaxis"]', 'physics = ["flaky_initial"]'))
+    result = rc.run("-p", plugin, "run", config, "--out", tmp_path / "out", "--no-progress", *dry_run, ranks=2,
+                    timeout=60)
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert rc.primordia_lines(result.stderr) == [
+        "primordia: error: flaky_initial.e0: its equations differ between MPI ranks (rank 0 and rank 1): a plugin "
+        "answers otherwise on some rank (a NaN there, or a value read from a file only one rank sees)"], \
+        result.stderr[-2000:]
+
+
 #: A physics module (the chemotaxis, renamed) whose ``before_step`` fails on rank 1 only, from the step to t = 0.4.
 FLAKY_PHYSICS = """\
 from mpi4py import MPI
