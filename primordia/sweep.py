@@ -22,7 +22,7 @@ boundary and predicted wavelength over it.
   database and MPI are fresh for every run (MPI starts as a singleton: the variables of
   an enclosing ``mpirun`` are not passed on), and the worker stays healthy for the next run.
 * A run that fails is recorded (``status`` = "failed" and ``reason`` in the Dataset),
-  not fatal.  Running the same command again skips every run already done (completed,
+  not fatal (when none completes, the command ends in one line, exit status 2, after writing them).  Running the same command again skips every run already done (completed,
   with its metrics, from the same configuration and overrides) and retries the others.
 * Mistakes in the command (malformed ``--vary``, unknown key or parameter, missing
   config, a backend no run can use) are one-line errors before anything runs; a value
@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core.config import apply_overrides, load_config, parse_assignment
-from primordia.core.errors import ConfigError, one_line, warn
+from primordia.core.errors import ConfigError, PrimordiaError, one_line, warn
 from primordia.core.validation import is_number, number
 
 #: The option that seeds the random initial perturbation (``--seeds``).
@@ -1038,6 +1038,11 @@ def command_sweep(args) -> int:
                                                     "before drawing its map") from None
     why = "it needs exactly two --vary keys" if len(sweep.axes) != 2 else "no run completed"
     print(f"  wrote {sweep.out / DATASET_FILE}" + (f" and {picture}" if picture else f" (no map: {why})"))
+    if ds["status"].size and (ds["status"].values != "completed").all():
+        # some failed points are a finding (a region of parameters that blows up); none completed is a sweep
+        # that did not work, and a batch script's `primordia sweep ... && ...` went on as if it had (exit 0)
+        raise PrimordiaError(f"none of the sweep's {ds['status'].size} runs completed ({DATASET_FILE} and each "
+                             f"run's run.log say why)")
     return 0
 
 

@@ -415,14 +415,20 @@ def test_an_interrupted_sweep_says_how_far_it_got(small_config, tmp_path):
     assert "Traceback" not in stderr, stderr
 
 
-def test_a_sweep_whose_runs_all_fail_says_why_it_has_no_map(small_config, primordia_cli, tmp_path):
-    """It said "no map: it needs exactly two --vary keys" of a sweep over two keys."""
+def test_a_sweep_whose_runs_all_fail_says_why_it_has_no_map_and_ends_in_one_line(small_config, primordia_cli, tmp_path):
+    """It said "no map: it needs exactly two --vary keys" of a sweep over two keys.  And it ended with exit status 0,
+    so a batch script's `primordia sweep ... && ...` went on as if it had worked: now one line, status 2, after
+    writing sweep.nc."""
     result = primordia_cli("sweep", small_config(), "--vary", "parameters.D_m=-0.03:-0.01:2", "--vary",
                            "parameters.alpha=2:4:2", "--workers", "2", "--out", tmp_path / "out", "--no-progress")
-    assert result.returncode == 0, result.stderr
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        "primordia: error: none of the sweep's 4 runs completed (sweep.nc and each run's run.log say why)"]
     assert "4 run, 4 failed" in result.stdout, result.stdout
     assert "(no map: no run completed)" in result.stdout, result.stdout
     assert not (tmp_path / "out" / "sweep_map.png").exists()
+    with xr.open_dataset(tmp_path / "out" / "sweep.nc") as saved:
+        assert (saved["status"].values == "failed").all()
 
 
 def test_a_scheduler_without_workers_is_said(capsys):
