@@ -140,10 +140,7 @@ class Simulation:
         self.model.check_affordable()  # before the directory is claimed: nothing written for a run that cannot fit
         self._choose_backend()
         self._claim_directory()
-        self._choose_splitting()
-        self._discretise()
-        self._create_fields()
-        self._setup_physics()
+        self._set_up_physics_on_the_mesh()
         checkpoint = self._read_checkpoint() if self.existing == "restart" else None
         if checkpoint is None:
             self._initialise_fields()
@@ -192,10 +189,7 @@ class Simulation:
         failure hint (whether the boundary conditions enclose the tissue) 1.1 s, found once a set-up since.
         """
         self._choose_backend()
-        self._choose_splitting()
-        self._discretise()
-        self._create_fields()
-        self._setup_physics()
+        self._set_up_physics_on_the_mesh()
         if self.existing != "restart":  # a restart takes the fields from its checkpoint
             self._set_initial_values()
         subproblems = [subproblems_of(physics, disc=self.disc) for physics in self.model.physics_objects]
@@ -212,6 +206,14 @@ class Simulation:
         if self.existing == "restart":  # after the subproblems: they make some of the state (Discretisation.at_balance)
             self._restore_fields(self._checked_checkpoint or self._read_checkpoint())
         self.backend = self.scheme = self.disc = self._checked_checkpoint = None
+
+    def _set_up_physics_on_the_mesh(self) -> None:
+        """What the forms are built on, for :meth:`setup` and :meth:`check_forms` alike: the scheme (its field
+        groups), the mesh on the backend, the fields and every module's ``setup``."""
+        self._choose_splitting()
+        self._discretise()
+        self._create_fields()
+        self._setup_physics()
 
     def _choose_backend(self):
         from primordia.core.backend import Backend
