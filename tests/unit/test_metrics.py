@@ -148,6 +148,20 @@ def test_a_lone_front_is_no_pattern():
     assert metrics.kind == "none"
 
 
+@pytest.mark.parametrize("shape", ["front", "gradient", "lone spot"])
+def test_a_spectrum_that_only_falls_has_no_dominant_wavelength(shape):
+    """Fields whose spectrum falls across the whole band had the band's long-wave end for their "peak": a dominant
+    wavelength of about half the box (9.3-11.1 here; 10.0, L / 2, in example 1a's flat species at 40 x 40), which a
+    sweep's wavelength over its points showed as a number where there was no pattern."""
+    x, y = MESH.points.T
+    field = {"front": np.tanh(y - 8.0), "gradient": x,
+             "lone spot": np.exp(-((x - 10.0) ** 2 + (y - 10.0) ** 2) / 0.5)}[shape]
+    metrics = measure(field)
+    assert metrics.kind == "none"
+    assert np.isnan(metrics.dominant_wavenumber) and np.isnan(metrics.dominant_wavelength)
+    assert metrics.prominence == 1.0  # nothing stands above its surroundings: measured, not missing
+
+
 def test_hexatic_order_of_known_point_sets():
     hexagonal = hexagonal_lattice(2.0, margin=0.0)
     assert hexatic_order(hexagonal)[0] == pytest.approx(1.0, abs=1e-9)
@@ -440,3 +454,22 @@ def test_the_spot_count_of_a_sweep_map_is_drawn_from_zero(tmp_path, monkeypatch)
     for figure, top in zip(drawn, (1.0, 12.0)):
         (bar,) = [ax for ax in figure.axes if ax.get_label() == "<colorbar>"]
         assert bar.get_ylim() == (0.0, top)
+
+
+def test_the_metrics_picture_marks_no_peak_on_a_spectrum_that_only_falls(tmp_path, monkeypatch):
+    """The spectrum of a flat field was marked "peak k = 0.628 (wavelength 10)" at the band's long-wave end, on a
+    curve that only falls there (example 1a at 40 x 40, alpha = 6, t = 150: species e, f and b)."""
+    from primordia.analysis.patterns import figures
+    from primordia.analysis.patterns.run import Measurement, PredictedMode
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
+    metrics, grid = mesh_pattern_metrics(MESH.points, MESH.cells, np.tanh(MESH.points[:, 1] - 8.0))
+    figures.metrics_figure([Measurement(150.0, "reference", "e", metrics, grid)],
+                           PredictedMode(2.78, 2.26, 0.1, "linear analysis"), tmp_path / "metrics_e.png")
+    (figure,) = drawn
+    spectrum = figure.axes[1]
+    labels = [text.get_text() for text in spectrum.get_legend().get_texts()]
+    assert labels[0] == "no spectral peak" and not any("peak k" in label for label in labels)
+    assert [line.get_xdata()[0] for line in spectrum.get_lines()[1:] if len(line.get_xdata())] == [2.78]

@@ -67,8 +67,11 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
         k, power = metrics.wavenumbers, metrics.power
         shown = k > 0
         bottom.semilogy(k[shown], np.maximum(power[shown], 1e-300), color="tab:blue", linewidth=1)
-        bottom.axvline(metrics.dominant_wavenumber, color="black", linestyle=":",
-                       label=f"peak k = {metrics.dominant_wavenumber:.3g} (wavelength {metrics.dominant_wavelength:.3g})")
+        if np.isfinite(metrics.dominant_wavenumber):
+            bottom.axvline(metrics.dominant_wavenumber, color="black", linestyle=":", label=f"peak k = "
+                           f"{metrics.dominant_wavenumber:.3g} (wavelength {metrics.dominant_wavelength:.3g})")
+        else:  # a spectrum that falls across the band: its long-wave end was marked as a "peak"
+            bottom.plot([], [], " ", label="no spectral peak")
         if np.isfinite(predicted.k_max):
             bottom.axvline(predicted.k_max, color="tab:red", linestyle="--",
                            label=f"linear k_max = {predicted.k_max:.3g} (wavelength {predicted.wavelength:.3g})")

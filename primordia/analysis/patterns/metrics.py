@@ -8,7 +8,8 @@ else works on that grid:
   the field minus its mean (Hann-windowed, zero-padded FFT);
   :func:`dominant_wavenumber` -- its peak, and how far the peak stands above
   the spectrum around it (``prominence``: ~1-5 for noise or a front, >> 10
-  for a pattern);
+  for a pattern); NaN, and prominence 1, where the spectrum has no peak (it
+  falls across the whole band: a front, a gradient, a lone spot);
 * :func:`find_blobs` -- connected regions above ``level`` (halfway between the
   field's minimum and maximum).  A region is a *spot* if it is compact: its
   second-moment aspect ratio is below :data:`MAX_SPOT_ASPECT` and its area
@@ -181,11 +182,17 @@ def dominant_wavenumber(k: np.ndarray, power: np.ndarray, k_low: float, k_high: 
     only the end of a long-wave trend (a front, a gradient) has prominence ~1.
     ``k_low`` keeps out trends longer than half the domain; ``k_high`` (the
     mesh's Nyquist wavenumber) keeps the median out of the band the mesh cannot resolve.
+    When the spectrum has no peak in the band, only a trend that keeps rising past
+    ``k_low`` (a front, a gradient, a lone spot: P falls across the whole band), the
+    wavenumber is NaN and the prominence 1: its k_low was taken for a wavelength of
+    half the domain (10 on the 20 x 20 box) in fields with no pattern.
     """
     band = np.flatnonzero((k >= k_low) & (k <= k_high))
     if band.size < 3 or not np.any(power[band] > 0):
         return np.nan, np.nan
     i = band[np.argmax(power[band])]
+    if i == band[0] and i > 0 and power[i - 1] >= power[i]:  # the tail of a longer-wave trend, not a peak
+        return np.nan, 1.0
     k_peak = float(k[i])
     if 0 < i < k.size - 1:
         left, centre, right = power[i - 1], power[i], power[i + 1]

@@ -37,8 +37,10 @@ METRICS_FILE = ANALYSIS_FILE
 
 #: The scalar metrics of one snapshot: Dataset variable, PatternMetrics attribute, long name.
 SCALAR_METRICS = (
-    ("dominant_wavelength", "dominant_wavelength", "2 pi / peak of the radially averaged power spectrum"),
-    ("dominant_wavenumber", "dominant_wavenumber", "peak of the radially averaged power spectrum"),
+    ("dominant_wavelength", "dominant_wavelength", "2 pi / peak of the radially averaged power spectrum "
+     "(NaN: no peak, the spectrum falls across the whole band)"),
+    ("dominant_wavenumber", "dominant_wavenumber", "peak of the radially averaged power spectrum "
+     "(NaN: no peak, the spectrum falls across the whole band)"),
     ("spectral_prominence", "prominence", "peak power over the spectrum around it (noise, fronts ~1-5; patterns >> 10)"),
     ("spot_count", "spot_count", "number of spots (compact regions above the level)"),
     ("spacing_mean", "spacing_mean", "mean distance from a spot to its nearest neighbour"),
