@@ -473,3 +473,30 @@ def test_the_metrics_picture_marks_no_peak_on_a_spectrum_that_only_falls(tmp_pat
     labels = [text.get_text() for text in spectrum.get_legend().get_texts()]
     assert labels[0] == "no spectral peak" and not any("peak k" in label for label in labels)
     assert [line.get_xdata()[0] for line in spectrum.get_lines()[1:] if len(line.get_xdata())] == [2.78]
+
+
+@pytest.mark.parametrize("count, expected", [(0, "no spots"), (1, "1 spot"), (3, "3 spots, spacing 3 +- 0.1"),
+                                             (7, "7 spots, spacing 3 +- 0.1, |psi_6| 0.980")])
+def test_the_spots_in_words_leave_out_what_has_no_value(count, expected):
+    """The metrics picture's titles read "0 spots, spacing nan +- nan, |psi6| nan" for a field with no spots."""
+    from primordia.analysis.patterns.metrics import spots_text
+
+    spacing = (3.0, 0.1) if count >= 2 else (np.nan, np.nan)
+    assert spots_text(count, *spacing, 0.98 if count >= 4 else np.nan) == expected
+
+
+def test_the_metrics_picture_titles_say_no_spots(tmp_path, monkeypatch):
+    from primordia.analysis.patterns import figures
+    from primordia.analysis.patterns.run import PredictedMode, measure, read_run
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
+    write_run(tmp_path, stretch=1.0)
+    for species in ("b", "m"):
+        chosen = [m for m in measure(read_run(tmp_path), [species]) if m.configuration == "reference"][1:]
+        figures.metrics_figure(chosen, PredictedMode(2.78, 2.26, 0.1, "linear analysis"), tmp_path / "metrics.png")
+    noise, spots = (figure.axes[0].get_title() for figure in drawn)
+    assert "nan" not in noise
+    assert noise.startswith("b, t = 20 (reference): none\n") and noise.endswith("\nno spots")
+    assert spots.startswith("m, t = 20 (reference): spots\n42 spots, spacing 2.99") and spots.endswith("|psi_6| 1.000")

@@ -50,11 +50,13 @@ def run(args) -> int:
 def describe(point, kind: str) -> str:
     """One line for one (time, configuration, species) of a metrics Dataset."""
     text = f"t = {point['time'].item():g} {point['species'].item()} ({point['configuration'].item()}): {kind}"
+    from primordia.analysis.patterns.metrics import spots_text
+
     if kind == "none":  # the spectrum's highest point is no pattern's wavelength
         return text + f" (spectral prominence {point['spectral_prominence'].item():.3g})"
     text += f"; wavelength {point['dominant_wavelength'].item():.4g}"
     count = int(point["spot_count"].item())
     if count:
-        text += (f"; {count} spots, spacing {point['spacing_mean'].item():.4g} +- {point['spacing_std'].item():.2g}, "
-                 f"|psi_6| {point['hexatic_order'].item():.3f}")
+        text += "; " + spots_text(count, *(point[name].item() for name in ("spacing_mean", "spacing_std",
+                                                                           "hexatic_order")))
     return text

@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
+from primordia.analysis.patterns.metrics import spots_text
 from primordia.core.atomic_files import atomic_path
 
 
@@ -58,9 +59,10 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
         # margins beside a field its neighbours drew edge to edge
         top.set_xlim(grid.extent[:2])
         top.set_ylim(grid.extent[2:])
+        # a field with no spots read "0 spots, spacing nan +- nan, |psi6| nan"
         top.set_title(f"{m.species}, t = {m.time:g} ({m.configuration}): {metrics.kind}\n"
-                      f"{metrics.spot_count} spots, spacing {metrics.spacing_mean:.3g} +- {metrics.spacing_std:.2g}, "
-                      f"|psi6| {metrics.hexatic_order:.2f}", fontsize=8)
+                      + spots_text(metrics.spot_count, metrics.spacing_mean, metrics.spacing_std,
+                                   metrics.hexatic_order), fontsize=8)
         top.set_aspect("equal")
         top.set_xlabel("x")
         top.set_ylabel("y")

@@ -338,6 +338,19 @@ def classify(prominence: float, spot_fraction: float, orientation: float) -> str
     return "labyrinth"
 
 
+def spots_text(count: int, spacing_mean: float, spacing_std: float, hexatic: float) -> str:
+    """The spots in words: count, and the spacing and |psi_6| where they have a value (two spots have a spacing,
+    four off a line a |psi_6|); "no spots" rather than "0 spots, spacing nan +- nan, |psi6| nan"."""
+    if not count:
+        return "no spots"
+    text = f"{count} spot" + ("s" if count > 1 else "")
+    if np.isfinite(spacing_mean):
+        text += f", spacing {spacing_mean:.4g} +- {spacing_std:.2g}"
+    if np.isfinite(hexatic):
+        text += f", |psi_6| {hexatic:.3f}"
+    return text
+
+
 @dataclass(frozen=True)
 class PatternMetrics:
     """Every metric of one snapshot of one field (lengths in mesh units)."""
