@@ -475,6 +475,29 @@ def test_the_metrics_picture_marks_no_peak_on_a_spectrum_that_only_falls(tmp_pat
     assert [line.get_xdata()[0] for line in spectrum.get_lines()[1:] if len(line.get_xdata())] == [2.78]
 
 
+def test_a_field_of_no_pattern_says_which_criterion_it_missed(tmp_path):
+    """Example 1a at 40 x 40, alpha = 6, t = 300: m_snapshots.png shows rows of spots two or three cells across,
+    metrics.nc said "pattern = none", 0 spots, prominence 8.5, and nowhere what "none" takes: the threshold
+    of 10 was in the module's constants alone."""
+    from primordia.analysis.patterns.cli import describe
+    from primordia.analysis.patterns.metrics import MIN_PROMINENCE
+
+    write_run(tmp_path, stretch=1.0)
+    analyse_run(tmp_path, pictures=False)
+    saved = xr.open_dataset(tmp_path / "metrics.nc")
+    rule = saved["pattern"].attrs["comment"]
+    assert f"none: spectral_prominence below {MIN_PROMINENCE:g}" in rule and "its spots are not counted" in rule
+    assert "aspect ratio below 2" in rule and "spot_fraction >= 0.5" in rule
+    assert f"a pattern needs {MIN_PROMINENCE:g}" in saved["spectral_prominence"].attrs["long_name"]
+    noise = saved.sel(time=20.0, configuration="reference", species="b")
+    line = describe(noise, pattern_kind(noise).item())
+    assert line == (f"t = 20 b (reference): none (spectral prominence {noise['spectral_prominence'].item():.3g} "
+                    f"< {MIN_PROMINENCE:g})")
+    flat = noise.copy()
+    flat["dominant_wavelength"], flat["spectral_prominence"] = np.nan, 1.0
+    assert describe(flat, "none") == "t = 20 b (reference): none (no spectral peak)"
+
+
 @pytest.mark.parametrize("count, expected", [(0, "no spots"), (1, "1 spot"), (3, "3 spots, spacing 3 +- 0.1"),
                                              (7, "7 spots, spacing 3 +- 0.1, |psi_6| 0.980")])
 def test_the_spots_in_words_leave_out_what_has_no_value(count, expected):
@@ -485,7 +508,7 @@ def test_the_spots_in_words_leave_out_what_has_no_value(count, expected):
     assert spots_text(count, *spacing, 0.98 if count >= 4 else np.nan) == expected
 
 
-def test_the_metrics_picture_titles_say_no_spots(tmp_path, monkeypatch):
+def test_the_metrics_picture_titles_say_no_spots_and_why_there_is_no_pattern(tmp_path, monkeypatch):
     from primordia.analysis.patterns import figures
     from primordia.analysis.patterns.run import PredictedMode, measure, read_run
 
@@ -494,9 +517,15 @@ def test_the_metrics_picture_titles_say_no_spots(tmp_path, monkeypatch):
     monkeypatch.setattr(figures, "_save", lambda figure, path: (drawn.append(figure), save(figure, path))[1])
     write_run(tmp_path, stretch=1.0)
     for species in ("b", "m"):
-        chosen = [m for m in measure(read_run(tmp_path), [species]) if m.configuration == "reference"][1:]
+        chosen = [m for m in measure(read_run(tmp_path), [species]) if m.configuration == "reference"]
         figures.metrics_figure(chosen, PredictedMode(2.78, 2.26, 0.1, "linear analysis"), tmp_path / "metrics.png")
-    noise, spots = (figure.axes[0].get_title() for figure in drawn)
+    noise, spots = (figure.axes[1].get_title() for figure in drawn)  # t = 20, the right-hand panel
     assert "nan" not in noise
-    assert noise.startswith("b, t = 20 (reference): none\n") and noise.endswith("\nno spots")
+    assert noise.startswith("b, t = 20 (reference): none (spectral prominence ")
+    assert noise.endswith(" < 10)\nno spots")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    for figure in drawn:  # the reason fits above its panel
+        title = figure.axes[1].title.get_window_extent(FigureCanvasAgg(figure).get_renderer())
+        assert title.x0 >= 0 and title.x1 <= figure.bbox.x1
     assert spots.startswith("m, t = 20 (reference): spots\n42 spots, spacing 2.99") and spots.endswith("|psi_6| 1.000")

@@ -50,10 +50,11 @@ def run(args) -> int:
 def describe(point, kind: str) -> str:
     """One line for one (time, configuration, species) of a metrics Dataset."""
     text = f"t = {point['time'].item():g} {point['species'].item()} ({point['configuration'].item()}): {kind}"
-    from primordia.analysis.patterns.metrics import spots_text
+    from primordia.analysis.patterns.metrics import no_pattern_reason, spots_text
 
     if kind == "none":  # the spectrum's highest point is no pattern's wavelength
-        return text + f" (spectral prominence {point['spectral_prominence'].item():.3g})"
+        reason = no_pattern_reason(point["spectral_prominence"].item(), point["dominant_wavelength"].item())
+        return text + f" ({reason})"
     text += f"; wavelength {point['dominant_wavelength'].item():.4g}"
     count = int(point["spot_count"].item())
     if count:

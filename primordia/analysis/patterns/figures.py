@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
-from primordia.analysis.patterns.metrics import spots_text
+from primordia.analysis.patterns.metrics import no_pattern_reason, spots_text
 from primordia.core.atomic_files import atomic_path
 
 
@@ -59,8 +59,10 @@ def metrics_figure(measurements: Sequence, predicted, path) -> Path:
         # margins beside a field its neighbours drew edge to edge
         top.set_xlim(grid.extent[:2])
         top.set_ylim(grid.extent[2:])
-        # a field with no spots read "0 spots, spacing nan +- nan, |psi6| nan"
-        top.set_title(f"{m.species}, t = {m.time:g} ({m.configuration}): {metrics.kind}\n"
+        # a field with no spots read "0 spots, spacing nan +- nan, |psi6| nan"; a field of no pattern says why
+        kind = (f"none ({no_pattern_reason(metrics.prominence, metrics.dominant_wavelength)})"
+                if metrics.kind == "none" else metrics.kind)
+        top.set_title(f"{m.species}, t = {m.time:g} ({m.configuration}): {kind}\n"
                       + spots_text(metrics.spot_count, metrics.spacing_mean, metrics.spacing_std,
                                    metrics.hexatic_order), fontsize=8)
         top.set_aspect("equal")

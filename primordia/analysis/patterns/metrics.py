@@ -327,8 +327,18 @@ def orientation_order(field: GriddedField) -> float:
     return float(abs(np.sum(squared[finite])) / magnitude) if magnitude > 0 else np.nan
 
 
+#: The rule of :func:`classify` and of the spots, in words, for metrics.nc and the command's lines.
+CLASSIFICATION_RULE = (
+    f"none: spectral_prominence below {MIN_PROMINENCE:g} (no spectral peak stands out: noise, a front, a lone "
+    f"spot or a few, or a pattern at the mesh's scale); its spots are not counted. Else spots if "
+    f"spot_fraction >= {MIN_SPOT_FRACTION:g}, stripes if orientation_order >= {MIN_STRIPE_ORDER:g}, else "
+    f"labyrinth. A spot is a connected region above the level with a second-moment aspect ratio below "
+    f"{MAX_SPOT_ASPECT:g} and an area below {MAX_SPOT_AREA:g} dominant wavelength squared")
+
+
 def classify(prominence: float, spot_fraction: float, orientation: float) -> str:
-    """none (no spectral peak), spots (mostly compact blobs), stripes (aligned), else labyrinth."""
+    """none (no spectral peak), spots (mostly compact blobs), stripes (aligned), else labyrinth
+    (:data:`CLASSIFICATION_RULE`)."""
     if not prominence >= MIN_PROMINENCE:
         return "none"
     if spot_fraction >= MIN_SPOT_FRACTION:
@@ -336,6 +346,13 @@ def classify(prominence: float, spot_fraction: float, orientation: float) -> str
     if orientation >= MIN_STRIPE_ORDER:
         return "stripes"
     return "labyrinth"
+
+
+def no_pattern_reason(prominence: float, wavelength: float) -> str:
+    """Why a field is of kind "none", with the threshold it missed (:data:`MIN_PROMINENCE`)."""
+    if not np.isfinite(wavelength):
+        return "no spectral peak"
+    return f"spectral prominence {prominence:.3g} < {MIN_PROMINENCE:g}"
 
 
 def spots_text(count: int, spacing_mean: float, spacing_std: float, hexatic: float) -> str:

@@ -24,6 +24,8 @@ import numpy as np
 import xarray as xr
 
 from primordia.analysis.patterns.metrics import (
+    CLASSIFICATION_RULE,
+    MIN_PROMINENCE,
     PATTERN_KINDS,
     GriddedField,
     MeshSampler,
@@ -41,7 +43,8 @@ SCALAR_METRICS = (
      "(NaN: no peak, the spectrum falls across the whole band)"),
     ("dominant_wavenumber", "dominant_wavenumber", "peak of the radially averaged power spectrum "
      "(NaN: no peak, the spectrum falls across the whole band)"),
-    ("spectral_prominence", "prominence", "peak power over the spectrum around it (noise, fronts ~1-5; patterns >> 10)"),
+    ("spectral_prominence", "prominence", "peak power over the spectrum around it (noise, fronts ~1-5; patterns >> 10; "
+     f"a pattern needs {MIN_PROMINENCE:g})"),
     ("spot_count", "spot_count", "number of spots (compact regions above the level)"),
     ("spacing_mean", "spacing_mean", "mean distance from a spot to its nearest neighbour"),
     ("spacing_std", "spacing_std", "standard deviation of the nearest-neighbour distances"),
@@ -282,7 +285,7 @@ def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predict
     )
     ds["pattern"] = (dims, kind, {"long_name": "pattern kind", "flag_values": np.arange(len(PATTERN_KINDS),
                                                                                         dtype=np.int8),
-                                  "flag_meanings": " ".join(PATTERN_KINDS)})
+                                  "flag_meanings": " ".join(PATTERN_KINDS), "comment": CLASSIFICATION_RULE})
     for name, text in (("spot_x", "x of the spot's maximum"), ("spot_y", "y of the spot's maximum"),
                        ("spot_area", "area of the spot above the level")):
         ds[name] = (dims + ("spot",), spot_arrays[name], {"long_name": text + " (NaN past spot_count)",
