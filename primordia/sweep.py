@@ -173,6 +173,8 @@ class Sweep:
     given: dict = field(init=False, repr=False)  #: what every run is given (the file, the fixed --set), by value
     base_config: dict = field(init=False, repr=False)  #: resolved configuration with the fixed overrides
     inert_settings: list = field(init=False, repr=False)  #: what the runs leave without effect (Model.inert_settings)
+    #: per dimension, its coordinate's values and attributes in sweep.nc (:func:`_coordinate`)
+    coordinates: dict = field(init=False, repr=False)
 
     def __post_init__(self):
         from primordia.model import Model
@@ -217,6 +219,8 @@ class Sweep:
         self.given = _by_value(table)  # the fingerprints' (see _fingerprint)
         self.base_config = resolved
         self.inert_settings = model.inert_settings + _inert_axes(model, keys)  # said once the runs' check passed
+        self.coordinates = {name: _coordinate(model, resolved, key, values)
+                            for key, (name, values) in zip(keys, self.dimensions)}
 
     @property
     def keys(self) -> list[str]:
@@ -287,6 +291,22 @@ def _inert_axes(model, keys: list[str]) -> list[str]:
             flag = "--seeds" if key == SEED_KEY else f"--vary {key}"
             told.append(f"{flag} varies {key}, which has no effect: {why}; the runs differ in nothing else")
     return told
+
+
+def _coordinate(model, resolved: dict, key: str, values: tuple) -> tuple[np.ndarray, dict]:
+    """The values of a varied key as sweep.nc's coordinate, and its attributes: a model parameter's description
+    and units (as patterning_*.nc gives them), another key's name.  A parameter, or a key whose resolved value is
+    a float, is a float coordinate: ``alpha=2:6:2`` was stored as int32 (the values as ``--vary`` wrote them),
+    another type than ``alpha=2.0:6.0:2`` for the same floats the runs were given."""
+    if key.startswith("parameters.") and key.count(".") == 1:
+        attrs = {"long_name": model.parameters.declaration(key.split(".", 1)[1]).description,
+                 "units": "1"}  # the seed's dimensionless parameters (seed section 2)
+        return np.asarray(values, dtype=float), attrs
+    if key == SEED_KEY:
+        attrs = {"long_name": f"seed of the random initial perturbation ({SEED_KEY})"}
+    else:
+        attrs = {"long_name": f"the configuration's {key}"}
+    return np.asarray(values, dtype=float if isinstance(_lookup(resolved, key), float) else None), attrs
 
 
 def _assigned_keys(text: str) -> list[str]:
@@ -875,7 +895,7 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
                                                                    "units": "1"}),
          "predicted_growth_rate": (names, predicted["rate"], {"long_name": "linear analysis: Re phi at k_max",
                                                               "units": "1"})},
-        coords={name: (name, list(values)) for name, values in dims},
+        coords={name: (name, *sweep.coordinates[name]) for name, _ in dims},
         # no Conventions, as metrics.nc states none: the configuration and species dimensions (and a text-valued
         # varied key's) are labelled by text, which CF's coordinate variables cannot be (cfchecks: "Possible
         # incorrect declaration of a coordinate variable")

@@ -680,3 +680,24 @@ def test_seeds_of_a_perturbation_they_do_not_seed_are_said(small_config, tmp_pat
     mixed = Sweep(unperturbed, (Axis.parse("physics.chemotaxis.perturbation=0:0.1:2"),), seeds=(1, 2),
                   out=tmp_path / "mixed")
     assert mixed.inert_settings == []
+
+
+def test_the_varied_keys_are_coordinates_with_their_meaning_and_a_parameters_type(small_config, tmp_path):
+    """sweep.nc's alpha and m0 had no long_name or units, where patterning_*.nc gives m0 both from its declaration,
+    and alpha=2:6:2 was stored as int32: another type than alpha=2.0:6.0:2, for the same float parameter."""
+    from primordia.analysis.patterning import save_dataset
+
+    for vary in ("parameters.alpha=2:6:2", "parameters.alpha=2.0:6.0:2"):
+        sweep = Sweep(small_config(), (Axis.parse(vary), Axis.parse("time.t_final=1:2:2")), seeds=(1, 2),
+                      out=tmp_path / "sweep")
+        save_dataset(gather(sweep, sweep.points(), {}), tmp_path / "sweep.nc")
+        with xr.open_dataset(tmp_path / "sweep.nc") as saved:
+            assert saved["alpha"].dtype == np.float64 and list(saved["alpha"].values) == [2.0, 6.0]
+            assert saved["alpha"].attrs == {"long_name": "chemotactic sensitivity to FGF", "units": "1"}
+            assert saved["time.t_final"].dtype == np.float64  # a float of the configuration
+            assert saved["time.t_final"].attrs == {"long_name": "the configuration's time.t_final"}
+            assert saved["seed"].dtype.kind == "i" and list(saved["seed"].values) == [1, 2]
+            assert saved["seed"].attrs == {"long_name": f"seed of the random initial perturbation ({SEED_KEY})"}
+    # the runs are given the values as --vary wrote them: the folders and the fingerprints of earlier sweeps hold
+    assert Sweep(small_config(), (Axis.parse("parameters.alpha=2:6:2"),), out=tmp_path).points()[0].overrides == (
+        "parameters.alpha=2",)
