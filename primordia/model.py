@@ -402,6 +402,7 @@ class Model:
         existing = "restart" if restart else "overwrite" if overwrite else "refuse"
         out = out if isinstance(out, str) else _path(out, "out")  # a str as given: Simulation refuses "" (not ".")
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
+        sim.restart_hint = f"Model.run(out={str(out)!r}, restart=True)"  # the command's words were no help here
         sim.setup()
         sim.run(progress=progress)
         return sim

@@ -84,6 +84,8 @@ class Simulation:
         if isinstance(out_dir, str) and not out_dir.strip():  # Path("") is the current directory, files and all
             raise ConfigError("a run's out needs a directory name (\".\" for the current directory)")
         self.out_dir = Path(out_dir)
+        #: how a stopped run is continued, in its lines (Model.run gives its own, in Python's words)
+        self.restart_hint = f"primordia run --restart {self.out_dir}"
         self.comm = comm
         self._output_comm = None  # see _outputs_comm
         self._output_seconds: dict[tuple[str, str], float] = {}  # the longest call of each output, at each moment
@@ -715,7 +717,7 @@ class Simulation:
                 self._stop(exc)
             if isinstance(exc, KeyboardInterrupt):
                 signum = getattr(exc, "signum", None) or INTERRUPTS.received or signal.SIGINT
-                how = (f"continue it with: primordia run --restart {self.out_dir}"
+                how = (f"continue it with: {self.restart_hint}"
                        if self._checkpoint_step == self.step_index or not self.is_root else self._how_it_continues())
                 raise InterruptedRun(signum, f"{self.status}; {how}") from None
             if not raised_by_a_signal:  # the run has stopped, as the signal asked: the failure's line says why
@@ -750,7 +752,7 @@ class Simulation:
         """How a run stopped before its last step was checkpointed goes on: from the checkpoint in its folder."""
         try:
             meta = checkpoint_file.read_meta(self.out_dir / checkpoint_file.CHECKPOINT_FILE)
-            return (f"primordia run --restart {self.out_dir} continues it from its checkpoint at "
+            return (f"{self.restart_hint} continues it from its checkpoint at "
                     f"t = {time_label(meta['run']['time'])}")
         except (PrimordiaError, KeyError, TypeError):
             return "it wrote no checkpoint to continue from"
@@ -1089,7 +1091,7 @@ class Simulation:
 
         from mpi4py import MPI
 
-        restart = (f"; continue it from its last checkpoint with: primordia run --restart {self.out_dir}"
+        restart = (f"; continue it from its last checkpoint with: {self.restart_hint}"
                    if (self.out_dir / checkpoint_file.CHECKPOINT_FILE).exists() else "")
         print(f"primordia: error: {status}; the run is aborted{restart}", file=sys.stderr, flush=True)
         self._flush_outputs()

@@ -196,7 +196,8 @@ def test_a_run_whose_disk_fills_stops_in_one_line_and_continues_once_there_is_ro
         if once:  # a full disk takes no summary either: it says "running", and a restart goes on all the same
             assert summary["status"] == f"stopped at t = {summary['time']:g}: {str(stopped.value).split(';')[0]}"
             continue  # the restart is the full disk's
-        assert f"primordia run --restart {out} continues it from its checkpoint at t = " in str(stopped.value)
+        assert (f"Model.run(out={str(out)!r}, restart=True) continues it from its checkpoint at t = "
+                in str(stopped.value)), stopped.value  # from Python, in Python's words
         disk.room = None  # space freed
         small_model().run(out=out, restart=True)
         restarted.append(room)

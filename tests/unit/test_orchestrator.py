@@ -613,8 +613,11 @@ def test_a_signal_one_run_received_does_not_stop_the_next_run_in_the_process(wat
     try:
         if when == "in a step":
             monkeypatch.setattr(Recorder, "before_step", signal_in_a_step)
-            with pytest.raises(InterruptedRun, match=r"^interrupted at t = 0\.4 \(Ctrl-C\)"):
+            with pytest.raises(InterruptedRun, match=r"^interrupted at t = 0\.4 \(Ctrl-C\)") as stopped:
                 model(t_final=1.0).run(out=tmp_path / "first")
+            # in Python's words: it said "continue it with: primordia run --restart OUT" to a notebook
+            assert str(stopped.value).endswith(f"continue it with: Model.run(out={str(tmp_path / 'first')!r}, "
+                                               f"restart=True)"), str(stopped.value)
         else:
             monkeypatch.setattr(Recording, "finish", signal_while_ending)
             assert model(t_final=0.4).run(out=tmp_path / "first").status == "completed"
