@@ -182,6 +182,10 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     # ex01a has no mechanics: its "coupled" map was the uncoupled one with Table 3.1's mechanics, labelled coupled
     (["stability", "map", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--coupled",
       "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3"], "--coupled: the model of"),
+    # the dispersion relation of ex01a's chemistry alone was printed under --coupled without a word
+    (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--coupled"],
+     "--coupled: the model ex01a has no closed mechano-chemical loop"),
+    (["stability", "--coupled", "--chemistry-only"], "--coupled: --chemistry-only leaves the mechanics out"),
     # a grid that cannot fit had the kernel kill the process (24 GB at --y alpha:0:12:100000000)
     (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:100000000"], "use fewer points"),
     (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3", "--nk", "100000000"], "use fewer points"),
