@@ -522,6 +522,9 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
             notes.append("uncoupled: the volume sink xi_f div u left out (xi_f = 0)")
             continue
         terms.append(COUPLINGS[module.name](module, context, mechanics))
+    if not _lame_from_E_and_nu(mechanics, params):
+        notes.append(f"Lame constants from physics.poroelasticity options: mu = {mechanics.mu:g}, "
+                     f"lambda = {mechanics.lam:g} (E and nu unused)")
     if uncoupled and "mechanochemical" not in [module.name for module in modules]:
         notes.append("uncoupled: the model has no mechano-chemical loop to cut")
     linear = LinearisedModel(name=name, physics=tuple(module.name for module in modules), kinetics=kinetics.name,
@@ -631,13 +634,11 @@ def seed_cross_check(linear: LinearisedModel, k=(0.0, 0.3, 1.0, 2.7, 8.0), phi=(
     module, or Lame constants given as options (the seed reads them from E and nu).
     """
     from primordia.analysis.linearisation import linearise, matrix_pencil
-    from primordia.physics.seed_parameters import lame
 
     if linear.kinetics != "painter2018" or linear.third_party:
         return None
     values = seed_values(linear.parameters)
-    if linear.mechanics is not None and not np.allclose((linear.mechanics.mu, linear.mechanics.lam),
-                                                        lame(values), rtol=1e-14, atol=0):
+    if not _lame_from_E_and_nu(linear.mechanics, values):
         return None
     seed = linearise(seed_model_values(linear)[0])
     direction = np.arange(1.0, d + 1.0) / np.linalg.norm(np.arange(1.0, d + 1.0))
@@ -660,7 +661,9 @@ def seed_model_values(linear: LinearisedModel):
     The seed's model (:data:`SEED_PHYSICS`) read as the composed one: xi_f = 0 where the model
     has no volume sink and tau = 0 where it has no active stress (the loop is then open, seed
     section 3.4), rather than Table 3.1's xi_f = 0.15 and tau = 60 for couplings it does not have.
-    A ConfigError when the seed's model does not describe ``linear``'s: another kinetics, a third party's module.
+    A ConfigError when the seed's model does not describe ``linear``'s: another kinetics, a third party's module,
+    Lame constants given as options (the seed's model reads E and nu: a map of it, or a sweep's overlay, was
+    computed with Table 3.1's E and nu whatever the model's ``shear_modulus`` and ``lame_lambda``).
     """
     if linear.kinetics != "painter2018":
         raise ConfigError(f"{linear.name or 'the model'} uses kinetics {linear.kinetics}: the seed's model "
@@ -670,9 +673,20 @@ def seed_model_values(linear: LinearisedModel):
                           f"model does not describe it")
     kinds = {type(term) for term in linear.terms}
     values = seed_values(linear.parameters)
+    if not _lame_from_E_and_nu(linear.mechanics, values):
+        raise ConfigError(f"{linear.name or 'the model'} sets its Lame constants by physics.poroelasticity options "
+                          f"(mu = {linear.mechanics.mu:g}, lambda = {linear.mechanics.lam:g}): the seed's model reads "
+                          f"them from E and nu; give E and nu instead")
     values = values.replace(xi_f=values["xi_f"] if VolumeSink in kinds else 0.0,
                             tau=values["tau"] if ActiveStressCoupling in kinds else 0.0)
     return values, linear.coupled
+
+
+def _lame_from_E_and_nu(mechanics: PoroelasticWaves | None, params: Mapping) -> bool:
+    """Whether the Lame constants of ``mechanics`` are those of E and nu in ``params`` (or there is no mechanics)."""
+    from primordia.physics.seed_parameters import lame
+
+    return mechanics is None or np.allclose((mechanics.mu, mechanics.lam), lame(params), rtol=1e-14, atol=0)
 
 
 def seed_values(params: Mapping):

@@ -186,6 +186,10 @@ def test_map_command_writes_patterning_space(tmp_path, capsys):
     (["stability", str(Path(__file__).resolve().parents[2] / "examples" / "ex01a.toml"), "--coupled"],
      "--coupled: the model ex01a has no closed mechano-chemical loop"),
     (["stability", "--coupled", "--chemistry-only"], "--coupled: --chemistry-only leaves the mechanics out"),
+    # the map of ex01b with mu, lambda given as options was the map of Table 3.1's E and nu, without a word
+    (["stability", "map", str(Path(__file__).resolve().parents[2] / "examples" / "ex01b.toml"), "--set",
+      "physics.poroelasticity.shear_modulus=1000", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3"],
+     "ex01b sets its Lame constants by physics.poroelasticity options (mu = 1000, lambda = 42857.1)"),
     # a grid that cannot fit had the kernel kill the process (24 GB at --y alpha:0:12:100000000)
     (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:100000000"], "use fewer points"),
     (["stability", "map", "--x", "m0:0.1:4:3", "--y", "alpha:0:1:3", "--nk", "100000000"], "use fewer points"),

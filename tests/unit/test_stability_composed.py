@@ -22,6 +22,7 @@ from primordia.analysis.composed import (
     linearise_seed,
     reaction_jacobian,
     seed_cross_check,
+    seed_model_values,
 )
 from primordia.analysis.linearisation import linearise, matrix_pencil
 from primordia.core.errors import ConfigError, PrimordiaError
@@ -209,6 +210,13 @@ def test_options_of_the_modules_are_honoured():
     assert seed_cross_check(given) is None and seed_cross_check(plain) < AGREEMENT
     slope = [term.slope for term in given.terms if type(term).__name__ == "ActiveStressCoupling"][0]
     assert slope == pytest.approx(active_stress_slope(0.75, 40.0, 90.0, 60.0, 1.0))
+    # the printed parameters say "Table 3.1" (E = 3e4, nu = 0.4): the note says which mu, lambda are analysed
+    assert "Lame constants from physics.poroelasticity options: mu = 40, lambda = 90" in "; ".join(given.notes)
+    assert not plain.notes
+    # the seed's model (a map, a sweep's overlay) reads E and nu: it was Table 3.1's solid, without a word
+    with pytest.raises(ConfigError, match=r"sets its Lame constants by physics.poroelasticity options \(mu = 40"):
+        seed_model_values(given)
+    assert seed_model_values(plain)[0]["E"] == 3.0e4
 
 
 def test_a_conductivity_varying_in_space_is_refused():
