@@ -497,6 +497,9 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
                 f"homogeneous steady state, so the linear analysis of seed section 3 does not apply (seed "
                 f"section 6); --chemistry-only analyses the chemistry alone")
     homogeneous = kinetics.homogeneous()
+    if homogeneous is not kinetics:  # the steady state printed is not the run's initial state: say which it is
+        notes.append(f"kinetics {kinetics.name} linearised where its forcing has settled, not at a run's initial "
+                     f"state: {_settled(homogeneous)}")
     rest = homogeneous_steady_state(homogeneous)
     _, jacobian = reaction_jacobian(homogeneous, rest.values)
     context = _Context(homogeneous, rest, jacobian, params)
@@ -534,6 +537,12 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
     if linear.third_party:
         _check_real(linear)
     return linear
+
+
+def _settled(homogeneous) -> str:
+    """What :meth:`Kinetics.homogeneous` returned, in the words of its docstring's first line."""
+    summary = (type(homogeneous).homogeneous.__doc__ or "").strip().split("\n")[0].rstrip(".")
+    return summary[:1].lower() + summary[1:] if summary else "its homogeneous, autonomous form (Kinetics.homogeneous)"
 
 
 def _third_party_symbol(module, context: _Context):

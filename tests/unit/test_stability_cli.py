@@ -53,6 +53,9 @@ def test_a_run_configuration_is_analysed_as_it_runs(tmp_path, capsys):
     assert ("fastest stationary (Turing) mode: k_max = 2.784, wavelength 2 pi / k_max = 2.257, "
             "growth rate 0.1546") in printed
     assert "homogeneous steady state: m = 0.75, e = 0.0313889, f = 0.0313889, b = 0.0165037" in printed
+    # the run starts ahead of the priming wave (e = 0.0047 where w = 0): the state printed is the one behind it
+    assert ("kinetics painter2018 linearised where its forcing has settled, not at a run's initial state: the same "
+            "kinetics behind the priming wave, w = omega_1 everywhere (seed section 3)") in printed
     assert "cross-check: the seed's hand-derived M(phi, k)" in printed
     assert "uncoupled (xi_f = 0 or tau = 0, seed section 3.4): patterns" in printed
     assert "coupled (seed section 3.6)" not in printed  # example 1a has no mechanics to couple
