@@ -288,19 +288,25 @@ def main(argv: list[str] | None = None) -> int:
 def _refuse_an_unwritable_tmpdir() -> None:
     """One line when ``TMPDIR`` names a folder that cannot be written, before MPI starts (dolfinx and petsc4py
     start it on import): Open MPI keeps its session files there, and a read-only one (or a file) gave some 50
-    lines of its banners and MPI_Init_thread's abort, for any command.  (Under ``mpirun``, mpirun itself says it first.)"""
+    lines of its banners and MPI_Init_thread's abort, for any command.  A missing one Open MPI makes, so the
+    nearest folder that exists is probed instead (one under a file, or in a read-only tree, gave the same
+    banners).  (Under ``mpirun``, mpirun itself says it first.)"""
     import tempfile
 
     folder = os.environ.get("TMPDIR")
-    if not folder or not os.path.exists(folder):  # unset, or missing: Open MPI makes it
+    if not folder:
         return
+    existing = os.path.abspath(folder)
+    while not os.path.exists(existing):  # missing: Open MPI makes it, in the nearest folder that exists
+        existing = os.path.dirname(existing)
     try:
-        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=folder))
+        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=existing))
     except OSError as error:
         from primordia.core.atomic_files import reason_of
 
-        raise ConfigError(f"TMPDIR {folder} cannot be written ({reason_of(error)}): MPI keeps its session files "
-                          f"there; set TMPDIR to a writable folder") from None
+        where = "" if existing == os.path.abspath(folder) else f"{existing}: "
+        raise ConfigError(f"TMPDIR {folder} cannot be written ({where}{reason_of(error)}): MPI keeps its session "
+                          f"files there; set TMPDIR to a writable folder") from None
 
 
 def _refuse_ranks_for_a_serial_command(command: str) -> None:

@@ -96,15 +96,26 @@ def test_a_jit_cache_that_cannot_be_written_is_one_line(primordia_cli, small_con
     assert_one_line_error(result, "dolfinx's JIT cache", "a_file/fenics cannot be written", "XDG_CACHE_HOME")
 
 
+@pytest.mark.parametrize("tmpdir", ["a_file", "a_file/tmp"], ids=["file", "missing_under_a_file"])
 @pytest.mark.parametrize("command", [["plugins"], ["run", "--dry-run"]], ids=["plugins", "run"])
-def test_a_tmpdir_that_cannot_be_written_is_one_line(primordia_cli, small_config, tmp_path, command):
+def test_a_tmpdir_that_cannot_be_written_is_one_line(primordia_cli, small_config, tmp_path, command, tmpdir):
     """Open MPI keeps its session files in TMPDIR: a read-only one was some 50 lines of its banners and an abort
-    in MPI_Init_thread, for any command.  A file stands in for a read-only folder (root may write anywhere)."""
+    in MPI_Init_thread, for any command.  A file stands in for a read-only folder (root may write anywhere).
+    A missing TMPDIR Open MPI makes, unless the folder it would be made in cannot be written: that gave the
+    same banners until the folder that exists was probed."""
     (tmp_path / "a_file").write_text("")
-    env = {**os.environ, "TMPDIR": str(tmp_path / "a_file")}
+    env = {**os.environ, "TMPDIR": str(tmp_path / tmpdir)}
     arguments = [*command, small_config(), "--out", tmp_path / "out"] if command[0] == "run" else command
     result = primordia_cli(*arguments, env=env)
-    assert_one_line_error(result, f"TMPDIR {tmp_path / 'a_file'} cannot be written", "set TMPDIR to a writable")
+    assert_one_line_error(result, f"TMPDIR {tmp_path / tmpdir} cannot be written", "not a directory",
+                          "set TMPDIR to a writable")
+
+
+def test_a_missing_tmpdir_is_left_to_open_mpi_which_makes_it(primordia_cli, tmp_path):
+    env = {**os.environ, "TMPDIR": str(tmp_path / "new" / "tmp")}
+    result = primordia_cli("plugins", env=env)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "new" / "tmp").is_dir()
 
 
 def test_unknown_command_and_missing_argument_are_usage_errors(primordia_cli):
