@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from primordia.core.atomic_files import StorageError, reason_of
-from primordia.core.checkpoint import CHECKPOINT_FILE
+from primordia.core.checkpoint import CHECKPOINT_FILE, read_meta
 from primordia.core.errors import ConfigError, PluginError
 from primordia.core.json_toml import write_json, write_toml
 from primordia.core.pictures import plot_field, plot_fields_grid
@@ -588,7 +588,21 @@ def existing_run(directory: str | Path) -> str | None:
     process = summary.get("process") or {}
     if run_is_alive(process):
         return f"a run in progress (process {process.get('pid')} on {process.get('host')})"
-    return f"a run that was killed without a word at {where} (its process {process.get('pid', '?')} is gone)"
+    return (f"a run that was killed without a word after {_last_seen(directory, summary)} (its process "
+            f"{process.get('pid', '?')} is gone)")
+
+
+def _last_seen(directory: Path, summary: dict) -> str:
+    """How far a killed run got, as far as its files tell: its summary's last rewrite, or its checkpoint if later.
+
+    The summary is rewritten at series times, at most every SUMMARY_INTERVAL seconds: a run killed after 20
+    steps was said "killed without a word at 0 steps, t = 0.0" beside a checkpoint of step 20."""
+    steps, t = summary.get("steps", "?"), summary.get("time", "?")
+    with contextlib.suppress(Exception):  # noqa: BLE001 - none, or unreadable: the summary's word stands
+        run = read_meta(directory / CHECKPOINT_FILE)["run"]
+        if not isinstance(steps, int) or int(run["step"]) > steps:
+            steps, t = int(run["step"]), float(run["time"])
+    return f"{steps} steps, t = {t}"
 
 
 def run_is_alive(process: dict) -> bool:

@@ -336,6 +336,22 @@ def test_a_run_from_python_is_in_progress_while_its_process_runs(watching, tmp_p
         process.wait()
 
 
+def test_a_killed_run_is_said_as_far_as_its_checkpoint_got(watching, tmp_path):
+    """The summary is rewritten at series times only: a run killed after its checkpoint of step 5 was said
+    "killed without a word at 0 steps, t = 0.0" (found by the cluster QA pass)."""
+    from primordia.core.outputs import existing_run
+
+    out = tmp_path / "killed"
+    model(t_final=1.0).run(out=out)
+    summary = json.loads((out / "summary.json").read_text())
+    summary.update(status="running", steps=0, time=0.0, process={"pid": 2**22 + 7, "host": "nowhere"})
+    (out / "summary.json").write_text(json.dumps(summary))  # as written at the start, then SIGKILL
+    assert existing_run(out) == "a run that was killed without a word after 5 steps, t = 1.0 (its process 4194311 " \
+                                "is gone)"
+    (out / "checkpoint.npz").unlink()
+    assert existing_run(out).startswith("a run that was killed without a word after 0 steps, t = 0.0 ")
+
+
 @pytest.mark.parametrize("changes, fragment", [
     ({"backend": "fenics"}, "fenics"),
     ({"coupling": "leapfrog"}, "leapfrog"),
