@@ -177,6 +177,9 @@ def _run_dispersion(args, config, stem) -> int:
         else:
             walls = "; with mechanics, exact for slip walls only" if linear.mechanics is not None else ""
             print(f"  {modes.describe()}{walls}")
+            fastest = linear.fastest_mode()
+            if fastest.unstable and not fastest.stationary:  # the box's say on it too: its wavelength may not fit
+                print(f"  {domain_modes(linear.rates, box, fastest.band, kind='oscillatory').describe()}")
     if isinstance(box, str):
         print(f"  admissible modes: none listed ({box})")
     difference = seed_cross_check(linear, d=d)

@@ -40,6 +40,7 @@ class DomainModes:
     k: np.ndarray  #: (modes,) pi |n / L|
     growth: np.ndarray  #: (modes,) largest Re phi of the roots of ``kind``; -inf where none
     kind: str
+    band_end: float = 0.0  #: the highest unstable k of ``kind`` (0 when none grows)
 
     @property
     def unstable(self) -> np.ndarray:
@@ -58,12 +59,18 @@ class DomainModes:
     def describe(self) -> str:
         box = " x ".join(f"{length:g}" for length in self.lengths)
         if not np.any(self.unstable):
-            return f"on the {box} box (zero-flux cosine modes) no admissible mode grows as a {self.kind} mode"
+            article = "an" if self.kind[0] in "aeiou" else "a"
+            why = (f" (its unstable band ends at k = {self.band_end:.4g}, below the box's lowest k, pi / "
+                   f"{max(self.lengths):g} = {np.pi / max(self.lengths):.4g})" if self.band_end > 0 and self.k.size <= 1
+                   else "")
+            return (f"on the {box} box (zero-flux cosine modes) no admissible mode grows as {article} {self.kind} "
+                    f"mode{why}")
         best = self.fastest
         modes = ", ".join(str(mode) for mode in self.ties(best)[:4])
-        wavelength = 2.0 * np.pi / self.k[best]
+        wavelength = (f"wavelength {2.0 * np.pi / self.k[best]:.4g}" if self.k[best] > 0 else
+                      "the homogeneous mode")  # n = 0: the box's whole, no wavelength (it said "inf", warning)
         return (f"on the {box} box (zero-flux cosine modes) the fastest is n = {modes}: k = {self.k[best]:.4g}, "
-                f"wavelength {wavelength:.4g}, growth rate {self.growth[best]:.4g}; "
+                f"{wavelength}, growth rate {self.growth[best]:.4g}; "
                 f"{int(np.count_nonzero(self.unstable))} admissible modes grow")
 
 
@@ -86,7 +93,7 @@ def domain_modes(rates_at, lengths, band, kind: str = "stationary") -> DomainMod
     indices, k = indices[inside], k[inside]
     distinct, which = np.unique(np.round(k, 12), return_inverse=True)  # modes of one k share their rates
     growth = max_growth_of_kind(rates_at(distinct), kind)[which]
-    return DomainModes(lengths=lengths, indices=indices, k=k, growth=growth, kind=kind)
+    return DomainModes(lengths=lengths, indices=indices, k=k, growth=growth, kind=kind, band_end=k_high)
 
 
 def box_lengths(mesh_data) -> tuple[float, ...] | None:

@@ -191,6 +191,9 @@ def test_the_command_says_which_kind_of_mode_is_missing_when_the_kinetics_oscill
     assert "fastest stationary (Turing) mode: none: no stationary root at any k searched" in printed
     assert "-inf" not in printed
     assert "no admissible mode grows as a stationary mode" in printed
+    # and the box's say on the oscillating modes: n = (0, 0), the homogeneous one, is the fastest of them
+    assert ("on the 20 x 20 box (zero-flux cosine modes) the fastest is n = (0, 0): k = 0, the homogeneous mode, "
+            "growth rate 0.2578; 181 admissible modes grow") in printed
 
 
 def test_the_dispersion_datasets_constant_term_has_dets_sign_and_no_spikes():

@@ -120,6 +120,17 @@ def test_example_1b_is_the_coupled_analysis_at_its_own_tau_and_xi_f(tmp_path, ca
     ds.close()
 
 
+def test_an_oscillatory_instability_is_placed_on_the_box_too(tmp_path, capsys):
+    """The fastest mode oscillates with a wavelength of 400 on a 20 x 20 box: only the stationary modes were
+    listed, so nothing said that no admissible mode grows (found by the stability QA pass)."""
+    assert run(["stability", str(EXAMPLES / "ex01b.toml"), "--set", "parameters.tau=-60", "--set",
+                "parameters.xi_f=0.15", "--set", "parameters.alpha=1", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "wavelength 2 pi / k_max = 399.7, growth rate 3.05e-06 (oscillatory" in printed
+    assert ("on the 20 x 20 box (zero-flux cosine modes) no admissible mode grows as an oscillatory mode (its "
+            "unstable band ends at k = 0.06651, below the box's lowest k, pi / 20 = 0.1571)") in printed
+
+
 def test_a_third_party_kinetics_is_analysed(tmp_path, capsys):
     assert run(["stability", str(EXAMPLES / "schnakenberg.toml"), "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
