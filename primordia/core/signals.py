@@ -32,7 +32,6 @@ from primordia.core.errors import InterruptedRun
 HANDLED = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
 
 
-
 def copy_window() -> float:
     """Under mpirun, the same signal again within this many seconds of the first is a copy, not a second request
     (:attr:`Interrupts.copy_window`).  A batch system that signals the whole job reaches every rank and mpirun,
