@@ -22,7 +22,8 @@ boundary and predicted wavelength over it.
   database and MPI are fresh for every run (MPI starts as a singleton: the variables of
   an enclosing ``mpirun`` are not passed on), and the worker stays healthy for the next run.
 * A run that fails is recorded (``status`` = "failed" and ``reason`` in the Dataset),
-  not fatal (when none completes, the command ends in one line, exit status 2, after writing them).  Running the same command again skips every run already done (completed,
+  not fatal (when none completes, the command ends in one line, exit status 2, after
+  writing them).  Running the same command again skips every run already done (completed,
   with its metrics, from the same configuration and overrides) and retries the others.
 * Mistakes in the command (malformed ``--vary``, unknown key or parameter, missing
   config, a backend no run can use) are one-line errors before anything runs; a value
