@@ -275,9 +275,11 @@ def condition_kinds() -> dict[str, type]:
 class Conditions(list):
     """The conditions of one physics module: what they contribute together, each contributing its own."""
 
-    def terms(self, disc):
-        """The sum of every condition's weak-form terms (0 when none adds any)."""
-        return sum((term for condition in self for terms in condition.terms(disc).values() for term in terms), 0)
+    def terms(self, disc, field: str | None = None):
+        """The sum of every condition's weak-form terms (0 when none adds any); only those of ``field``'s balance
+        law when it is given."""
+        return sum((term for condition in self for name, terms in condition.terms(disc).items()
+                    if field in (None, name) for term in terms), 0)
 
     def dirichlet(self, disc) -> list:
         """Every condition's Dirichlet constraints."""

@@ -308,11 +308,15 @@ class PoroelasticGrowth(Physics):
         return [equilibrium, self._initial_velocity()]
 
     def _static_residual(self, F_g):
-        """The static problem of the initial state: no inertia, p = 0 (seed (2.6))."""
+        """The static problem of the initial state: no inertia, p = 0 (seed (2.6)).
+
+        The conditions' terms on u only (tractions, springs): a fluid flux belongs to (4.12b), which p = 0
+        replaces here (with it, p(0) was the flux on its boundary, and int p dX kept that offset for good).
+        """
         disc = self.disc
         return (self._stress_terms(F_g)
                 + disc.field("p") * disc.test("p") * self.dx                                 # p(0) = 0 (2.6)
-                + self.conditions.terms(disc))
+                + self.conditions.terms(disc, "u"))
 
     def _initial_velocity(self) -> Subproblem:
         """The velocity with which the initial equilibrium follows the growth over the first step.

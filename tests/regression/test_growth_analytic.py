@@ -18,6 +18,7 @@ sigma = mu B_e - (psi + alpha_BW p) I when J_e = 1:
    ell = ell_0 sum_i d gamma_i/dt = ell_0 d r constant.  Backward Euler telescopes, so
    p(t) = (ell t - alpha_BW (tr C - d)) / C_0 at every step, for every dt; traction-free
    faces give psi = mu - alpha_BW p.
+4. **An inflow** Q through one face of a freely grown tissue: p starts at 0 and int p dX grows like Q t.
 """
 
 from __future__ import annotations
@@ -141,6 +142,29 @@ def test_growth_with_a_fluid_source_is_exact_for_every_dt(backend, dimension, dt
         assert_close(values["p"], p, f"p(t) = (ell t - alpha_BW (tr C - d)) / C_0 at t = {t:g}")
         assert_close(values["psi"], MU - alpha * p, f"psi = mu - alpha_BW p at t = {t:g}")
     assert abs(p) > 1.0  # the case is not trivial: the source and the storage both matter
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_inflow_fills_the_tissue_from_p_0(backend, dimension, tmp_path):
+    """Free growth F_g = g I with an inflow Q through the face X_1 = 0 (``fluid_flux``): p starts at 0 ((2.6)), and
+    (4.12b) times J tested with q = 1 is J C_0 d/dt int p dX = Q |Gamma|, so int p dX = Q |Gamma| t / (g^d C_0) at
+    every step (the solid stays stress free: psi = mu - alpha_BW p).  The initial static solve once added the
+    flux's boundary term to p = 0: p(0) was Q on the face, int p dX = Q |Gamma| ever after."""
+    g, inflow, C_0, alpha = 1.2, 1e-3, 1e-3, 0.1
+    faces = ("left", "bottom", "front")[:dimension]
+    boundary = rollers(*faces) + [{"boundary": "left", "type": "fluid_flux", "value": inflow}]
+    sim = simulation(backend, dimension, "test_uniform", {"g": g, "C_0": C_0, "alpha_BW": alpha}, boundary,
+                     tmp_path, dt=0.5, steps=2)
+    face = 1.0  # |Gamma|: the face X_1 = 0 of (0, 2) x (0, 1) [x (0, 1)]
+    amount = sim.disc.field("p") * sim.model.physics_objects[0].dx
+    assert_close(sim.vertex_values()["p"], 0.0, "p(0) = 0")
+    while sim.step_index < sim.model.num_steps:
+        sim.step()
+        expected = inflow * face * sim.time / (g**dimension * C_0)
+        assert_close(sim.backend.assemble_scalar(amount), expected, f"int p dX at t = {sim.time:g}")
+    values = sim.vertex_values()
+    assert_close(values["psi"] + alpha * values["p"], MU, "psi + alpha_BW p = mu")
 
 
 @pytest.mark.parametrize("dimension", [2, 3])
