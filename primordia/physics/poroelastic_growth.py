@@ -405,12 +405,14 @@ PRECONDITIONERS = ("auto", "lu", "schur")
 
 
 def _enclosed_hint(conditions, mesh_data) -> str | None:
-    """Why a solve may have no solution: a tissue held on all sides cannot change its volume."""
+    """Why a solve may have no solution, or no unique one: the boundary values of a tissue held on all sides fix
+    its volume (not always that of Omega_0: a ``displacement`` may move it) and leave a constant psi free."""
     if not encloses(conditions, mesh_data):
         return None
-    return ("every boundary holds the normal displacement, so the volume of Omega_0 cannot change, while J_e = 1 "
-            "(seed (4.12c)) asks J = J_g: the growth cannot be accommodated; free a boundary or hold it with robin "
-            "springs")
+    return ("every boundary holds the normal displacement, so the boundary values fix the current volume (that of "
+            "Omega_0 under u . N_0 = 0) and psi only up to a constant, while J_e = 1 (seed (4.12c)) asks J = J_g: "
+            "unless int J_g dX is that volume the growth cannot be accommodated, and if it is the solution is not "
+            "unique; free a boundary or hold it with robin springs")
 
 
 def _solver_defaults(preconditioner: str, gdim: int) -> dict:

@@ -483,6 +483,27 @@ def test_a_box_held_on_every_face_cannot_grow(backend, tmp_path):
     assert "growth cannot be accommodated" in message and "(t = 0 -> 0.125)" in message  # halved down to dt_min
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_tissue_moved_on_every_face_is_told_why_it_has_no_unique_solution(backend, tmp_path):
+    """u = (A - I) X on every face with det A = g^2, the growth's J_g: the data agree with J_e = 1 (seed (4.12c)),
+    but psi is then fixed only up to a constant and the solve fails.  The hint said that "the volume of Omega_0
+    cannot change", which the data change by 41%, and that the growth could not be accommodated, which it is."""
+    A = np.array([[1.3, 0.2], [0.1, 1.1]])
+    value = [f"{A[i, 0] - (i == 0)!r} * x[0] + {A[i, 1] - (i == 1)!r} * x[1]" for i in range(2)]
+    with growth_test_laws.registered():
+        model = Model(physics=["poroelastic_growth"], growth_law="test_uniform",
+                      parameters={"g": float(np.sqrt(np.linalg.det(A)))}, mesh=rectangle((0, 0), (1, 1), (2, 2)),
+                      dt=0.5, t_final=0.5, physics_options={"poroelastic_growth": {"boundary": [
+                          {"boundary": b, "type": "displacement", "value": value}
+                          for b in ("left", "right", "bottom", "top")]}}, output={"pictures": False})
+        with pytest.raises(SolverError) as failure:
+            model.run(backend=backend, out=tmp_path / backend)
+    message = str(failure.value)
+    assert "\n" not in message and "initial state" in message
+    assert "volume of Omega_0 cannot change" not in message
+    assert "the boundary values fix the current volume" in message and "psi only up to a constant" in message
+
+
 def test_faster_growth_starts_without_rejected_steps(tmp_path):
     """delta_2 = 0.5 (3.3 times the seed's): the tissue starts moving with its growth, so Newton is within
     its radius from the first step; from rest (u_t(0) = 0) it failed at every dt down to dt/1024."""
