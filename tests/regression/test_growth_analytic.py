@@ -28,6 +28,7 @@ import pytest
 import ufl
 
 import growth_test_laws
+from primordia.core.mesh_data import MeshData
 from primordia.core.meshes import box, rectangle
 from primordia.coupling.orchestrator import Simulation
 from primordia.model import Model
@@ -54,9 +55,20 @@ def mesh(dimension):
     return box((0.0, 0.0, 0.0), (2.0, 1.0, 1.0), (2, 1, 1))
 
 
-def simulation(backend, dimension, law, parameters, boundary, tmp_path, dt=0.1, steps=2, **options):
-    model = Model(physics=["poroelastic_growth"], growth_law=law, parameters=parameters, mesh=mesh(dimension),
-                  dt=dt, t_final=steps * dt, solver=SOLVERS,
+def distorted(dimension, cells):
+    """The mesh of ``mesh(dimension)`` at ``cells`` boxes a side, its interior vertices moved by up to 0.3 h."""
+    given = rectangle((0.0, 0.0), (2.0, 1.0), cells) if dimension == 2 else box((0.0,) * 3, (2.0, 1.0, 1.0), cells)
+    points = given.points.copy()
+    inside = np.all((points > 1e-12) & (points < given.points.max(axis=0) - 1e-12), axis=1)
+    h = given.points.max(axis=0) / np.array(cells)
+    points[inside] += 0.3 * h * np.random.default_rng(1).uniform(-1.0, 1.0, (inside.sum(), dimension))
+    return MeshData(points, given.cells, given.boundaries)
+
+
+def simulation(backend, dimension, law, parameters, boundary, tmp_path, dt=0.1, steps=2, mesh_data=None,
+               solver=SOLVERS, **options):
+    model = Model(physics=["poroelastic_growth"], growth_law=law, parameters=parameters,
+                  mesh=mesh(dimension) if mesh_data is None else mesh_data, dt=dt, t_final=steps * dt, solver=solver,
                   physics_options={"poroelastic_growth": {"boundary": boundary, "preconditioner": "lu", **options}},
                   output={"pictures": False, "series_every": 10**6})
     return Simulation(model, backend=backend, out_dir=tmp_path / backend).setup()
@@ -142,6 +154,84 @@ def test_growth_with_a_fluid_source_is_exact_for_every_dt(backend, dimension, dt
         assert_close(values["p"], p, f"p(t) = (ell t - alpha_BW (tr C - d)) / C_0 at t = {t:g}")
         assert_close(values["psi"], MU - alpha * p, f"psi = mu - alpha_BW p at t = {t:g}")
     assert abs(p) > 1.0  # the case is not trivial: the source and the storage both matter
+
+
+def rotation(angle, dimension):
+    """A rotation by ``angle`` about X_3 (in 3D after one by 0.4 * sign(angle) about X_1; none at 0)."""
+    c, s = np.cos(angle), np.sin(angle)
+    planar = np.array([[c, -s], [s, c]])
+    if dimension == 2:
+        return planar
+    tip = 0.4 * np.sign(angle)
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(tip), -np.sin(tip)], [0.0, np.sin(tip), np.cos(tip)]])
+    return np.block([[planar, np.zeros((2, 1))], [np.zeros((1, 2)), np.ones((1, 1))]]) @ tilt
+
+
+@pytest.mark.parametrize("superposed", [0.0, 0.6], ids=["", "rotated"])
+@pytest.mark.parametrize("dimension", [2, 3])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_patch_of_distorted_cells_takes_the_homogeneous_stress(backend, dimension, superposed, tmp_path):
+    """u = t (A - I) X on the faces X_i = 0, t times their nominal traction P e_i on the faces opposite, F_g = g I
+    with g^d = det A, rho = 0: at t = 1, F = A, J_e = 1, and the Cauchy stress mu A A^T / g^2 - psi_0 I with
+    psi_0 as chosen, whatever the cells ((4.11), P = J sigma A^-T), with psi + alpha_BW p = psi_0: at every vertex,
+    and every cell's P at its vertices.  With a rigid rotation Q by 34 degrees superposed (A -> Q A, so
+    P -> Q P: objectivity), the same psi and J.  The values start from 0: the initial state's continuation
+    ramps the growth, not the boundary values, and from u = 0 the rotated values at once made Newton fail
+    (README, "Initial state")."""
+    A = np.array([[1.3, 0.2, 0.05], [0.1, 1.1, -0.1], [0.0, 0.15, 1.2]])[:dimension, :dimension]
+    J, psi, alpha = np.linalg.det(A), 2.5, 0.1
+    g = J ** (1.0 / dimension)
+    P = J * (MU * A @ A.T / g**2 - psi * np.eye(dimension)) @ np.linalg.inv(A).T
+    Q = rotation(superposed, dimension)
+    A, P = Q @ A, Q @ P
+    displacement = [f"t * ({' + '.join(f'{A[i, j] - (i == j)!r} * x[{j}]' for j in range(dimension))})"
+                    for i in range(dimension)]
+    boundary = [{"boundary": face, "type": "displacement", "value": displacement}
+                for face in ("left", "bottom", "front")[:dimension]]
+    boundary += [{"boundary": face, "type": "traction", "value": [f"t * {float(v)!r}" for v in P[:, axis]]}
+                 for axis, face in enumerate(("right", "top", "back")[:dimension])]
+    sim = simulation(backend, dimension, "test_uniform", {"g": g, "rho": 0.0, "alpha_BW": alpha}, boundary, tmp_path,
+                     dt=0.25, steps=4, mesh_data=distorted(dimension, (6, 4) if dimension == 2 else (3, 2, 2)),
+                     solver={name: {"snes_rtol": 1e-12, "snes_atol": 1e-10} for name in SOLVERS})
+    sim.run()
+    values = sim.vertex_values()
+    assert_close(values["u"], sim.mesh_data.points @ (A - np.eye(dimension)).T, "u = (A - I) X")
+    assert_close(values["psi"] + alpha * values["p"], psi, "psi + alpha_BW p = psi_0", tolerance=1e-9)
+    diagnostics = sim.diagnostic_values()
+    assert_close([diagnostics["J_min"], diagnostics["J_max"]], J, "J = det A")
+    assert_close([diagnostics["J_e_minus_1_min"], diagnostics["J_e_minus_1_max"]], 0.0, "J_e = 1")
+    for i in range(dimension):
+        for j in range(dimension):
+            assert_close(piola_range(sim, i, j), P[i, j], f"P_{i}{j}", tolerance=1e-9)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_rotated_tissue_grows_into_the_rotated_answer(backend, dimension, tmp_path):
+    """No direction is preferred: a clamped bar with anisotropic growth along turned directions k_i, springs on
+    its far end (4.16a) and a fluid at work, then the same with its mesh (its reference configuration) and k_i
+    rotated by Q.  F -> Q F Q^T: the stresses of (4.11), tr C, J C^-1 and J F^-T u are invariant or turn with Q,
+    so u -> Q u and psi, p, J, J_e are unchanged (to round-off: the two runs take the same Newton steps)."""
+    Q, frame = rotation(0.7, dimension), rotation(0.5, dimension)
+    given = distorted(dimension, (8, 4) if dimension == 2 else (4, 2, 2))
+    runs = {}
+    for name, points, directions in (("given", given.points, frame), ("rotated", given.points @ Q.T, frame @ Q.T)):
+        sim = simulation(backend, dimension, {"name": "test_anisotropic", "directions": directions.tolist()},
+                         {"ell_0": 0.02, "C_0": 1e-3, "kappa": 1.0},
+                         [{"boundary": "left", "type": "clamped"},
+                          {"boundary": "right", "type": "robin", "value": 3.0}],
+                         tmp_path / name, mesh_data=MeshData(points, given.cells, given.boundaries),
+                         solver={"poroelastic_growth": {"snes_rtol": 1e-12, "snes_atol": 1e-11},
+                                 "poroelastic_growth_initial": {"snes_rtol": 1e-12, "snes_atol": 1e-11}})
+        sim.run()
+        runs[name] = sim.vertex_values(), sim.diagnostic_values()
+    (given_values, given_diagnostics), (values, diagnostics) = runs["given"], runs["rotated"]
+    assert np.abs(given_values["u"]).max() > 0.2 and np.ptp(given_values["psi"]) > 1.0  # not homogeneous
+    assert_close(values["u"], given_values["u"] @ Q.T, "u -> Q u")
+    for name in ("psi", "p"):
+        assert_close(values[name], given_values[name], name)
+    for name, value in given_diagnostics.items():
+        assert_close(diagnostics[name], value, name)
 
 
 @pytest.mark.parametrize("dimension", [2, 3])

@@ -5,6 +5,8 @@
 * ``test_linear``: F_g = (1 + r t) I, each stretch linear in time (parameter ``r``); the law
   overrides :meth:`~primordia.physics.growth_laws.GrowthLaw.stretches` to use its factors
   gamma_i = r t directly, so F_g(0) = I exactly and ell = ell_0 d r is constant.
+* ``test_anisotropic``: F_g = I + sum_i (g_i - 1) k_i (x) k_i, constant in time (parameters ``g1``, ``g2``,
+  ``g3``), on the directions of ``[growth_law] directions``.
 """
 
 from __future__ import annotations
@@ -36,10 +38,23 @@ class Linear(GrowthLaw):
         return list(gammas)
 
 
+class Anisotropic(GrowthLaw):
+    name = "test_anisotropic"
+    parameters = (Parameter("g1", 1.3, "growth stretch along k_1 (dimensionless)"),
+                  Parameter("g2", 1.1, "growth stretch along k_2 (dimensionless)"),
+                  Parameter("g3", 1.05, "growth stretch along k_3 (dimensionless)"))
+
+    def factors(self, fields, t, X, dimension):
+        return [self.params[name] - 1.0 for name in ("g1", "g2", "g3")][:dimension]
+
+    def stretches(self, gammas):
+        return list(gammas)
+
+
 class _Plugin:
     @hookimpl
     def primordia_growth_laws(self):
-        return [Uniform, Linear]
+        return [Uniform, Linear, Anisotropic]
 
 
 @contextlib.contextmanager
