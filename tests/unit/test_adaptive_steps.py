@@ -16,9 +16,16 @@ from pathlib import Path
 
 import meshio
 import numpy as np
+import pytest
 import xarray as xr
 
+from primordia.core.errors import SolverError
+from primordia.core.meshes import rectangle
+from primordia.core.plugins import hookimpl
 from primordia.core.timestepping import StepController
+from primordia.coupling.orchestrator import Simulation
+from primordia.model import Model
+from primordia.testing import registered
 
 from cli_checks import assert_one_line_error
 
@@ -181,3 +188,51 @@ def test_petsc_usage_errors_do_not_depend_on_the_step_and_numerical_failures_may
 
     assert not any(depends_on_step(code) for code in (56, 62, 63, 73, 75, 86, 92))  # support, arguments, factor
     assert all(depends_on_step(code) for code in (55, 71, 72, 76, 77, 81, 82, 91))  # memory, pivots, FP, libs
+
+
+class _DippingScheme:
+    """Sequential splitting that leaves m at one vertex ``dip`` times its largest value below zero in every step."""
+
+    dip = 0.0
+
+    @hookimpl
+    def primordia_splitting_schemes(self):
+        from primordia.coupling.splitting import Sequential
+
+        outer = self
+
+        class Dipping(Sequential):
+            name = "dipping"
+
+            def advance(self, sim, t0, dt):
+                stats = super().advance(sim, t0, dt)
+                values = sim.backend.local_array(sim.disc.function_of("m")[0])
+                values[0] = -outer.dip * values.max()
+                return stats
+
+        return [Dipping]
+
+
+@pytest.mark.parametrize("backend", ["fenicsx", "skfem"])
+@pytest.mark.parametrize("m0, dip, rejected", [(1e6, 1e-10, False), (1e-6, 1e-4, True)])
+def test_a_negative_density_is_judged_against_the_density_s_own_size(backend, m0, dip, rejected, tmp_path):
+    """Round-off of the cell density's solve scales with the density: at m0 = 1e6 (cells per unit area in
+    another scaling) m = -1e-4 beside m = 1e6 is round-off, and was rejected against a fixed 1e-8 (an
+    aggregating run with ksp_rtol = 1e-6 was halved for m = -1.3e-7 beside m = 2.6e8); at m0 = 1e-6, m = -1e-10
+    is a tenth of a thousandth of the density below zero, and was accepted."""
+    scheme = _DippingScheme()
+    scheme.dip = dip
+    model = Model(physics=["chemotaxis"], parameters={"m0": m0}, coupling={"scheme": "dipping"},
+                  mesh=rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4)), dt=0.2, t_final=0.2, dt_min=0.1,
+                  output={"pictures": False})
+    with registered(scheme, name="tests.unit.test_adaptive_steps.dipping"):
+        sim = Simulation(model, backend=backend, out_dir=tmp_path).setup()
+        if not rejected:
+            sim.run()
+            assert sim.rejections == []
+            return
+        with pytest.raises(SolverError) as caught:
+            sim.run()
+    assert re.search(r"field m fell to -1\.0\de-10 at t = 0\.1, below 0 where the scheme of chemotaxis keeps it >= 0",
+                     str(caught.value))
+    assert [event["dt"] for event in sim.rejections] == [0.2, 0.1]
