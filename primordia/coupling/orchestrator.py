@@ -111,6 +111,7 @@ class Simulation:
         self._set_up = False  # setup() has finished: a Simulation is set up, and run, once
         self.outputs: list = []
         self._saved_state = None  # a sub-step's start values (their arrays reused from step to step)
+        self._times_tried: list[float] = []  # the times the try under way set (Simulation.substep)
         self._state_version = 0  # counts accepted sub-steps and restores: vertex values are cached per version
         self._vertex_cache: tuple[int, dict] | None = None
         self._statistics_cache: tuple[int, dict] | None = None  # field_statistics, per version likewise
@@ -886,6 +887,7 @@ class Simulation:
             self._solver_dt = dt
         saved = self._saved_state = self.disc.copy_state(into=self._saved_state)
         saved_physics = [physics.state() for physics in self.model.physics_objects]
+        self._times_tried = []
         try:
             stats = self.scheme.advance(self, self.time, dt)
             failure = self._inadmissible(t_next)
@@ -902,6 +904,7 @@ class Simulation:
             raise
         if failure is not None:
             self._undo(saved, saved_physics)
+            self._refuse_inputs_not_finite_at(self._times_tried, t_next)
             return failure
         nonlinear = {solver.sub.name for solver in self.solvers if not solver.sub.linear}
         for name, solve in stats.items():
@@ -912,6 +915,18 @@ class Simulation:
         self.time, self.last_dt = t_next, dt
         self._state_version += 1
         return None
+
+    def _refuse_inputs_not_finite_at(self, times: list[float], t_next: float) -> None:
+        """The one line of an input (a boundary formula) that is not finite at a time a failed try set: no smaller
+        step mends it.  The model checks inputs at sample times of the span (``Model.sample_times``); a formula
+        singular at a step time between them ("s0 / (t - 0.25)", dt = 0.25) failed that step at every dt, each
+        try still ending there, until dt_min, and the run blamed the solve ("the residual is not finite")."""
+        try:
+            for module in self.model.physics_objects:
+                with module_code(module, "check_inputs"):
+                    module.check_inputs(self.model.mesh_data, sorted(set(times)))
+        except ConfigError as error:
+            raise ConfigError(f"{self._step_label(t_next)}: {error}") from None
 
     def _undo(self, saved: dict, saved_physics: list) -> None:
         self.disc.restore_state(saved)
@@ -980,6 +995,7 @@ class Simulation:
         fields stored; after: the rates of these fields (e.g. the solid velocity).
         """
         self.disc.set_time(t, dt)
+        self._times_tried.append(t)
         for physics in self.model.physics_objects:
             with module_code(physics, "before_step"):
                 physics.before_step(t, dt)

@@ -30,6 +30,7 @@ from primordia.testing import registered
 from cli_checks import assert_one_line_error
 
 EX02A = Path(__file__).resolve().parents[2] / "examples" / "ex02a.toml"
+EX01B = EX02A.with_name("ex01b.toml")
 
 
 def test_the_controller_halves_on_failure_and_grows_back_in_aligned_steps():
@@ -236,3 +237,23 @@ def test_a_negative_density_is_judged_against_the_density_s_own_size(backend, m0
     assert re.search(r"field m fell to -1\.0\de-10 at t = 0\.1, below 0 where the scheme of chemotaxis keeps it >= 0",
                      str(caught.value))
     assert [event["dt"] for event in sim.rejections] == [0.2, 0.1]
+
+
+@pytest.mark.parametrize("backend", ["fenicsx", "skfem"])
+def test_a_boundary_formula_singular_at_a_step_time_the_model_did_not_sample_is_named_at_that_step(
+        backend, primordia_cli, small_config, tmp_path):
+    """The model checks boundary formulas at 65 times of the span and the output times; t = 0.25 is a step
+    time none of them holds (1.5 k / 64), and "s0 / (t - 0.25)" is infinite there.  The step failed at every
+    dt it was halved to, each sub-step still ending at t = 0.25, and the run stopped at dt_min blaming
+    "poroelasticity (fields u, p): the residual is not finite" after 11 rejected tries."""
+    text = EX01B.read_text().replace('"s0 * sin(pi * t / t_hat)"', '"s0 / (t - 0.25)"')
+    assert '"s0 / (t - 0.25)"' in text
+    out = tmp_path / "out"
+    result = primordia_cli("run", small_config(text, name="ex01b.toml"), "--backend", backend, "--out", out,
+                           "--no-progress", "--set", "mesh.cells=[4,4]", "--set", "time.dt=0.25",
+                           "--set", "time.t_final=1.5", "--set", "output.times=[1.5]",
+                           "--set", "output.pictures=false")
+    assert_one_line_error(result, "step 1 (t = 0 -> 0.25)", "'s0 / (t - 0.25)' cannot be evaluated at x = (",
+                          "t = 0.25: division by zero")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["rejected_steps"] == 0 and summary["status"].startswith("stopped at t = 0: step 1")
