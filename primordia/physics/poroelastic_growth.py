@@ -207,6 +207,20 @@ class PoroelasticGrowth(Physics):
                   if holds]
         refuse_free_rigid_motions(f"physics.{self.name}", self.settings["boundary"], mesh_data, times, static,
                                   "momentum balance (seed (4.12a))")
+        self._refuse_a_free_pressure_constant(mesh_data)
+
+    def _refuse_a_free_pressure_constant(self, mesh_data) -> None:
+        """C_0 = 0 with nothing holding p: (p + c, psi - alpha_BW c) solves (4.12a)-(4.12c) as (p, psi) does, since p
+        enters (4.12b) then through Grad p alone and P_e + P_f through psi + alpha_BW p.  The tangent is singular at
+        every dt: example 2a with C_0 = 0 was halved down to dt_min, "Newton did not converge"."""
+        if self.params["C_0"] != 0:
+            return
+        conditions = conditions_from_config(self.settings["boundary"], mesh_data, mesh_data.gdim)
+        if any(condition.field == "p" and condition.kind != "fluid_flux" for condition in conditions):
+            return
+        raise ConfigError(f"physics.{self.name}: parameter C_0 = 0 with no fluid_pressure condition leaves the fluid "
+                          f"pressure fixed only up to a constant (p + c and psi - alpha_BW c solve seed (4.12a)-(4.12c) "
+                          f"as p and psi do); give C_0 > 0 or hold p on a boundary (type = \"fluid_pressure\")")
 
     def fields(self):
         return [FieldSpec("u", degree=2, vector=True, group=GROUP, displacement=True,
