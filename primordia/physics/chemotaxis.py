@@ -64,7 +64,7 @@ import numpy as np
 import ufl
 
 from primordia.core import compiled
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, warn
 from primordia.core.ops import NUMPY, UFL
 from primordia.core.validation import number, numbers
 from primordia.physics.base import GATHERED_RANKS, Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
@@ -226,6 +226,7 @@ class Chemotaxis(Physics):
 
     def setup(self, disc):
         self.disc = disc  # the fitted flux's separate fields are checked when the scheme is made (check_scheme)
+        self._fitted_operators = {}  # this run's, by species
 
     def initialise(self, disc):
         """The kinetics' initial state (seed eq. (2.6)), the perturbed species perturbed at the vertices."""
@@ -320,11 +321,14 @@ class Chemotaxis(Physics):
         an M-matrix at small strain (module docstring).  A term another module adds can break that (the solid's
         explicit advection of m in example 1b, :mod:`~primordia.physics.mechanochemical`): there m dips below zero
         on coarse meshes (min m -0.011, -0.005, -0.0025 on 16^2, 32^2, 64^2 over 2,600 steps; 4e-8 on the seed's
-        171^2), a spatial artefact a smaller dt does not remove, which series.nc records."""
+        171^2), a spatial artefact a smaller dt does not remove, which series.nc records.  So can a mesh whose
+        stiffness has negative edge weights (obtuse angles opposite a boundary edge, or summing past 180 degrees
+        opposite an inner one): its fitted operator warns of it, and the field is not promised either."""
         if self.disc.kinematics.metric is not None:
             return ()
         return tuple(species.name for species in self.species
-                     if self._fitted(species) and not self.disc.contributors(species.name))
+                     if self._fitted(species) and not self.disc.contributors(species.name)
+                     and not getattr(self._fitted_operators.get(species.name), "negative_weights", 0))
 
     def _fitted(self, species: Species) -> bool:
         return species.attractant is not None and self.settings["flux_scheme"] == "exponential_fitting"
@@ -346,7 +350,9 @@ class Chemotaxis(Physics):
                     sensitivity=lambda c, species=species: self.sensitivity(species, c, EDGE_OPS),
                     metric=motion.metric, quadrature_degree=motion.quadrature_degree,
                 )
-                self._fitted_operators = {**getattr(self, "_fitted_operators", {}), species.name: operator}
+                if species.name not in self._fitted_operators and motion.metric is None:  # once a run
+                    _warn_of_negative_weights(species.name, operator, self.disc.mesh_data.gdim)
+                self._fitted_operators = {**self._fitted_operators, species.name: operator}
             constant = jacobian_is_constant(jacobian, self.disc)
             problems.append(Subproblem(
                 name=f"{self.name}.{species.name}", unknown=unknown, residual=residual, jacobian=jacobian,
@@ -366,6 +372,21 @@ class Chemotaxis(Physics):
                           jacobian=ufl.derivative(residual, unknown), linear=False,
                           fields=self.disc.unknown_fields(first),
                           petsc_options=_coupled_defaults(self.settings["preconditioner"], self.species))
+
+
+def _warn_of_negative_weights(name: str, operator: ExponentiallyFittedFlux, gdim: int) -> None:
+    """One warning when the fixed mesh's stiffness has edges of negative weight, where the fitted flux's matrix is
+    not an M-matrix (module docstring): the run neither keeps ``name`` >= 0 there nor rejects a step for it."""
+    if not operator.negative_weights:
+        return
+    count = operator.negative_weights
+    cause, remedy = (("angles opposite an inner edge summing past 180 degrees, or an obtuse angle opposite a boundary "
+                      "edge", "a Delaunay triangulation with no obtuse angle at the boundary has none") if gdim == 2
+                     else ("obtuse dihedral angles opposite them", "a mesh with no obtuse dihedral angle, such as a "
+                           "box's, has none"))
+    warn(f"the mesh has {count} edge{'s' if count > 1 else ''} of negative stiffness weight ({cause}): the "
+         f"exponentially fitted flux no longer keeps {name} >= 0, so a negative {name} is recorded (series.nc's "
+         f"{name}_min), not rejected; {remedy}")
 
 
 def _coupled_defaults(preconditioner: str, species: tuple[Species, ...]) -> dict:

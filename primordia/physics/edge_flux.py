@@ -30,7 +30,6 @@ from petsc4py import PETSc
 from scipy.sparse import csr_matrix as _csr
 
 from primordia.core import compiled
-from primordia.core.errors import warn
 from primordia.core.petsc_library import update_mpiaij_values
 from primordia.core.reductions import largest, smallest
 from primordia.physics.base import AlgebraicOperator
@@ -90,9 +89,6 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._shift = None  # that diagonal (a Vec, made once)
         self._compiled = None  # the compiled loops, False for numpy's (decided at the first update, collectively)
         self._midpoints = self._addresses = None  # the species at the edge midpoints, and the loops' arrays
-        if self.negative_weights and not self._moving:
-            warn(f"the mesh has obtuse angles (positive off-diagonal stiffness entries): the exponentially fitted "
-                 f"flux of {species} no longer guarantees a non-negative density")
 
     def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
