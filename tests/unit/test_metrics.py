@@ -173,6 +173,25 @@ def test_hexatic_order_of_known_point_sets():
     assert np.isnan(hexatic_order(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))[0])
 
 
+@pytest.mark.parametrize("spacing, cut, before, now", [
+    (2.5, "notch", 0.950, 0.999),  # an L-shape: (0, 20)^2 without its upper right quarter
+    (3.5, "hole", 0.683, 0.89),  # a hole of radius 4 in the middle
+])
+def test_the_hexatic_order_leaves_out_bonds_across_a_hole_or_a_notch(spacing, cut, before, now):
+    """Delaunay bonds span the domain's holes and notches, which the spots' convex hull does not see: a perfect
+    lattice on an L-shape had |psi_6| 0.950, around a hole 0.683.  The spots next to the hole still have bonds
+    that skip the lattice points the hole removed, in the domain: 0.90, not 1."""
+    width = spacing / 6
+    centres = hexagonal_lattice(spacing, margin=3 * width)
+    x, y = MESH.points[MESH.cells].mean(axis=1).T
+    removed = {"notch": lambda x, y: (x > SIDE / 2) & (y > SIDE / 2),
+               "hole": lambda x, y: np.hypot(x - SIDE / 2, y - SIDE / 2) < 4.0}[cut]
+    kept = centres[~removed(*centres.T)]
+    metrics = mesh_pattern_metrics(MESH.points, MESH.cells[~removed(x, y)], gaussian_spots(MESH.points, kept, width))[0]
+    assert metrics.kind == "spots" and metrics.spot_count == len(kept)
+    assert metrics.hexatic_order > now > before
+
+
 def test_nearest_neighbour_distances():
     points = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 3.0]])
     assert nearest_neighbour_distances(points) == pytest.approx([1.0, 1.0, 3.0])

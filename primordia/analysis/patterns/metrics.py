@@ -19,7 +19,7 @@ else works on that grid:
 * :func:`nearest_neighbour_distances` -- spacing between spot centres;
 * :func:`hexatic_order` -- |psi_6| = |mean over Delaunay neighbours of
   exp(6 i theta)| per spot, averaged over the spots away from the edge of the
-  spot set (1 hexagonal, ~0.07 square, ~0.36 random);
+  spot set and of the domain (1 hexagonal, ~0.07 square, ~0.36 random);
 * :func:`orientation_order` -- nematic order of the field's gradient
   (1 for parallel stripes, ~0 for isotropic patterns);
 * :func:`classify` -- none / spots / stripes / labyrinth from those numbers.
@@ -57,6 +57,8 @@ MIN_SPOT_FRACTION = 0.5
 MIN_STRIPE_ORDER = 0.5
 #: Spots closer than this many median spacings to the convex hull of all spots are edge spots.
 EDGE_MARGIN = 0.5
+#: Points along a Delaunay bond checked to lie in the domain (:func:`hexatic_order`'s ``inside``).
+BOND_SAMPLES = 16
 #: Pixels of the interpolation grid per side: at least this many, at most ``MAX_PIXELS``.
 MIN_PIXELS, MAX_PIXELS = 128, 1024
 #: The spectrum is computed on a zero-padded grid of at least this many points per side (finer k bins).
@@ -89,6 +91,15 @@ class GriddedField:
     @property
     def pixel_area(self) -> float:
         return self.spacing[0] * self.spacing[1]
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point (n, 2) lies in a pixel of the mesh (one with a value); a point on the grid's frame
+        counts in the pixel beside it."""
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        ny, nx = self.values.shape
+        cols = np.clip(np.floor((points[:, 0] - self.origin[0]) / self.spacing[0]).astype(int), 0, nx - 1)
+        rows = np.clip(np.floor((points[:, 1] - self.origin[1]) / self.spacing[1]).astype(int), 0, ny - 1)
+        return np.isfinite(self.values[rows, cols])
 
 
 def median_edge_length(points: np.ndarray, triangles: np.ndarray) -> float:
@@ -289,7 +300,7 @@ def nearest_neighbour_distances(centres: np.ndarray) -> np.ndarray:
     return distances[:, 1]
 
 
-def hexatic_order(centres: np.ndarray) -> tuple[float, np.ndarray]:
+def hexatic_order(centres: np.ndarray, inside=None) -> tuple[float, np.ndarray]:
     """Mean |psi_6| over the spots away from the pattern's edge, and psi_6 per spot (NaN at the edge).
 
     psi_6(j) = mean over the bonds j-l of exp(6 i theta_jl); the bonds are the
@@ -297,7 +308,10 @@ def hexatic_order(centres: np.ndarray) -> tuple[float, np.ndarray]:
     one or two bonds each, and a single bond has |psi_6| = 1).  Spots within
     :data:`EDGE_MARGIN` median spacings of the convex hull of all spots lack
     neighbours on one side and are left out of the mean.  1 for a hexagonal
-    lattice, ~0.07 for a square one, ~0.36 for random points.
+    lattice, ~0.07 for a square one, ~0.36 for random points.  ``inside`` maps
+    points (n, 2) to whether they lie in the domain: a spot with a bond that
+    leaves it, across a hole or a notch the hull does not see, is at the domain's
+    edge too (a hexagonal lattice on an annulus had 0.89, on an L-shape 0.94).
     """
     psi = np.full(len(centres), np.nan, dtype=complex)
     spacing = nearest_neighbour_distances(centres)
@@ -311,8 +325,11 @@ def hexatic_order(centres: np.ndarray) -> tuple[float, np.ndarray]:
     typical = float(np.median(spacing))
     to_hull = -np.max(centres @ hull.equations[:, :2].T + hull.equations[:, 2], axis=1)
     pointers, neighbours = triangulation.vertex_neighbor_vertices
+    fractions = (np.arange(BOND_SAMPLES) + 0.5)[:, None, None] / BOND_SAMPLES
     for j in np.flatnonzero(to_hull > EDGE_MARGIN * typical):
         bonds = centres[neighbours[pointers[j]:pointers[j + 1]]] - centres[j]
+        if inside is not None and not inside((centres[j] + fractions * bonds).reshape(-1, 2)).all():
+            continue
         psi[j] = np.mean(np.exp(6j * np.arctan2(bonds[:, 1], bonds[:, 0])))
     inner = np.isfinite(psi)
     return (float(np.mean(np.abs(psi[inner]))) if inner.any() else np.nan), psi
@@ -425,7 +442,7 @@ def pattern_metrics(field: GriddedField, resolution: float | None = None) -> Pat
         spot_centres=centres, spot_areas=areas,
         spacing_mean=float(spacing.mean()) if spacing.size else np.nan,
         spacing_std=float(spacing.std()) if spacing.size else np.nan,
-        hexatic_order=hexatic_order(centres)[0],
+        hexatic_order=hexatic_order(centres, field.inside)[0],
         spot_fraction=blobs.spot_fraction, orientation_order=orientation,
         wavenumbers=k, power=power,
     )
