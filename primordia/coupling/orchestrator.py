@@ -836,6 +836,7 @@ class Simulation:
         if self.step_done == 0.0:
             self.step_begin = self.time
         t_begin, t_end = self.step_begin, self.model.step_time(self.step_index + 1)
+        failed_tries = 0
         while self.step_done < 1.0:
             fraction, dt = self.controller.fraction, self.controller.step
             done = self.step_done + fraction
@@ -849,12 +850,15 @@ class Simulation:
             self.rejections.append(event)
             self._notify("rejection", event)
             self._create_solvers()  # nothing of the failed try (e.g. a lagged preconditioner) may carry over
+            failed_tries += 1
             if not self.controller.rejected():
                 where = self._step_label(t_next)
                 if not self.model.adaptive:
                     raise SolverError(f"{where}: {failure}")
-                raise SolverError(f"{where}: {failure}; retried down to dt = {dt:g}, and dt may not fall below "
-                                  f"time.dt_min = {self.model.dt_min:g}")
+                # "retried down to" its first try's dt said a retry that never was (time.dt_min = dt)
+                tried = f"retried down to dt = {dt:g}" if failed_tries > 1 else f"not retried at dt = {dt:g}"
+                raise SolverError(f"{where}: {failure}; {tried}, and half of it would fall below time.dt_min = "
+                                  f"{self.model.dt_min:g}")
         self.step_index += 1
         self.time, self.step_done = t_end, 0.0
         self._collect_petsc_garbage()

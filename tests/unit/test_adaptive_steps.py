@@ -105,6 +105,16 @@ def primordia_splitting_schemes():
 """
 
 
+def test_a_step_that_dt_min_lets_no_smaller_is_said_not_retried(primordia_cli, small_config, plugin_distribution,
+                                                               tmp_path):
+    """time.dt_min = dt: the failing step was said "retried down to dt = 0.2", its first and only try."""
+    env = plugin_distribution("primordia-flaky", "0.1", {"flaky": FLAKY_SCHEME}, {"flaky": "flaky"})
+    result = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress", "--set",
+                           "coupling.scheme=flaky", "--set", "time.t_final=2.0", "--set", "time.dt_min=0.2", env=env)
+    assert_one_line_error(result, "injected", "not retried at dt = 0.2, and half of it would fall below "
+                                              "time.dt_min = 0.2")
+
+
 def test_an_injected_failure_is_retried_smaller_and_recorded(primordia_cli, small_config, plugin_distribution,
                                                              tmp_path):
     env = plugin_distribution("primordia-flaky", "0.1", {"flaky": FLAKY_SCHEME}, {"flaky": "flaky"})
@@ -113,7 +123,7 @@ def test_an_injected_failure_is_retried_smaller_and_recorded(primordia_cli, smal
                            "--set", "output.series_every=1", "--set", "output.times=[0.6, 1.2]",
                            "--set", "time.t_final=2.0", "--set", "time.dt_min=0.05", env=env)
     line = assert_one_line_error(result, "step 7 (t = 1.2 -> 1.25)", "injected for good in step 7",
-                                 "retried down to dt = 0.05", "time.dt_min = 0.05")
+                                 "retried down to dt = 0.05, and half of it would fall below time.dt_min = 0.05")
     assert "chemotaxis.m" in line
 
     with xr.open_dataset(out / "series.nc") as series:
