@@ -30,8 +30,9 @@ Systems (``--systems``):
 Each (system, preconditioner, size) runs in a child process (``--one``), so its peak memory is its own;
 ``--ranks 2`` runs the children under ``mpirun -n 2``.
 
-``--share ex01a ex01b`` prints instead, per example, backend and size, the cost of a step against the
-time its linear solves take in the same run (Krylov iterations, preconditioner set-ups,
+``--share ex01a ex01b`` prints instead, per example (any of the seed's in ``examples/``; a size is
+squares per side, or boxes per side of a 3D example, sized as ``growth3d``), backend and size, the cost
+of a step against the time its linear solves take in the same run (Krylov iterations, preconditioner set-ups,
 factorisations, diagonal divisions: ``linear_solve_seconds`` of each solver, on the clock the step is
 timed with, ``--clock``), and their ratio, then each subproblem's share; with ``--ranks 2`` under
 ``mpirun`` (fenicsx), the largest over the ranks.
@@ -58,6 +59,9 @@ from pathlib import Path
 from machine import describe  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
+
+#: The examples ``--share`` can time: the seed's, in examples/.
+EXAMPLES = sorted(path.stem for path in (ROOT / "examples").glob("ex*.toml"))
 
 #: The cell density by BoomerAMG with HMIS coarsening and extended+i interpolation (hypre's advice for 2D and 3D).
 HMIS = ["solver.chemotaxis_m.pc_type=\"hypre\"", "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
@@ -161,7 +165,7 @@ def share(example: str, backend: str, size: int, steps: int, warmup: int, extra:
     from primordia.core.clocks import CLOCKS
     from primordia.model import Model
 
-    overrides = [f"mesh.cells=[{size},{size}]", "output.pictures=false", "output.series_every=100000",
+    overrides = [f"mesh.cells={mesh_cells(example, size)}", "output.pictures=false", "output.series_every=100000",
                  "time.t_final=1e6", *extra]
     model = Model.from_file(ROOT / f"examples/{example}.toml", overrides)
     sim = Simulation(model, backend=backend, out_dir=f"/tmp/primordia-bench-share/{example}-{backend}-{size}")
@@ -182,6 +186,15 @@ def share(example: str, backend: str, size: int, steps: int, warmup: int, extra:
     return {"example": example, "backend": backend, "size": size, "ranks": sim.comm.size,
             "ms_per_step": 1e3 * elapsed / steps, "solve_ms_per_step": 1e3 * solving / steps, "ratio": elapsed / solving,
             "solves_ms_per_step": {name: 1e3 * value / steps for name, value in solves.items()}}
+
+
+def mesh_cells(example: str, size: int) -> str:
+    """``mesh.cells`` of ``example`` at ``size``: squares per side on a rectangle, boxes per side on a box (as
+    ``growth3d``: a tenth of them, at least 2, across the thickness)."""
+    import tomllib
+
+    kind = tomllib.loads((ROOT / f"examples/{example}.toml").read_text()).get("mesh", {}).get("type")
+    return SYSTEMS["growth3d"]["cells"](size) if kind == "box" else f"[{size},{size}]"
 
 
 def _max():
@@ -256,12 +269,23 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=1,
                         help="run every size N times (each repeat runs the sizes in turn) and summarise medians")
     parser.add_argument("--json", help="also append every row to this file (JSON lines)")
-    parser.add_argument("--share", nargs="+", metavar="EXAMPLE", help="step cost against linear solves instead")
-    parser.add_argument("--backends", nargs="+", default=["fenicsx"], help="backends of --share")
+    parser.add_argument("--share", nargs="+", metavar="EXAMPLE", choices=EXAMPLES,
+                        help="step cost against linear solves instead")
+    parser.add_argument("--backends", nargs="+", default=["fenicsx"], choices=["fenicsx", "skfem"],
+                        help="backends of --share")
     parser.add_argument("--share-one", nargs=3, metavar=("EXAMPLE", "BACKEND", "SIZE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error(f"--repeats must be at least 1, got {args.repeats}")
+    for option, value, least in (("--steps", args.steps, 1), ("--warmup", args.warmup, 0), ("--ranks", args.ranks, 1),
+                                 ("--sizes", min(args.sizes), 1)):
+        if value < least:
+            parser.error(f"{option} must be at least {least}, got {value}")
+    for system in args.systems if args.preconditioners and not args.share else []:
+        unknown = [name for name in args.preconditioners if name not in SYSTEMS[system]["preconditioners"]]
+        if unknown:
+            parser.error(f"--preconditioners: {system} has no {', '.join(unknown)} "
+                         f"(its own: {', '.join(SYSTEMS[system]['preconditioners'])})")
     if args.share_one:
         example, backend, size = args.share_one
         row = share(example, backend, int(size), args.steps, args.warmup, args.set, args.clock)

@@ -78,3 +78,32 @@ def test_the_plain_dolfinx_script_refuses_a_mesh_of_no_cells_in_one_line():
     assert done.returncode == 2
     assert done.stderr.strip().splitlines()[-1] == "plain_dolfinx_ex01a.py: error: cells and steps must be positive"
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("options, error", [
+    (["--systems", "cells", "--preconditioners", "foo"], "--preconditioners: cells has no foo (its own: lu, "),
+    (["--systems", "growth2d", "cells", "--preconditioners", "lu"], "--preconditioners: growth2d has no lu (its own: "),
+    (["--share", "ex01c"], "argument --share: invalid choice: 'ex01c'"),
+    (["--share", "ex01a", "--backends", "fenix"], "argument --backends: invalid choice: 'fenix'"),
+    (["--steps", "0"], "--steps must be at least 1, got 0"),
+    (["--warmup", "-1"], "--warmup must be at least 0, got -1"),
+    (["--sizes", "43", "0"], "--sizes must be at least 1, got 0"),
+    (["--ranks", "0"], "--ranks must be at least 1, got 0"),
+])
+def test_a_bad_option_of_the_solver_study_is_one_line_before_any_run(options, error):
+    """A preconditioner the system does not have, an example or backend that does not exist, no steps: each ran
+    every child to a "failed" row (a KeyError, a division by zero) and exited 0."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_solvers.py"), *options], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 2, done.stdout
+    assert done.stderr.strip().splitlines()[-1].startswith(f"bench_solvers.py: error: {error}"), done.stderr
+    assert done.stdout == ""
+
+
+def test_the_share_of_a_3d_example_sizes_its_box_as_growth3d(bench):
+    """``--share ex04_small`` set two cells per side of a box mesh: every size failed."""
+    assert bench.mesh_cells("ex04_small", 20) == "[20,20,2]"
+    assert bench.mesh_cells("ex04", 40) == "[40,40,4]"
+    assert bench.mesh_cells("ex01b", 43) == "[43,43]"
