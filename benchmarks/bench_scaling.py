@@ -83,9 +83,15 @@ def start(example: str, ranks: int, steps: int | None, extra: list[str], out: Pa
 def finish(example: str, ranks: int, process: subprocess.Popen, out: Path) -> dict:
     _, stderr = process.communicate()
     if process.returncode != 0:
-        reason = (stderr.strip().splitlines() or ["no output"])[-1]
-        sys.exit(f"bench_scaling: {example} on {ranks} rank(s) failed: {reason}")
+        sys.exit(f"bench_scaling: {example} on {ranks} rank(s) failed: {last_words(stderr)}")
     return json.loads((out / "summary.json").read_text())
+
+
+def last_words(stderr: str) -> str:
+    """The last line a failed run wrote, before mpirun's own report (which opens with a line of dashes)."""
+    lines = stderr.strip().splitlines()
+    lines = lines[:next((k for k, line in enumerate(lines) if set(line) == {"-"}), len(lines))]
+    return (lines or ["no output"])[-1]
 
 
 def at_once(example: str, copies: int, steps: int | None, extra: list[str], out: Path) -> dict:

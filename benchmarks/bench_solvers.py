@@ -219,10 +219,17 @@ def _run_child(what: list[str], label: str, args) -> dict | None:
     done = subprocess.run(command, capture_output=True, text=True, env=env)
     lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
     if done.returncode != 0 or not lines:
-        reason = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        reason = last_words(done.stderr)
         print(f"  {label}: failed ({reason[:160]})", flush=True)
         return None
     return json.loads(lines[-1])
+
+
+def last_words(stderr: str) -> str:
+    """The last line a failed child wrote, before mpirun's own report (which opens with a line of dashes)."""
+    lines = stderr.strip().splitlines()
+    lines = lines[:next((k for k, line in enumerate(lines) if set(line) == {"-"}), len(lines))]
+    return (lines or ["no output"])[-1]
 
 
 def share_table(args) -> None:

@@ -107,3 +107,29 @@ def test_the_share_of_a_3d_example_sizes_its_box_as_growth3d(bench):
     assert bench.mesh_cells("ex04_small", 20) == "[20,20,2]"
     assert bench.mesh_cells("ex04", 40) == "[40,40,4]"
     assert bench.mesh_cells("ex01b", 43) == "[43,43]"
+
+
+MPIRUN_STDERR = """Traceback (most recent call last):
+  File "bench_solvers.py", line 267, in main
+primordia.core.errors.PrimordiaError: the skfem backend is serial: run it without mpirun
+--------------------------------------------------------------------------
+Primary job  terminated normally, but 1 process returned
+a non-zero exit code. Per user-direction, the job has been aborted.
+--------------------------------------------------------------------------
+"""
+
+
+@pytest.mark.parametrize("script", ["bench_solvers.py", "bench_scaling.py"])
+def test_a_run_failed_under_mpirun_is_told_by_its_own_last_line_not_mpiruns(script):
+    """Under ``--ranks 2`` every failure read "failed (-----...)": the last line of mpirun's banner."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        spec = importlib.util.spec_from_file_location(script[:-3], BENCHMARKS / script)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    assert module.last_words(MPIRUN_STDERR) == ("primordia.core.errors.PrimordiaError: the skfem backend is serial: "
+                                                "run it without mpirun")
+    assert module.last_words("primordia: error: no such file\n") == "primordia: error: no such file"
+    assert module.last_words("") == "no output"
