@@ -125,6 +125,12 @@ def main() -> None:
     parser.add_argument("--as-shipped", action="store_true",
                         help="run each example as its TOML states it and time the whole command")
     args = parser.parse_args()
+    for option, value, least in (("--ranks", args.ranks, 2), ("--steps", args.steps, 1),
+                                 ("--repeats", args.repeats, 1)):
+        if value is not None and value < least:
+            parser.error(f"{option} must be at least {least}, got {value}")
+    if args.as_shipped and (args.steps is not None or args.ceiling):
+        parser.error("--as-shipped runs each example as its TOML states it: it takes neither --steps nor --ceiling")
     print(describe(), flush=True)
     extra = [a for s in args.set for a in ("--set", s)]
     n = args.ranks

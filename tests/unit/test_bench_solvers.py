@@ -133,3 +133,21 @@ def test_a_run_failed_under_mpirun_is_told_by_its_own_last_line_not_mpiruns(scri
                                                 "run it without mpirun")
     assert module.last_words("primordia: error: no such file\n") == "primordia: error: no such file"
     assert module.last_words("") == "no output"
+
+
+@pytest.mark.parametrize("options, error", [
+    (["--repeats", "0"], "--repeats must be at least 1, got 0"),
+    (["--steps", "0"], "--steps must be at least 1, got 0"),
+    (["--ranks", "1"], "--ranks must be at least 2, got 1"),
+    (["--as-shipped", "--steps", "20"], "--as-shipped runs each example as its TOML states it: it takes neither"),
+])
+def test_a_bad_option_of_the_scaling_study_is_one_line_before_any_run(options, error):
+    """--repeats 0 ran both rank counts and ended in an IndexError; --steps 0 silently ran the default 200 steps
+    (``steps or default``), and so did --steps under --as-shipped, which runs the whole example."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_scaling.py"), "--examples", "ex01a",
+                           "--set", "mesh.cells=[8,8]", *options], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stdout
+    assert done.stderr.strip().splitlines()[-1].startswith(f"bench_scaling.py: error: {error}"), done.stderr
+    assert "Traceback" not in done.stderr
