@@ -77,6 +77,9 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="also run the whole example 1a")
     parser.add_argument("--ex01b", action="store_true", help="also time example 1b per backend and scheme")
     args = parser.parse_args()
+    for option, value in (("--steps", args.steps), ("--repeats", args.repeats), ("--sizes", min(args.sizes))):
+        if value < 1:
+            parser.error(f"{option} must be at least 1, got {value}")
     print(describe(), flush=True)
 
     from primordia.core.plugins import BackendEntry

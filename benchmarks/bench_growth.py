@@ -35,6 +35,9 @@ from machine import describe  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
+#: The examples ``--full`` can run: the seed's, in examples/.
+EXAMPLES = sorted(path.stem for path in (ROOT / "examples").glob("ex*.toml"))
+
 clock = time.perf_counter
 
 
@@ -93,14 +96,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=10)
     parser.add_argument("--sizes", type=int, nargs="+", default=[43, 86, 171])
-    parser.add_argument("--backends", nargs="+", default=["fenicsx", "skfem"])
+    parser.add_argument("--backends", nargs="+", default=["fenicsx", "skfem"], choices=["fenicsx", "skfem"])
     parser.add_argument("--ex04", action="store_true", help="also time examples/ex04_small.toml (3D)")
     parser.add_argument("--no-ex02a", action="store_true", help="skip the example 2a table")
-    parser.add_argument("--full", nargs="*", default=[], help="run these examples whole (e.g. ex02a ex02b)")
+    parser.add_argument("--full", nargs="*", default=[], choices=EXAMPLES,
+                        help="run these examples whole (e.g. ex02a ex02b)")
     parser.add_argument("--clock", choices=sorted(CLOCKS), default="wall",
                         help="cpu: this process's CPU time, fair on a machine others are using (run with "
                              "OPENBLAS_NUM_THREADS=1)")
     args = parser.parse_args()
+    for option, value in (("--steps", args.steps), ("--sizes", min(args.sizes))):
+        if value < 1:
+            parser.error(f"{option} must be at least 1, got {value}")
     print(describe(), flush=True)
     global clock
     clock = CLOCKS[args.clock]

@@ -81,6 +81,10 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=4)
     parser.add_argument("--rebuilds", type=int, default=3)
     args = parser.parse_args()
+    for option, value, least in (("--steps", args.steps, 1), ("--warmup", args.warmup, 0),
+                                 ("--rebuilds", args.rebuilds, 1)):
+        if value < least:
+            parser.error(f"{option} must be at least {least}, got {value}")
     print(describe(), flush=True)
     if not sys.platform.startswith("linux"):
         sys.exit("bench_memory: needs glibc's mallinfo2 (Linux)")

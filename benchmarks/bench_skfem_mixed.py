@@ -89,6 +89,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--clock", choices=CLOCKS, default="wall")
     args = parser.parse_args()
+    for option, value in (("--repeats", args.repeats), ("--sizes", min(args.sizes)),
+                          ("--box", min(args.box, default=1))):
+        if value < 1:
+            parser.error(f"{option} must be at least 1, got {value}")
     print(describe(), flush=True)
     clock = CLOCKS[args.clock]
 

@@ -37,6 +37,8 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=60, help="grid points per side (n^2 unknowns)")
     parser.add_argument("--package", default="mumps", help="the factor package (mumps, superlu_dist, ...)")
     arguments = parser.parse_args()
+    if arguments.n < 1:
+        parser.error(f"--n must be at least 1, got {arguments.n}")
     matrix = operator(arguments.n)
     rhs = matrix.createVecLeft()
     first, last = rhs.getOwnershipRange()
@@ -47,6 +49,10 @@ def main() -> None:
     ksp.setType("preonly")
     ksp.getPC().setType("lu")
     ksp.getPC().setFactorSolverType(arguments.package)
+    try:
+        ksp.setUp()  # the factorisation
+    except PETSc.Error as error:
+        parser.error(f"--package {arguments.package}: this PETSc cannot factorise with it (PETSc error {error.ierr})")
     ksp.solve(rhs, solution)
     parts = PETSc.COMM_WORLD.tompi4py().gather(solution.getArray().tobytes(), root=0)
     if PETSc.COMM_WORLD.rank == 0:

@@ -151,3 +151,27 @@ def test_a_bad_option_of_the_scaling_study_is_one_line_before_any_run(options, e
     assert done.returncode == 2, done.stdout
     assert done.stderr.strip().splitlines()[-1].startswith(f"bench_scaling.py: error: {error}"), done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("script, options, error", [
+    ("bench_examples.py", ["--sizes", "8", "--steps", "0"], "--steps must be at least 1, got 0"),
+    ("bench_examples.py", ["--sizes", "8", "--repeats", "0"], "--repeats must be at least 1, got 0"),
+    ("bench_growth.py", ["--sizes", "0"], "--sizes must be at least 1, got 0"),
+    ("bench_growth.py", ["--no-ex02a", "--full", "ex2a"], "argument --full: invalid choice: 'ex2a'"),
+    ("bench_growth.py", ["--backends", "fenix"], "argument --backends: invalid choice: 'fenix'"),
+    ("bench_memory.py", ["--examples", "ex01a", "--rebuilds", "0"], "--rebuilds must be at least 1, got 0"),
+    ("bench_skfem_mixed.py", ["--sizes", "4", "--box", "--repeats", "0"], "--repeats must be at least 1, got 0"),
+    ("mumps_reproducibility.py", ["--n", "0"], "--n must be at least 1, got 0"),
+    ("mumps_reproducibility.py", ["--n", "4", "--package", "mumsp"], "--package mumsp: this PETSc cannot factorise"),
+])
+def test_a_bad_option_of_a_benchmark_is_one_line_and_exit_2(script, options, error):
+    """No steps or repeats ended in a ZeroDivisionError or an empty median, --steps -1 printed negative times,
+    an example or backend that does not exist a traceback from the run, --n 0 the digest of nothing, an unknown
+    factor package PETSc's error stack."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, str(BENCHMARKS / script), *options], capture_output=True, text=True,
+                          cwd=BENCHMARKS, timeout=120)
+    assert done.returncode == 2, done.stdout
+    assert done.stderr.strip().splitlines()[-1].startswith(f"{script}: error: {error}"), done.stderr
+    assert "Traceback" not in done.stderr
