@@ -33,13 +33,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from machine import describe  # benchmarks/machine.py
+from machine import describe, launch_environment  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -76,7 +75,7 @@ def start(example: str, ranks: int, steps: int | None, extra: list[str], out: Pa
     command += ["--no-progress", "--overwrite", *extra]
     if ranks > 1:
         command = ["mpirun", "-n", str(ranks), *command]
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    env = launch_environment()
     return subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 

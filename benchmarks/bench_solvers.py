@@ -49,14 +49,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import resource
 import statistics
 import subprocess
 import sys
 from pathlib import Path
 
-from machine import describe  # benchmarks/machine.py
+from machine import describe, launch_environment  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -215,7 +214,7 @@ def _run_child(what: list[str], label: str, args) -> dict | None:
                "--clock", args.clock, *sum((["--set", s] for s in args.set), [])]
     if args.ranks > 1:
         command = ["mpirun", "-n", str(args.ranks), *command]
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    env = launch_environment()
     done = subprocess.run(command, capture_output=True, text=True, env=env)
     lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
     if done.returncode != 0 or not lines:

@@ -63,5 +63,16 @@ def describe() -> str:
     return f"machine: {', '.join(parts)}; {petsc}"
 
 
+def launch_environment() -> dict[str, str]:
+    """The environment of an ``mpirun`` a benchmark starts: this process's, as root may use it, without the
+    variables of an MPI launcher or singleton above it.  A process whose parent had started MPI (a pytest worker,
+    a notebook that imported dolfinx) inherits them (OMPI_MCA_ess, PMIX_SERVER_URI...), and the mpirun handed them
+    exited 1 without a word after its run had completed (primordia.sweep drops them for its runs alike)."""
+    from primordia.sweep import MPI_LAUNCHER_PREFIXES
+
+    return {**{key: value for key, value in os.environ.items() if not key.startswith(MPI_LAUNCHER_PREFIXES)},
+            "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+
+
 if __name__ == "__main__":
     print(describe())

@@ -59,6 +59,11 @@ RUNS = {
                                               name == "bench_scaling" else [])
                                  for name, (options, _) in RUNS.items()])
 def test_a_benchmark_runs_to_its_end_at_its_smallest_size(run):
+    """From a process that has started MPI, as a pytest worker that ran a backend's tests has (and a notebook that
+    imported dolfinx): its children inherit the singleton's OMPI_/PMIX_ variables, and the mpirun of bench_scaling
+    and bench_solvers --ranks 2 handed them exited 1 without a word (the fresh suite's failures of 2026-12-05)."""
+    from mpi4py import MPI  # noqa: F401 - starts MPI in this process, whose environment the script inherits
+
     options, expected = RUNS[run]
     script = run.removesuffix("_share") + ".py"
     done = subprocess.run([sys.executable, str(BENCHMARKS / script), *options], capture_output=True, text=True,
