@@ -925,6 +925,8 @@ class Simulation:
         step mends it.  The model checks inputs at sample times of the span (``Model.sample_times``); a formula
         singular at a step time between them ("s0 / (t - 0.25)", dt = 0.25) failed that step at every dt, each
         try still ending there, until dt_min, and the run blamed the solve ("the residual is not finite")."""
+        if not times:  # the try failed before it set a time (a scheme's own failure)
+            return
         try:
             for module in self.model.physics_objects:
                 with module_code(module, "check_inputs"):
