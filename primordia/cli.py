@@ -125,7 +125,7 @@ def command_run(args) -> int:
         return _report_dry_run(model, out, existing)
     _warn_about_a_slow_blas()
     sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
-                    restart=args.restart is not None)
+                    restart=args.restart is not None, continue_with=f"primordia run --restart {out}")
     final = sim.summary(sim.status)  # collective (reductions over ranks): every rank calls it
     if sim.is_root:
         restarted = f" (restart {sim.restarts})" if sim.restarts else ""

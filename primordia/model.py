@@ -388,8 +388,11 @@ class Model:
         return config_.as_toml_reads_it(resolved)
 
     def run(self, backend: str | None = None, out: str | Path = "out/run", progress: bool = False, comm=None,
-            overwrite: bool = False, restart: bool = False):
+            overwrite: bool = False, restart: bool = False, continue_with: str | None = None):
         """Set up and run; returns the finished :class:`~primordia.coupling.orchestrator.Simulation`.
+
+        ``continue_with``: how a run that stops early says it is continued (default, in Python's words,
+        ``Model.run(out=..., restart=True)``; ``primordia run`` gives its command).
 
         An ``out`` directory that already holds a run is refused, unless ``overwrite``
         (its run files are removed first) or ``restart`` (the run continues from the
@@ -402,7 +405,7 @@ class Model:
         existing = "restart" if restart else "overwrite" if overwrite else "refuse"
         out = out if isinstance(out, str) else _path(out, "out")  # a str as given: Simulation refuses "" (not ".")
         sim = Simulation(self, backend=backend or self.backend, out_dir=out, comm=comm, existing=existing)
-        sim.restart_hint = f"Model.run(out={str(out)!r}, restart=True)"  # the command's words were no help here
+        sim.restart_hint = continue_with or f"Model.run(out={str(out)!r}, restart=True)"
         sim.setup()
         sim.run(progress=progress)
         return sim
