@@ -38,7 +38,7 @@ import sys
 import time
 from pathlib import Path
 
-from machine import describe, launch_environment  # benchmarks/machine.py
+from machine import describe, last_words, launch_environment  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -86,11 +86,6 @@ def finish(example: str, ranks: int, process: subprocess.Popen, out: Path) -> di
     return json.loads((out / "summary.json").read_text())
 
 
-def last_words(stderr: str) -> str:
-    """The last line a failed run wrote, before mpirun's own report (which opens with a line of dashes)."""
-    lines = stderr.strip().splitlines()
-    lines = lines[:next((k for k, line in enumerate(lines) if set(line) == {"-"}), len(lines))]
-    return (lines or ["no output"])[-1]
 
 
 def at_once(example: str, copies: int, steps: int | None, extra: list[str], out: Path) -> dict:

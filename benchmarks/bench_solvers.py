@@ -55,7 +55,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from machine import describe, launch_environment  # benchmarks/machine.py
+from machine import describe, last_words, launch_environment  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -224,11 +224,6 @@ def _run_child(what: list[str], label: str, args) -> dict | None:
     return json.loads(lines[-1])
 
 
-def last_words(stderr: str) -> str:
-    """The last line a failed child wrote, before mpirun's own report (which opens with a line of dashes)."""
-    lines = stderr.strip().splitlines()
-    lines = lines[:next((k for k, line in enumerate(lines) if set(line) == {"-"}), len(lines))]
-    return (lines or ["no output"])[-1]
 
 
 def share_table(args) -> None:
