@@ -179,7 +179,10 @@ def _run_dispersion(args, config, stem) -> int:
             print(f"  {modes.describe()}{walls}")
             fastest = linear.fastest_mode()
             if fastest.unstable and not fastest.stationary:  # the box's say on it too: its wavelength may not fit
-                print(f"  {domain_modes(linear.rates, box, fastest.band, kind='oscillatory').describe()}")
+                try:
+                    print(f"  {domain_modes(linear.rates, box, fastest.band, kind='oscillatory').describe()}")
+                except ConfigError as dense:  # as for the stationary ones: said, and the files still written
+                    print(f"  admissible oscillatory modes: none listed ({dense})")
     if isinstance(box, str):
         print(f"  admissible modes: none listed ({box})")
     difference = seed_cross_check(linear, d=d)

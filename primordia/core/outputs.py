@@ -601,7 +601,7 @@ def _last_seen(directory: Path, summary: dict) -> str:
     with contextlib.suppress(Exception):  # noqa: BLE001 - none, or unreadable: the summary's word stands
         run = read_meta(directory / CHECKPOINT_FILE)["run"]
         if not isinstance(steps, int) or int(run["step"]) > steps:
-            steps, t = int(run["step"]), float(run["time"])
+            steps, t = int(run["step"]), step_time_label(float(run["time"]))
     return f"{steps} steps, t = {t}"
 
 

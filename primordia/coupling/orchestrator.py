@@ -39,7 +39,7 @@ from primordia.core import checkpoint as checkpoint_file
 from primordia.core.atomic_files import StorageError, make_directory, storage_error
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
-from primordia.core.outputs import existing_run, time_label
+from primordia.core.outputs import existing_run, step_time_label, time_label
 from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
 from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, largest_in_place, lowest_rank_where,
                                       on_every_rank)
@@ -749,14 +749,14 @@ class Simulation:
         (rank 0's words: the other ranks print nothing)."""
         if not self.is_root:
             return failure
-        return f"{failure}; the run stopped at t = {time_label(self.time)} ({self._how_it_continues()})"
+        return f"{failure}; the run stopped at t = {step_time_label(self.time)} ({self._how_it_continues()})"
 
     def _how_it_continues(self) -> str:
         """How a run stopped before its last step was checkpointed goes on: from the checkpoint in its folder."""
         try:
             meta = checkpoint_file.read_meta(self.out_dir / checkpoint_file.CHECKPOINT_FILE)
             return (f"{self.restart_hint} continues it from its checkpoint at "
-                    f"t = {time_label(meta['run']['time'])}")
+                    f"t = {step_time_label(meta['run']['time'])}")
         except (PrimordiaError, KeyError, TypeError):
             return "it wrote no checkpoint to continue from"
 
@@ -930,7 +930,8 @@ class Simulation:
         try:
             for module in self.model.physics_objects:
                 with module_code(module, "check_inputs"):
-                    module.check_inputs(self.model.mesh_data, sorted(set(times)))
+                    # from t_start, as at set-up: a module may read times[0] as the start (chemotaxis's initial state)
+                    module.check_inputs(self.model.mesh_data, sorted({self.model.t_start, *times}))
         except ConfigError as error:
             raise ConfigError(f"{self._step_label(t_next)}: {error}") from None
 

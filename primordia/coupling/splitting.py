@@ -61,8 +61,9 @@ class SplittingScheme(Configured, ABC):
         return groups
 
     def check_subproblems(self, subproblems: list[list[Subproblem]]) -> None:
-        """Refuse, in one line (:class:`ConfigError`), modules' subproblems this scheme cannot solve
-        (``subproblems``: each module's, in model order): before any solver is made, by :meth:`build` and by
+        """Refuse, in one line (:class:`ConfigError`; :class:`PluginError` for a module's own mistake), modules'
+        subproblems this scheme cannot solve (``subproblems``: each module's, in model order): before any solver
+        is made, by :meth:`build` and by
         ``primordia run --dry-run``, which makes none.  Here: a subproblem marked linear whose residual is not
         affine (:func:`~primordia.physics.base.check_affine`), for the schemes that solve each as it is; a
         scheme overriding this calls it too unless it solves them otherwise."""

@@ -253,7 +253,9 @@ class Physics(Configured, ABC):
         return None
 
     def check_inputs(self, mesh_data, times) -> None:
-        """Refuse, in one line, inputs only the mesh and the time span show wrong (before any assembly).
+        """Refuse, in one line, inputs only the mesh and the time span show wrong (before any assembly, and again
+        at the times of a try that failed mid-run, from ``times[0]`` = t_start: a formula infinite at a step time
+        no sample met is named there, not blamed on dt).
 
         By default the module's boundary conditions (option ``boundary``, a list of
         ``[[physics.NAME.boundary]]`` tables) are built and each formula is evaluated

@@ -346,7 +346,7 @@ def test_a_killed_run_is_said_as_far_as_its_checkpoint_got(watching, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     summary.update(status="running", steps=0, time=0.0, process={"pid": 2**22 + 7, "host": "nowhere"})
     (out / "summary.json").write_text(json.dumps(summary))  # as written at the start, then SIGKILL
-    assert existing_run(out) == "a run that was killed without a word after 5 steps, t = 1.0 (its process 4194311 " \
+    assert existing_run(out) == "a run that was killed without a word after 5 steps, t = 1 (its process 4194311 " \
                                 "is gone)"
     (out / "checkpoint.npz").unlink()
     assert existing_run(out).startswith("a run that was killed without a word after 0 steps, t = 0.0 ")
