@@ -291,22 +291,19 @@ def _refuse_an_unwritable_tmpdir() -> None:
     lines of its banners and MPI_Init_thread's abort, for any command.  A missing one Open MPI makes, so the
     nearest folder that exists is probed instead (one under a file, or in a read-only tree, gave the same
     banners).  (Under ``mpirun``, mpirun itself says it first.)"""
-    import tempfile
-
     folder = os.environ.get("TMPDIR")
     if not folder:
         return
     existing = os.path.abspath(folder)
     while not os.path.exists(existing):  # missing: Open MPI makes it, in the nearest folder that exists
         existing = os.path.dirname(existing)
-    try:
-        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=existing))
-    except OSError as error:
-        from primordia.core.atomic_files import reason_of
+    from primordia.core.atomic_files import reason_of, refusal_to_write
 
+    refusal = refusal_to_write(existing)
+    if refusal is not None:
         where = "" if existing == os.path.abspath(folder) else f"{existing}: "
-        raise ConfigError(f"TMPDIR {folder} cannot be written ({where}{reason_of(error)}): MPI keeps its session "
-                          f"files there; set TMPDIR to a writable folder") from None
+        raise ConfigError(f"TMPDIR {folder} cannot be written ({where}{reason_of(refusal)}): MPI keeps its session "
+                          f"files there; set TMPDIR to a writable folder")
 
 
 def _refuse_ranks_for_a_serial_command(command: str) -> None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import gc
 import logging
 import os
-import tempfile
 import weakref
 from collections.abc import Sequence
 
@@ -19,7 +18,7 @@ import numpy as np
 import ufl
 
 from primordia.core import reductions
-from primordia.core.atomic_files import reason_of
+from primordia.core.atomic_files import reason_of, refusal_to_write
 from primordia.core.backend import Backend, BoundaryCondition, FormCache, index_set, is_p1_scalar, sub_elements
 from primordia.core.errors import ConfigError, MeshError
 from primordia.core.mesh_data import MeshData
@@ -192,10 +191,12 @@ def _refuse_an_unwritable_jit_cache(parameters: dict) -> None:
     cache = jit.get_parameters(parameters)["cache_dir"]
     try:
         cache.mkdir(parents=True, exist_ok=True)
-        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=cache))  # os.access says yes to root everywhere
+        refusal = refusal_to_write(cache)
     except OSError as error:
-        raise ConfigError(f"dolfinx's JIT cache {cache} cannot be written ({reason_of(error)}): set XDG_CACHE_HOME "
-                          f"to a writable folder (the kernels are compiled into XDG_CACHE_HOME/fenics)") from None
+        refusal = error
+    if refusal is not None:
+        raise ConfigError(f"dolfinx's JIT cache {cache} cannot be written ({reason_of(refusal)}): set XDG_CACHE_HOME "
+                          f"to a writable folder (the kernels are compiled into XDG_CACHE_HOME/fenics)")
 
 
 #: The fenicsx backends made in this process, in order, each with its communicators' keepers (``_petsc_comms``).

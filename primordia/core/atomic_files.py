@@ -59,6 +59,18 @@ def reason_of(error: OSError) -> str:
     return text[:1].lower() + text[1:]
 
 
+def refusal_to_write(folder: str | Path) -> OSError | None:
+    """Why nothing can be made in the existing ``folder`` (the system's refusal), or None: by making and removing a
+    folder there, since os.access says yes to root everywhere (/proc, a read-only mount)."""
+    import tempfile
+
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=folder))
+    except OSError as error:
+        return error
+    return None
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it replaces ``path``.

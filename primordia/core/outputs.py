@@ -26,7 +26,6 @@ import json
 import os
 import shutil
 import socket
-import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -36,7 +35,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from primordia.core.atomic_files import StorageError, reason_of
+from primordia.core.atomic_files import StorageError, reason_of, refusal_to_write
 from primordia.core.checkpoint import CHECKPOINT_FILE, read_meta
 from primordia.core.errors import ConfigError, PluginError
 from primordia.core.json_toml import write_json, write_toml
@@ -665,9 +664,7 @@ def directory_problem(directory: str | Path) -> str | None:
         return f"the output directory {directory} lies inside {parent}, which is a file"
     if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
         return f"the output directory {directory} cannot be written ({parent} is not writable)"
-    if parent is not None:  # os.access says yes to root everywhere: /proc, a read-only mount
-        try:
-            os.rmdir(tempfile.mkdtemp(prefix=".primordia-probe-", dir=parent))
-        except OSError as error:
-            return f"the output directory {directory} cannot be created in {parent} ({reason_of(error)})"
+    refusal = refusal_to_write(parent) if parent is not None else None
+    if refusal is not None:
+        return f"the output directory {directory} cannot be created in {parent} ({reason_of(refusal)})"
     return None
