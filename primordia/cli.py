@@ -294,10 +294,9 @@ def _refuse_an_unwritable_tmpdir() -> None:
     folder = os.environ.get("TMPDIR")
     if not folder:
         return
-    existing = os.path.abspath(folder)
-    while not os.path.exists(existing):  # missing: Open MPI makes it, in the nearest folder that exists
-        existing = os.path.dirname(existing)
-    from primordia.core.atomic_files import reason_of, refusal_to_write
+    from primordia.core.atomic_files import nearest_existing, reason_of, refusal_to_write
+
+    existing = str(nearest_existing(folder))  # missing: Open MPI makes it, in the nearest folder that exists
 
     refusal = refusal_to_write(existing)
     if refusal is not None:

@@ -59,6 +59,12 @@ def reason_of(error: OSError) -> str:
     return text[:1].lower() + text[1:]
 
 
+def nearest_existing(path: str | Path) -> Path:
+    """``path`` made absolute, or its nearest ancestor that exists: where a folder still to be made would be made."""
+    path = Path(os.path.abspath(path))
+    return next(p for p in [path, *path.parents] if p.exists())
+
+
 def refusal_to_write(folder: str | Path) -> OSError | None:
     """Why nothing can be made in the existing ``folder`` (the system's refusal), or None: by making and removing a
     folder there, since os.access says yes to root everywhere (/proc, a read-only mount)."""

@@ -35,7 +35,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from primordia.core.atomic_files import StorageError, reason_of, refusal_to_write
+from primordia.core.atomic_files import StorageError, nearest_existing, reason_of, refusal_to_write
 from primordia.core.checkpoint import CHECKPOINT_FILE, read_meta
 from primordia.core.errors import ConfigError, PluginError
 from primordia.core.json_toml import write_json, write_toml
@@ -659,12 +659,12 @@ def directory_problem(directory: str | Path) -> str | None:
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         return f"the output directory {directory} is a file, not a directory"
-    parent = next((p for p in [directory, *directory.absolute().parents] if p.exists()), None)
-    if parent is not None and not parent.is_dir():
+    parent = nearest_existing(directory)
+    if not parent.is_dir():
         return f"the output directory {directory} lies inside {parent}, which is a file"
-    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+    if not os.access(parent, os.W_OK | os.X_OK):
         return f"the output directory {directory} cannot be written ({parent} is not writable)"
-    refusal = refusal_to_write(parent) if parent is not None else None
+    refusal = refusal_to_write(parent)
     if refusal is not None:
         return f"the output directory {directory} cannot be created in {parent} ({reason_of(refusal)})"
     return None

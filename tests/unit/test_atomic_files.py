@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from primordia.core.atomic_files import atomic_path, atomic_write_bytes, atomic_write_text
+from primordia.core.atomic_files import (atomic_path, atomic_write_bytes, atomic_write_text, nearest_existing,
+                                         refusal_to_write)
 from primordia.core.errors import PrimordiaError
 from file_writers import WriterDied, leftovers
 
@@ -58,3 +59,14 @@ def test_bad_paths_are_one_line_errors(tmp_path, target, message):
     with pytest.raises(PrimordiaError, match=message) as error:
         atomic_write_text(target(tmp_path), "x")
     assert "\n" not in str(error.value)
+
+
+def test_a_folder_still_to_be_made_is_probed_where_it_would_be_made(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a").mkdir()
+    assert nearest_existing("a/b/c") == tmp_path / "a"
+    assert nearest_existing(tmp_path / "a") == tmp_path / "a"
+    (tmp_path / "f").write_text("")
+    assert nearest_existing(tmp_path / "f" / "g") == tmp_path / "f"
+    assert refusal_to_write(tmp_path / "f") is not None  # a file holds no folder
+    assert refusal_to_write(tmp_path / "a") is None
