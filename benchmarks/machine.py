@@ -63,23 +63,12 @@ def describe() -> str:
     return f"machine: {', '.join(parts)}; {petsc}"
 
 
-#: What an MPI launcher or singleton sets in a process's environment (a user's own OMPI_MCA_ settings, e.g.
-#: ``OMPI_MCA_odls_base_sigkill_timeout`` or a container's ``OMPI_MCA_btl_vader_single_copy_mechanism``, stay).
-LAUNCHER_SET = ("PMIX_", "PMI_", "HYDRA_", "OMPI_MCA_ess", "OMPI_MCA_orte_", "OMPI_MCA_pmix", "OMPI_MCA_initial_wdir",
-                "OMPI_MCA_shmem_RUNTIME_QUERY_hint")
-
-
 def launch_environment() -> dict[str, str]:
     """The environment of an ``mpirun`` a benchmark starts: this process's, as root may use it, without the
-    variables of an MPI launcher or singleton above it.  A process whose parent had started MPI (a pytest worker,
-    a notebook that imported dolfinx) inherits them (OMPI_MCA_ess, PMIX_SERVER_URI...), and the mpirun handed them
-    exited 1 without a word after its run had completed."""
-    def launchers(key: str) -> bool:
-        return key.startswith(LAUNCHER_SET) or (key.startswith("OMPI_") and not key.startswith("OMPI_MCA_")
-                                                and not key.startswith("OMPI_ALLOW_RUN_AS_ROOT"))
+    variables of an MPI launcher or singleton above it (:mod:`primordia.core.launcher`)."""
+    from primordia.core.launcher import without_launcher
 
-    return {**{key: value for key, value in os.environ.items() if not launchers(key)},
-            "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    return {**without_launcher(os.environ), "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
 
 
 def last_words(stderr: str) -> str:

@@ -62,8 +62,6 @@ DATASET_FILE = "sweep.nc"
 PICTURE_FILE = "sweep_map.png"
 RECORD_FILE = "sweep.json"
 LOCK_FILE = ".sweep.lock"
-#: Environment variables by which an MPI launcher tells a process it is one rank of a job.
-MPI_LAUNCHER_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "HYDRA_")
 #: The most runs one sweep makes: beyond it, a typo (``alpha=1:5:100000000``) filled the memory
 #: with the runs' names (1 GB per million) before a word was said.
 MAX_RUNS = 100_000
@@ -427,8 +425,11 @@ def _refuse_if_every_run_fails(problem: str) -> None:
 
 def _run_environment() -> dict[str, str]:
     """The environment of a ``primordia run`` the sweep starts: this process's without the MPI launcher's variables
-    (the run is serial, not a rank of a job) nor the mark of a worker starting (the run takes a Ctrl-C)."""
-    return {k: v for k, v in os.environ.items() if not k.startswith(MPI_LAUNCHER_PREFIXES) and k != WORKER_STARTING}
+    (the run is serial, not a rank of a job; a user's own ``OMPI_MCA_`` settings stay) nor the mark of a worker
+    starting (the run takes a Ctrl-C)."""
+    from primordia.core.launcher import without_launcher
+
+    return {k: v for k, v in without_launcher(os.environ).items() if k != WORKER_STARTING}
 
 
 #: The runs this (worker) process has going, by directory: what :func:`stop_runs` asks to stop.
