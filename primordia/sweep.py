@@ -1014,7 +1014,8 @@ def register(subparsers) -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("config", help="TOML configuration file")
     parser.add_argument("--vary", action="append", default=[], metavar="SECTION.KEY=LO:HI:N",
-                        help="vary a config value over N values from LO to HI (repeatable), e.g. parameters.m0=0.5:1.5:5")
+                        help="vary a config value over N values from LO to HI (repeatable), "
+                             "e.g. parameters.m0=0.5:1.5:5")
     parser.add_argument("--seeds", type=int, default=0, metavar="N",
                         help=f"run each point with seeds 1..N of the random initial perturbation ({SEED_KEY})")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
