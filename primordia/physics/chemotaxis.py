@@ -306,7 +306,7 @@ class Chemotaxis(Physics):
         diagnostics = [Diagnostic("cell_amount", "integral",
                                   motion.volume_ratio * self.disc.field("m") * self.disc.dx_lumped,
                                   "cells in the current configuration, int J m dX over the reference one")]
-        for name, operator in getattr(self, "_fitted_operators", {}).items():
+        for name, operator in self._fitted_operators.items():
             diagnostics += [Diagnostic(f"{name}_negative_edge_weights", "value",
                                        lambda operator=operator: operator.negative_weights,
                                        f"edges with a negative weight in the metric's stiffness: the "
@@ -328,7 +328,12 @@ class Chemotaxis(Physics):
             return ()
         return tuple(species.name for species in self.species
                      if self._fitted(species) and not self.disc.contributors(species.name)
-                     and not getattr(self._fitted_operators.get(species.name), "negative_weights", 0))
+                     and not self._has_negative_weights(species))
+
+    def _has_negative_weights(self, species: Species) -> bool:
+        """Whether the species' fitted operator found edges of negative weight (not an M-matrix) at its last update."""
+        operator = self._fitted_operators.get(species.name)
+        return operator is not None and operator.negative_weights > 0
 
     def _fitted(self, species: Species) -> bool:
         return species.attractant is not None and self.settings["flux_scheme"] == "exponential_fitting"
