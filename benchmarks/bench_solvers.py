@@ -202,6 +202,10 @@ def _max():
     return MPI.MAX
 
 
+#: The runs that failed (their labels): the study says how many at its end and exits 1.
+FAILED: list[str] = []
+
+
 def child(system, preconditioner, size, args) -> dict | None:
     """One ``--one`` run in a child process, or None if it failed."""
     return _run_child(["--one", system, preconditioner, str(size)], f"{system} {preconditioner} {size}", args)
@@ -220,6 +224,7 @@ def _run_child(what: list[str], label: str, args) -> dict | None:
     if done.returncode != 0 or not lines:
         reason = last_words(done.stderr)
         print(f"  {label}: failed ({reason[:160]})", flush=True)
+        FAILED.append(label)
         return None
     return json.loads(lines[-1])
 
@@ -305,7 +310,14 @@ def main() -> None:
     print(describe(), flush=True)
     if args.share:
         share_table(args)
-        return
+    else:
+        study_table(args)
+    if FAILED:
+        sys.exit(f"bench_solvers: {len(FAILED)} run(s) failed: {', '.join(FAILED)}")
+
+
+def study_table(args) -> None:
+    """The solver study: per system, size and preconditioner, one row of Krylov iterations, cost and memory."""
     header = (f"{'system':>10} {'preconditioner':>14} {'size':>5} {'ranks':>5} {'unknowns':>9} {'Krylov/Newton':>13} "
               f"{'Newton/step':>11} {'ms/step':>9} {'peak MB':>8} {'B/unknown':>9} {'/direct':>7}")
     print(header, flush=True)

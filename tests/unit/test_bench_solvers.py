@@ -2,6 +2,7 @@
 
 import importlib.util
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -175,3 +176,14 @@ def test_a_bad_option_of_a_benchmark_is_one_line_and_exit_2(script, options, err
     assert done.returncode == 2, done.stdout
     assert done.stderr.strip().splitlines()[-1].startswith(f"{script}: error: {error}"), done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_a_study_whose_run_failed_says_so_at_its_end_and_exits_1():
+    """A failed run was a line among the rows and the study exited 0: a script driving it saw success."""
+    options = ["--systems", "cells", "--sizes", "4", "--preconditioners", "bjacobi_ilu", "--steps", "1",
+               "--warmup", "0", "--set", "mesh.cells=[0,4]"]
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_solvers.py"), *options], capture_output=True,
+                          text=True, cwd=BENCHMARKS, timeout=120)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "cells bjacobi_ilu 4: failed (" in done.stdout
+    assert done.stderr.strip().splitlines()[-1] == "bench_solvers: 1 run(s) failed: cells bjacobi_ilu 4"
