@@ -1,7 +1,5 @@
 """``python -m primordia``: the ``primordia`` command (:mod:`primordia.cli`)."""
 
-import sys
+from primordia.cli import console
 
-from primordia.cli import main
-
-sys.exit(main())
+console()

@@ -254,7 +254,32 @@ def _print_linear_algebra() -> None:
     print(f"  {'compiled loops':<22} {compiled.status().removeprefix('compiled loops: ')}")
 
 
-def main(argv: list[str] | None = None) -> int:
+def console() -> None:
+    """The ``primordia`` console script (and ``python -m primordia``): :func:`main`, and its status as the exit
+    status.  An interrupted command leaves the signals it handles ignored until the process ends: everything is
+    written, and a late copy (mpirun forwards a SIGTERM a second after the batch system's) changes nothing."""
+    sys.exit(main(_until_exit=True))
+
+
+def main(argv: list[str] | None = None, *, _until_exit: bool = False) -> int:
+    """The ``primordia`` command with arguments ``argv`` (default: the process's); returns its exit status.
+
+    Called from Python, it leaves the signal handlers as it found them: an interrupted command ignored Ctrl-C for
+    the rest of the session (a notebook could no longer be interrupted)."""
+    import signal
+    import threading
+
+    before = {signum: signal.getsignal(signum) for signum in HANDLED}
+    try:
+        return _command(argv)
+    finally:
+        if not _until_exit and threading.current_thread() is threading.main_thread():
+            for signum, handler in before.items():
+                if handler is not None:  # None: a handler not installed from Python, which cannot be put back
+                    signal.signal(signum, handler)
+
+
+def _command(argv: list[str] | None) -> int:
     with INTERRUPTS.installed():  # SIGTERM, like Ctrl-C, stops the program with a word, from the very start
         try:
             parser = build_parser()

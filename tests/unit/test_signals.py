@@ -7,7 +7,7 @@ import signal
 import pytest
 
 from primordia.core.errors import InterruptedRun
-from primordia.core.signals import Interrupts, copy_window
+from primordia.core.signals import HANDLED, Interrupts, copy_window
 
 
 def test_a_signal_repeated_at_once_under_mpirun_is_its_copy_not_a_second_request(monkeypatch):
@@ -48,3 +48,40 @@ def test_the_copy_window_follows_mpirun_s_delay(monkeypatch):
     assert copy_window() == 61.5
     monkeypatch.setenv("OMPI_MCA_odls_base_sigkill_timeout", "soon")
     assert copy_window() == 2.5
+
+
+def _interrupt_at_start(monkeypatch):
+    import primordia.cli
+
+    def interrupted():
+        raise InterruptedRun(signal.SIGINT)
+
+    monkeypatch.setattr(primordia.cli, "_refuse_an_unwritable_tmpdir", interrupted)
+
+
+def test_an_interrupted_command_called_from_python_leaves_ctrl_c_as_it_was(monkeypatch, capsys):
+    """After an interrupted ``cli.main`` a notebook (or a test session) ignored Ctrl-C for good."""
+    from primordia.cli import main
+
+    _interrupt_at_start(monkeypatch)
+    before = {signum: signal.getsignal(signum) for signum in HANDLED}
+    assert main(["plugins"]) == 128 + signal.SIGINT
+    assert "interrupted (Ctrl-C) during start-up" in capsys.readouterr().err
+    assert {signum: signal.getsignal(signum) for signum in HANDLED} == before
+
+
+def test_the_console_script_ignores_late_signals_until_it_exits(monkeypatch, capsys):
+    """The console script's process ends with the command: a late copy of the signal must not print a traceback."""
+    from primordia.cli import console
+
+    _interrupt_at_start(monkeypatch)
+    before = {signum: signal.getsignal(signum) for signum in HANDLED}
+    monkeypatch.setattr("sys.argv", ["primordia", "plugins"])
+    try:
+        with pytest.raises(SystemExit) as exit:
+            console()
+        assert exit.value.code == 128 + signal.SIGINT
+        assert all(signal.getsignal(signum) is signal.SIG_IGN for signum in HANDLED)
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
