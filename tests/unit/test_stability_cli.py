@@ -129,6 +129,15 @@ def test_an_oscillatory_instability_is_placed_on_the_box_too(tmp_path, capsys):
     assert "wavelength 2 pi / k_max = 399.7, growth rate 3.05e-06 (oscillatory" in printed
     assert ("on the 20 x 20 box (zero-flux cosine modes) no admissible mode grows as an oscillatory mode (its "
             "unstable band ends at k = 0.06651, below the box's lowest k, pi / 20 = 0.1571)") in printed
+    # a box far larger than 400: the oscillatory modes are dense, said so, and the files are still written
+    assert run(["stability", str(EXAMPLES / "ex01b.toml"), "--set", "parameters.tau=-60", "--set",
+                "parameters.xi_f=0.15", "--set", "parameters.alpha=1", "--domain", "70000,70000",
+                "--out", str(tmp_path / "large")]) == 0
+    printed = capsys.readouterr().out
+    assert "70000 x 70000 box (zero-flux cosine modes) no admissible mode grows as a stationary mode" in printed
+    assert ("admissible oscillatory modes: none listed (the 70000 x 70000 box admits more than 2000000 modes below "
+            "k = 0.06651: they are dense, as the continuous analysis assumes)") in printed
+    assert (tmp_path / "large" / "dispersion.nc").is_file() and (tmp_path / "large" / "dispersion.png").is_file()
 
 
 def test_a_third_party_kinetics_is_analysed(tmp_path, capsys):
