@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from machine import describe  # benchmarks/machine.py
+from machine import describe, last_words  # benchmarks/machine.py
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -58,11 +58,14 @@ def median_of(repeats: int, fn, *args) -> float:
     return statistics.median(fn(*args) for _ in range(repeats))
 
 
-def full_run() -> None:
-    out = Path("/tmp/primordia-bench-full")
+def full_run(out: Path = Path("/tmp/primordia-bench-full"), extra: tuple[str, ...] = ()) -> None:
+    """The whole example 1a as ``primordia run`` runs it, into ``out`` (replacing an earlier benchmark's run there:
+    a second ``--full`` was refused, a CalledProcessError traceback); a failed run is its own last line, exit 1."""
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "primordia.cli", "run", str(ROOT / "examples/ex01a.toml"),
-                    "--out", str(out), "--no-progress"], check=True)
+    done = subprocess.run([sys.executable, "-m", "primordia.cli", "run", str(ROOT / "examples/ex01a.toml"),
+                           "--out", str(out), "--no-progress", "--overwrite", *extra], stderr=subprocess.PIPE, text=True)
+    if done.returncode != 0:
+        sys.exit(f"bench_examples: the full example 1a failed: {last_words(done.stderr)}")
     wall = time.perf_counter() - start
     peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     print(f"full example 1a (171x171, 2600 steps, fenicsx, incl. start-up and outputs): "

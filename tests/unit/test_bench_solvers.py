@@ -187,3 +187,23 @@ def test_a_study_whose_run_failed_says_so_at_its_end_and_exits_1():
     assert done.returncode == 1, done.stdout + done.stderr
     assert "cells bjacobi_ilu 4: failed (" in done.stdout
     assert done.stderr.strip().splitlines()[-1] == "bench_solvers: 1 run(s) failed: cells bjacobi_ilu 4"
+
+
+def test_the_full_example_run_of_the_benchmark_replaces_its_last_one_and_a_failure_is_one_line(tmp_path, capsys):
+    """``bench_examples.py --full`` a second time was refused by the first one's run (a CalledProcessError
+    traceback), as was any failed run."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        spec = importlib.util.spec_from_file_location("bench_examples", BENCHMARKS / "bench_examples.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    coarse = ("--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.4", "--set", "output.times=[0.4]",
+              "--set", "output.pictures=false")
+    for _ in range(2):
+        module.full_run(tmp_path / "full", coarse)
+        assert "full example 1a (171x171, 2600 steps" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as failed:
+        module.full_run(tmp_path / "full", (*coarse, "--set", "mesh.cells=[0,4]"))
+    assert str(failed.value).startswith("bench_examples: the full example 1a failed: primordia: error: ")
