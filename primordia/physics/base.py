@@ -264,7 +264,7 @@ class Physics(Configured, ABC):
         """
         if "boundary" not in self.options:
             return
-        from primordia.physics.boundary_conditions import conditions_from_config
+        from primordia.physics.boundary_conditions import condition_code, conditions_from_config
 
         own = [spec.name for spec in self.fields()]
         for condition in conditions_from_config(self.settings["boundary"], mesh_data, mesh_data.gdim):
@@ -273,7 +273,8 @@ class Physics(Configured, ABC):
                                   f"{condition.field}, which physics {self.name} does not solve for "
                                   f"(it has: {', '.join(own)})")
             vertices = mesh_data.points[np.unique(mesh_data.boundaries[condition.boundary])]
-            condition.check(vertices, times)
+            with condition_code(type(condition), condition.boundary, "check"):
+                condition.check(vertices, times)
 
     def nonnegative_fields(self) -> tuple[str, ...]:
         """Fields this module's discretisation keeps >= 0 (read after ``setup``), e.g. a monotone scheme's density.

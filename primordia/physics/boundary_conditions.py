@@ -44,7 +44,7 @@ from typing import ClassVar
 import numpy as np
 import ufl
 
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError, third_party_code
 from primordia.core.expressions import Formula, VectorFormula
 from primordia.core.plugins import hookimpl
 
@@ -272,31 +272,61 @@ def condition_kinds() -> dict[str, type]:
     return {name: cls for name, (cls, _) in registry("boundary_conditions").items()}
 
 
+def condition_code(kind: type, boundary: str, method: str):
+    """Run ``method`` of a boundary-condition kind: a third party's bug in it is one line naming the kind, its
+    class, the boundary and where in the plugin's files it happened, not a traceback.  The built-in modules
+    that hold the conditions (poroelasticity, growth) are primordia's, so their own wrapping leaves a third
+    party's kind alone; primordia's own kinds keep their tracebacks."""
+    return third_party_code(f"boundary condition '{kind.kind}' on '{boundary}' ({kind.__module__}."
+                            f"{kind.__qualname__}): {method} failed", kind)
+
+
 class Conditions(list):
     """The conditions of one physics module: what they contribute together, each contributing its own."""
 
     def terms(self, disc, field: str | None = None):
         """The sum of every condition's weak-form terms (0 when none adds any); only those of ``field``'s balance
         law when it is given."""
-        return sum((term for condition in self for name, terms in condition.terms(disc).items()
+        return sum((term for condition in self for name, terms in self._terms_of(condition, disc).items()
                     if field in (None, name) for term in terms), 0)
+
+    @staticmethod
+    def _terms_of(condition: Condition, disc) -> dict:
+        """``condition.terms(disc)``, refused in one line unless it is ``{field name: [form, ...]}``."""
+        with condition_code(type(condition), condition.boundary, "terms"):
+            terms = condition.terms(disc)
+        if not isinstance(terms, dict) or not all(isinstance(name, str) and isinstance(forms, (list, tuple))
+                                                   for name, forms in terms.items()):
+            cls = type(condition)
+            raise PluginError(f"boundary condition '{cls.kind}' on '{condition.boundary}' ({cls.__module__}."
+                              f"{cls.__qualname__}): terms must return {{field name: [form, ...]}}, got {terms!r}")
+        return terms
 
     def dirichlet(self, disc) -> list:
         """Every condition's Dirichlet constraints."""
-        return [bc for condition in self for bc in condition.dirichlet(disc)]
+        return self._each("dirichlet", disc)
 
     def homogeneous(self, disc) -> list:
         """The same constraints with zero values (for increments and rates)."""
-        return [bc for condition in self for bc in condition.homogeneous(disc)]
+        return self._each("homogeneous", disc)
 
     def update(self, disc, t: float) -> None:
         """Refresh every time-dependent prescribed value for time ``t``."""
         for condition in self:
-            condition.update(disc, t)
+            with condition_code(type(condition), condition.boundary, "update"):
+                condition.update(disc, t)
 
     def rates(self, disc, t: float, dt: float) -> list:
         """Every condition's constraints on the rate over [t, t + dt] (the secant of a time-dependent value)."""
-        return [bc for condition in self for bc in condition.rates(disc, t, dt)]
+        return self._each("rates", disc, t, dt)
+
+    def _each(self, method: str, *args) -> list:
+        """Every condition's constraints of ``method``, each called as third-party code."""
+        constraints = []
+        for condition in self:
+            with condition_code(type(condition), condition.boundary, method):
+                constraints.extend(getattr(condition, method)(*args))
+        return constraints
 
 
 def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:
@@ -324,7 +354,8 @@ def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:
         if not len(mesh_data.boundaries[boundary]):  # a MeshData built by hand; files and generators name no empty one
             raise ConfigError(f"boundary condition '{kind}' names boundary {boundary!r}, which has no facets "
                               f"(the condition would act on nothing)")
-        condition = kinds[kind](boundary, table.get("value"), table.get("constants"), gdim)
+        with condition_code(kinds[kind], boundary, "__init__"):
+            condition = kinds[kind](boundary, table.get("value"), table.get("constants"), gdim)
         if _is_dirichlet(condition):
             other = next((c for c in conditions if _is_dirichlet(c) and c.boundary == boundary
                           and c.field == condition.field), None)
@@ -372,7 +403,8 @@ def free_rigid_motions(conditions: list[Condition], mesh_data, times) -> int:
     rows = [np.zeros((0, len(motions)))]
     for condition in conditions:
         vertices = np.unique(mesh_data.boundaries[condition.boundary])
-        rows.append(condition.restraint(motions[:, vertices, :], points[vertices], times))
+        with condition_code(type(condition), condition.boundary, "restraint"):
+            rows.append(condition.restraint(motions[:, vertices, :], points[vertices], times))
     held = np.vstack(rows)
     return len(motions) - (np.linalg.matrix_rank(held) if len(held) else 0)
 

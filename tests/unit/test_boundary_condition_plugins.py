@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import ufl
 
-from primordia.core.errors import ConfigError
+from primordia.core.errors import ConfigError, PluginError
 from primordia.core.meshes import rectangle
 from primordia.core.plugins import get_plugin_manager, hookimpl, registry
 from primordia.model import Model
@@ -33,10 +33,37 @@ class SolidPressureLoad(Condition):
         return {"psi": [self.formula.ufl(disc.x, disc.t) * disc.test("psi") * disc.ds(self.boundary)]}
 
 
+class BuggyLoad(Condition):
+    """A third party's kind with a bug in its terms."""
+
+    kind, field = "buggy_load", "u"
+
+    def terms(self, disc):
+        return {"u": [disc.no_such_method()]}
+
+
+class ListedLoad(Condition):
+    """A third party's kind whose terms are a list, not {field: [form, ...]}."""
+
+    kind, field = "listed_load", "u"
+
+    def terms(self, disc):
+        return [self.formula.ufl(disc.x, disc.t) * disc.test("u")[0] * disc.ds(self.boundary)]
+
+
+class UnbuildableLoad(Condition):
+    """A third party's kind whose constructor fails."""
+
+    kind, field = "unbuildable_load", "u"
+
+    def __init__(self, boundary, value=None, constants=None, gdim=2):
+        raise TypeError("unbuildable on purpose")
+
+
 class _Plugin:
     @hookimpl
     def primordia_boundary_conditions(self):
-        return [NormalPressure, SolidPressureLoad]
+        return [NormalPressure, SolidPressureLoad, BuggyLoad, ListedLoad, UnbuildableLoad]
 
 
 @pytest.fixture
@@ -47,10 +74,10 @@ def third_party_kind():
     pm.unregister(name=plugin)
 
 
-def squeezed(load: str | None):
+def squeezed(load: str | None, kind: str = "normal_pressure"):
     boundary = [{"boundary": "bottom", "type": "clamped"}]
     if load is not None:
-        boundary.append({"boundary": "top", "type": "normal_pressure", "value": load})
+        boundary.append({"boundary": "top", "type": kind, "value": load})
     model = Model(physics=["poroelasticity"], parameters={"E": 100.0, "nu": 0.3},
                   mesh=rectangle((0, 0), (1, 1), (4, 4)), dt=0.1, t_final=0.2,
                   physics_options={"poroelasticity": {"boundary": boundary}}, output={"pictures": False})
@@ -79,3 +106,18 @@ def test_a_kind_on_a_field_the_physics_lacks_is_one_line_before_the_run(third_pa
               dt=0.1, t_final=0.2, physics_options={"poroelasticity": {"boundary": boundary}})
     assert str(failure.value) == ("boundary condition 'solid_pressure_load' on 'top' acts on the field psi, "
                                   "which physics poroelasticity does not solve for (it has: u, p)")
+
+
+@pytest.mark.parametrize("kind, told", [
+    ("buggy_load", "terms failed: AttributeError: 'Discretisation' object has no attribute 'no_such_method' (at "),
+    ("listed_load", "terms must return {field name: [form, ...]}, got ["),
+    ("unbuildable_load", "__init__ failed: TypeError: unbuildable on purpose (at "),
+])
+def test_a_bug_in_a_third_party_kind_is_one_line_naming_it(third_party_kind, tmp_path, kind, told):
+    """A kind's bug was a traceback and exit status 1: its methods are called by poroelasticity or growth,
+    primordia's own modules, whose own bugs keep their tracebacks, so nothing named the kind."""
+    with pytest.raises(PluginError) as failure:
+        squeezed("2.0", kind).run(backend="skfem", out=tmp_path / "out")
+    message = str(failure.value)
+    assert message.startswith(f"boundary condition '{kind}' on 'top' ({__name__}.")
+    assert told in message and "\n" not in message
