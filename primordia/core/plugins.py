@@ -13,7 +13,9 @@ name -> class tables and reports where each piece came from.
 A plugin is trusted with nothing: a contribute hook that raises, returns
 something other than a list of named pieces of the right kind, or reuses a name
 already taken (a built-in's, or another plugin's) is named in one warning and
-its contribution skipped (a PluginError if the plugin was asked for); a choosing
+its contribution skipped (a PluginError if the plugin was asked for); a name two
+installed plugins give is used from neither, since which of them is found first
+depends on the machine, so a config naming it is one line naming both; a choosing
 hook (:func:`choose`) that raises or returns something of the wrong kind is skipped
 the same way.  Every such plugin is listed as broken by ``primordia plugins``
 (:attr:`LoadReport.broken`), which asks the backend choosers itself
@@ -76,6 +78,9 @@ HOOK_BY_KIND = {
 
 _manager: pluggy.PluginManager | None = None
 
+#: The origin of the built-in plugins.
+BUILT_IN = "primordia (built-in)"
+
 
 @dataclass(frozen=True)
 class BackendEntry:
@@ -107,6 +112,8 @@ class LoadReport:
     failures: list[str] = field(default_factory=list)  # one message per broken plugin and hook
     broken: dict[str, list[str]] = field(default_factory=dict)  # plugin name -> what is wrong with it
     skipped: dict[tuple[str, str], str] = field(default_factory=dict)  # (kind, piece name) -> why it was skipped
+    #: (kind, piece name) -> why: a name two installed plugins give, used by neither (see :func:`registry`)
+    contested: dict[tuple[str, str], str] = field(default_factory=dict)
     asked: set[str] = field(default_factory=set)  # plugins named in PRIMORDIA_PLUGINS: their failures stop the program
     #: plugins a test put in for a block (primordia.testing.registered): a name of theirs already taken stops the
     #: program, since the test would otherwise run the piece that holds it (an installed older version) unawares
@@ -137,7 +144,7 @@ def get_plugin_manager(reload: bool = False) -> pluggy.PluginManager:
     pm.load_report = LoadReport()
     for module_name in DEFAULT_PLUGINS:
         pm.register(importlib.import_module(module_name), name=module_name)
-        pm.load_report.sources[module_name] = "primordia (built-in)"
+        pm.load_report.sources[module_name] = BUILT_IN
     for entry_point in importlib.metadata.entry_points(group="primordia"):
         origin = _distribution_label(entry_point)
         try:
@@ -268,9 +275,14 @@ def registry(kind: str, pm: pluggy.PluginManager | None = None) -> dict[str, tup
     cache = pm.__dict__.setdefault("_primordia_registries", {})
     if key not in cache:
         table: dict[str, tuple[object, str]] = {}
+        for stale in [entry for entry in pm.load_report.contested if entry[0] == kind]:  # found again below if so
+            del pm.load_report.contested[stale]
         for impl in impls:
             for name, piece in _contribution(pm, kind, impl, table).items():
                 table[name] = (piece, _origin(pm, impl.plugin_name))
+        for contested_kind, name in pm.load_report.contested:
+            if contested_kind == kind:  # which plugin held it depended on the order the packages were found in
+                table.pop(name, None)
         # the entry keeps the hook functions of its key alive: an unregistered plugin's function could
         # otherwise be freed and its id taken by a newly registered one, which would get the old table
         cache[key] = (tuple(impl.function for impl in impls), table)
@@ -297,6 +309,12 @@ def _contribution(pm, kind: str, impl, taken: dict) -> dict[str, object]:
         raise PluginError(f"{where} {problem}")
     if problem:
         message = f"{where} {problem}; its {kind.replace('_', ' ')} are skipped"
+        contested = _contested(kind, pieces, taken) if reused else []
+        if contested:
+            message += (f", and neither plugin's {', '.join(repr(name) for name in contested)} is used (which one ran "
+                        f"depended on the order their packages are found in): uninstall one of them")
+            for name in contested:
+                pm.load_report.contested[kind, name] = message
         pm.load_report.report(plugin, message)
         for piece in pieces if isinstance(pieces, (list, tuple)) else ():
             name = getattr(piece, "name", None)
@@ -333,6 +351,16 @@ def _junk(kind: str, pieces, taken: dict) -> str | None:
             return f"returned {name!r}, which {twice}"
         names.append(name)
     return None
+
+
+def _contested(kind: str, pieces, taken: dict) -> list[str]:
+    """The names among ``pieces`` another installed plugin already gives (a built-in's name stays the built-in's).
+
+    Entry points come in the order their distributions are found on the path (a directory listing's), so
+    which of two plugins giving one name was registered first, and ran, depended on the machine; neither does.
+    """
+    return [piece.name for piece in pieces if getattr(piece, "name", None) in taken
+            and taken[piece.name][1] != BUILT_IN]
 
 
 def _parameter_declared_twice(piece) -> str | None:

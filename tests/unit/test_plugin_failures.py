@@ -191,3 +191,25 @@ def test_a_bug_in_a_contributed_term_is_one_line_naming_it_and_exit_status_2(pri
     assert ran.stderr.splitlines() == [
         f"primordia: error: the term buggy adds to the balance law of 'm' failed: AttributeError: 'Discretisation' "
         f"object has no attribute 'no_such_method' (at {tmp_path / 'site-packages' / 'buggy.py'}:9)"], ran.stderr
+
+
+def test_a_name_two_installed_plugins_give_is_used_from_neither(primordia_cli, small_config, plugin_distribution,
+                                                                 tmp_path):
+    """Two installed plugins giving one kinetics: the one whose distribution the path listed first ran, with a
+    warning and exit status 0, so the same config ran one plugin's kinetics on one machine and the other's on
+    another.  A config naming it is now one line naming both, exit status 2; the rest keeps working."""
+    env = _install(plugin_distribution, "frozen-copy", FROZEN_KINETICS)
+    listed = primordia_cli("plugins", env=env)
+    assert listed.returncode == 0 and "Traceback" not in listed.stderr, listed.stderr
+    warning = listed.stderr.splitlines()
+    assert len(warning) == 1 and "reuses the name 'frozen'" in warning[0], listed.stderr
+    assert "frozen" not in listing(listed.stdout)["kinetics"], listed.stdout
+    ran = primordia_cli("run", small_config(), "--out", tmp_path / "out", "--no-progress",
+                        "--set", "kinetics.name=frozen", env=env)
+    assert ran.returncode == 2 and "Traceback" not in ran.stderr, ran.stderr
+    lines = ran.stderr.splitlines()
+    assert lines[0] == warning[0] and len(lines) == 2, ran.stderr
+    assert lines[1].startswith("primordia: error: kinetics 'frozen' was skipped: ") and "uninstall one" in lines[1]
+    assert "primordia-frozen-kinetics 0.3" in lines[1] and "primordia-frozen-copy 0.1" in lines[1]
+    ran = primordia_cli("run", small_config(), "--out", tmp_path / "built-in", "--no-progress", env=env)
+    assert ran.returncode == 0 and ran.stderr.splitlines() == warning, ran.stderr
