@@ -125,8 +125,8 @@ class GrowthLaw(Configured, ABC):
     def growth_tensor(self, fields: Mapping[str, Any], t, X, dimension: int):
         """F_g = I + sum_i s_i k_i (x) k_i (the unnumbered equation after seed (4.12)), a UFL tensor."""
         tensor = ufl.Identity(dimension)
-        for stretch, k in zip(self.stretches(checked_factors(self, fields, t, X, dimension)),
-                              self.directions_at(X, dimension)):
+        stretches = _checked_terms(self, "stretches", (), dimension, checked_factors(self, fields, t, X, dimension))
+        for stretch, k in zip(stretches, _checked_terms(self, "directions_at", (dimension,), dimension, X, dimension)):
             tensor = tensor + stretch * ufl.outer(k, k)  # F_g, after (4.12c)
         return tensor
 
@@ -143,11 +143,32 @@ def _dimension_meant(directions, dimensions: Sequence[int]) -> int | None:
     return None
 
 
+def _checked_terms(law: GrowthLaw, method: str, shape: tuple[int, ...], dimension: int, *args) -> list:
+    """``law.<method>(*args)`` (``stretches``, ``directions_at``: a law may override both), checked: ``dimension``
+    UFL expressions or numbers of ``shape``.  A law's bug there, or an answer of another shape, is one line naming
+    it (:class:`PluginError`), as in :func:`checked_factors`: zip() silently dropped a missing direction."""
+    where = f"growth law {law.name}"
+    with plugin_code(f"{where}: {method} failed", passes=(PluginError,), source=type(law)):
+        terms = getattr(law, method)(*args)
+    what = "scalars" if not shape else f"vectors of {shape[0]} components"
+    if not isinstance(terms, (list, tuple)) or len(terms) != dimension:
+        raise PluginError(f"{where}: {method} must return {dimension} {what} in {dimension}D (one per direction "
+                          f"k_i), got {terms!r}")
+    for i, term in enumerate(terms, start=1):
+        try:
+            expression = ufl.as_ufl(term) if not shape else ufl.as_vector(term)
+        except Exception:  # noqa: BLE001 - anything UFL cannot take is refused below
+            expression = None
+        if expression is None or expression.ufl_shape != shape:
+            raise PluginError(f"{where}: {method} must return {what}, got {term!r} for k_{i}")
+    return list(terms)
+
+
 def checked_factors(law: GrowthLaw, fields: Mapping[str, Any], t, X, dimension: int) -> list:
     """``law.factors(...)``, checked: one scalar (a number or a UFL expression) per direction, ``dimension`` of
     them.  A law that breaks this, or whose code fails, is one line naming it (:class:`PluginError`)."""
     where = f"growth law {law.name}"
-    with plugin_code(f"{where}: factors failed", passes=(PluginError,)):  # a ConfigError too: name the law
+    with plugin_code(f"{where}: factors failed", passes=(PluginError,), source=type(law)):  # ConfigError: name it
         try:
             gammas = law.factors(fields, t, X, dimension)
         except KeyError as error:

@@ -183,3 +183,40 @@ def test_a_negative_in_plane_growth_rate_of_the_3d_law_is_one_line():
     """gamma_1 = delta_1 t is the square of a stretch: delta_1 < 0 took the root of a negative number (NaN)."""
     with pytest.raises(ConfigError, match="parameter delta_1 must be >= 0"):
         Model.from_file(Path(__file__).resolve().parents[2] / "examples" / "ex04_small.toml", ["parameters.delta_1=-0.1"])
+
+
+class _Broken(Seed2D):
+    """A third party's law overriding the methods docs/plugins.md says a law may override, wrongly."""
+
+    name = "broken_frame"
+    answer = None
+
+    def directions_at(self, X, dimension):
+        return self.answer(X, dimension) if callable(self.answer) else super().directions_at(X, dimension)
+
+
+class _BrokenStretches(Seed2D):
+    name = "broken_stretches"
+
+    def stretches(self, gammas):
+        return [positive_sqrt(gammas[0])]  # forgot the second direction
+
+
+@pytest.mark.parametrize("cls, answer, message", [
+    (_Broken, lambda X, d: [][d], "growth law broken_frame: directions_at failed: IndexError: list index out of "
+                                  "range (at "),
+    (_Broken, lambda X, d: None, "growth law broken_frame: directions_at must return 2 vectors of 2 components in "
+                                 "2D (one per direction k_i), got None"),
+    (_Broken, lambda X, d: [ufl.as_vector([1.0, 0.0]), 1.0], "growth law broken_frame: directions_at must return "
+                                                            "vectors of 2 components, got 1.0 for k_2"),
+    (_BrokenStretches, None, "growth law broken_stretches: stretches must return 2 scalars in 2D (one per "
+                             "direction k_i), got ["),
+])
+def test_a_bug_in_an_overridden_frame_or_stretch_is_one_line_naming_the_law(cls, answer, message):
+    """directions_at and stretches were called bare: a law's bug there was a traceback, and a list one direction
+    short was zipped away, a growth tensor without that direction's growth."""
+    broken = law(cls)
+    broken.answer = answer
+    with pytest.raises(PluginError) as failure:
+        broken.growth_tensor({"m": 0.75}, 1.0, None, 2)
+    assert str(failure.value).startswith(message)
