@@ -75,8 +75,8 @@ from primordia.analysis.dispersion import (
     split_transverse,
 )
 from primordia.analysis.linearisation import made_real, wave_vectors
-from primordia.core.errors import ConfigError, PrimordiaError
-from primordia.physics.kinetics.base import kinetics_code
+from primordia.core.errors import ConfigError, PluginError, PrimordiaError
+from primordia.physics.kinetics.base import Kinetics, kinetics_code
 
 #: Largest number of pseudo-transient steps towards the steady state.
 STEADY_STATE_STEPS = 200
@@ -496,7 +496,11 @@ def linearise_composition(modules, kinetics, params: Mapping, name: str = "", ch
                 f"{name or 'this model'} grows at finite strain ({module.name}): a growing tissue has no "
                 f"homogeneous steady state, so the linear analysis of seed section 3 does not apply (seed "
                 f"section 6); --chemistry-only analyses the chemistry alone")
-    homogeneous = kinetics.homogeneous()
+    with kinetics_code(kinetics, "homogeneous"):  # a third party's: one line naming it, as its rates are
+        homogeneous = kinetics.homogeneous()
+    if not isinstance(homogeneous, Kinetics) or homogeneous.species_names != kinetics.species_names:
+        raise PluginError(f"kinetics {kinetics.name}: homogeneous() must return a kinetics of the same species "
+                          f"({', '.join(kinetics.species_names)}) for the analysis to linearise, got {homogeneous!r}")
     if homogeneous is not kinetics:  # the steady state printed is not the run's initial state: say which it is
         notes.append(f"kinetics {kinetics.name} linearised where its forcing has settled, not at a run's initial "
                      f"state: {_settled(homogeneous)}")

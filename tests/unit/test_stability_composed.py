@@ -355,3 +355,39 @@ def test_dual_values_reach_the_kinetics_unchanged():
     kinetics = Painter2018(seed_parameters()).homogeneous()
     rates = kinetics.rates(seeded({"m": 2.0, "e": 0.2, "f": 0.2, "b": 0.3}, "mefb"), 0.0, DUAL)
     assert all(isinstance(rates[s], Dual) for s in "efb")
+
+
+class _SettlesBadly(Painter2018):
+    """A third party's kinetics whose homogeneous() (the state the analysis linearises) is wrong."""
+
+    name = "settles_badly"
+    answer = None
+
+    def homogeneous(self):
+        return self.answer()
+
+
+@pytest.mark.parametrize("answer, message", [
+    (lambda: {}["settled"], "kinetics settles_badly (test_stability_composed._SettlesBadly): homogeneous failed: "
+                            "KeyError: 'settled' (at "),
+    (lambda: 3, "kinetics settles_badly: homogeneous() must return a kinetics of the same species (m, e, f, b) "
+                "for the analysis to linearise, got 3"),
+])
+def test_a_bug_in_a_kinetics_homogeneous_is_one_line_naming_it(answer, message, monkeypatch):
+    """homogeneous() was called bare: a third party's bug in it was a traceback and exit status 1 from
+    primordia stability, and an answer that is no kinetics one from deep inside the analysis."""
+    from primordia.core.plugins import hookimpl
+    from primordia.testing import registered
+
+    class Plugin:
+        @hookimpl
+        def primordia_kinetics(self):
+            return [_SettlesBadly]
+
+    monkeypatch.setattr(_SettlesBadly, "answer", staticmethod(answer))
+    with registered(Plugin()):
+        model = Model(physics=["chemotaxis"], kinetics="settles_badly", mesh=rectangle((0, 0), (4, 4), (2, 2)),
+                      dt=0.1, t_final=0.2)
+        with pytest.raises(PrimordiaError) as failure:
+            linearise_model(model)
+    assert str(failure.value).startswith(message)
