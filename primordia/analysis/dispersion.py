@@ -430,6 +430,8 @@ def fastest_mode_of(rates_at, k, kind: str = "any") -> FastestMode:
         first, last = int(np.argmax(grows)), int(k.size - 1 - np.argmax(grows[::-1]))
         if first > 0:
             low = _band_edge(growth_at, k[first], k[first - 1])
+        elif k[0] > 0 and growth_at(0.0)[0] > 1e-10 * abs(rate):  # k = 0 itself grows (beyond the roots' round-off,
+            low = 0.0  # below): no edge to seek, where bisecting towards it halved k[0] 40 times and said 9.09e-16
         elif k[0] > 0 and k_max > 0:  # below the grid: ex01a's band is (0, 5.44], its conserved m's root 0 at k = 0
             low = _band_edge(growth_at, k[0], 0.0)  # by bisection towards 0, so also a band that starts above it
             # below it the rate is round-off of the roots (ex01a's ~ 0.086 k^2: ~ 1e-11 at k = 1e-5): it reaches 0

@@ -216,3 +216,17 @@ def test_a_band_below_the_grids_first_k_is_followed_down(onset, low):
     mode = fastest_mode_of(rates_at, np.linspace(1e-3, 10.0, 1000))
     # rates within round-off of 0 count as 0 (dispersion.REAL_TOLERANCE): the onset to 1e-5 of itself
     assert mode.band[0] == pytest.approx(low, rel=1e-5, abs=1e-15) and mode.band[1] == pytest.approx(5.0, rel=1e-9)
+
+
+def test_a_band_that_holds_k_0_itself_starts_at_0():
+    """An oscillatory instability whose band holds k = 0 (the homogeneous mode grows too) printed "unstable band k in
+    [9.09e-16, ...]": the bisection towards 0 halved the grid's first k 40 times, every middle growing."""
+    from primordia.analysis.dispersion import fastest_mode_of
+
+    def rates_at(k):  # 0.1 + k^2 - k^4 +- i: every k up to 1.05 grows, oscillating, the fastest at k^2 = 1/2
+        real = 0.1 + k ** 2 - k ** 4
+        return np.stack([real + 1j, real - 1j], axis=-1)
+
+    mode = fastest_mode_of(rates_at, np.linspace(1e-3, 10.0, 1000))
+    assert mode.k_max == pytest.approx(np.sqrt(0.5), rel=1e-6) and mode.band[0] == 0.0
+    assert mode.band[1] == pytest.approx(np.sqrt((1.0 + np.sqrt(1.4)) / 2.0), rel=1e-9)
