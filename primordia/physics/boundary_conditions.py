@@ -272,6 +272,16 @@ def condition_kinds() -> dict[str, type]:
     return {name: cls for name, (cls, _) in registry("boundary_conditions").items()}
 
 
+def _refuse_a_skipped_kind(kind: str) -> None:
+    """A kind a plugin gives but that was skipped (two plugins give it, or its contribution was junk): why, in one
+    line, as a kinetics or a growth law so skipped says (:func:`primordia.core.plugins.lookup`), not "unknown"."""
+    from primordia.core.plugins import get_plugin_manager
+
+    why = get_plugin_manager().load_report.skipped.get(("boundary_conditions", kind))
+    if why is not None:
+        raise PluginError(f"boundary condition type {kind!r} was skipped: {why}")
+
+
 def condition_code(kind: type, boundary: str, method: str):
     """Run ``method`` of a boundary-condition kind: a third party's bug in it is one line naming the kind, its
     class, the boundary and where in the plugin's files it happened, not a traceback.  The built-in modules
@@ -346,6 +356,7 @@ def conditions_from_config(tables, mesh_data, gdim: int) -> Conditions:
         kind = table.get("type")
         kinds = condition_kinds()
         if kind not in kinds:
+            _refuse_a_skipped_kind(kind)
             raise ConfigError(f"unknown boundary condition type {kind!r} (known: {', '.join(kinds)})")
         boundary = table.get("boundary")
         if boundary not in mesh_data.boundaries:

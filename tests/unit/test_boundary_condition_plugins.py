@@ -121,3 +121,14 @@ def test_a_bug_in_a_third_party_kind_is_one_line_naming_it(third_party_kind, tmp
     message = str(failure.value)
     assert message.startswith(f"boundary condition '{kind}' on 'top' ({__name__}.")
     assert told in message and "\n" not in message
+
+
+def test_a_kind_skipped_at_loading_says_why_not_unknown(monkeypatch):
+    """A kind two installed plugins give is used from neither; a config naming it said "unknown boundary condition
+    type", where a kinetics or a growth law so skipped says why (the plugin QA pass)."""
+    why = "plugin 'b' reuses the name 'gm_pressure' of plugin 'a'; ... uninstall one of them"
+    monkeypatch.setitem(get_plugin_manager().load_report.skipped, ("boundary_conditions", "gm_pressure"), why)
+    with pytest.raises(PluginError, match="^boundary condition type 'gm_pressure' was skipped: plugin 'b' reuses"):
+        conditions_from_config([{"boundary": "top", "type": "gm_pressure"}], rectangle((0, 0), (1, 1), (2, 2)), 2)
+    with pytest.raises(ConfigError, match="^unknown boundary condition type 'gm_pressures'"):
+        conditions_from_config([{"boundary": "top", "type": "gm_pressures"}], rectangle((0, 0), (1, 1), (2, 2)), 2)
