@@ -56,7 +56,7 @@ def plugin_code(what: str, passes: tuple[type[BaseException], ...] = (PrimordiaE
     except passes:
         raise
     except Exception as error:  # noqa: BLE001 - the plugin's own bug, stated in one line
-        raise PluginError(f"{what}: {one_line(error)}{_place_in(error, source)}") from error
+        raise PluginError(f"{what}: {one_line(error)}{place_in(error, source)}") from error
     finally:
         if outermost:
             ufl_log.removeFilter(_below_error)
@@ -75,7 +75,7 @@ def third_party_code(what: str, source, passes: tuple[type[BaseException], ...] 
     return plugin_code(what, passes, source=source)
 
 
-def _place_in(error: BaseException, source: type | None) -> str:
+def place_in(error: BaseException, source: type | None) -> str:
     """`` (at FILE:LINE)``: the innermost frame of ``error``'s traceback in the files of ``source``'s top-level
     package (or module), or "" when it passed through none of them."""
     top = sys.modules.get(getattr(source, "__module__", "").partition(".")[0])

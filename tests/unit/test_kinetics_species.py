@@ -109,3 +109,33 @@ def test_the_analysis_has_five_species():
                                     dt=0.1, t_final=0.1))
     for root in painter.rates(np.array([k]))[0]:
         assert np.min(np.abs(roots - root)) < 1e-10
+
+
+class _Unevaluable(Signal):
+    """A kinetics whose initial state raises from its own code (here on purpose; in practice a bug or a parameter)."""
+
+    name = "painter2018_unevaluable"
+
+    def initial_state(self, t0, ops):
+        raise ValueError("math domain error")
+
+
+class _UnevaluablePlugin:
+    @hookimpl
+    def primordia_kinetics(self):
+        return [_Unevaluable]
+
+
+def test_a_third_party_initial_state_that_raises_is_placed_in_its_file():
+    """It was blamed on the parameters alone, with no place: a plugin author could not tell their bug from them."""
+    from primordia.core.errors import ConfigError
+    from primordia.testing import registered as registering
+
+    with registering(_UnevaluablePlugin(), name="tests.unevaluable"):
+        with pytest.raises(ConfigError) as caught:
+            Model(physics=["chemotaxis"], kinetics={"name": "painter2018_unevaluable"},
+                  mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.1, t_final=0.2, output={"pictures": False})
+    message = str(caught.value)
+    assert message.startswith("kinetics painter2018_unevaluable: the initial state cannot be evaluated with these "
+                              "parameters (ValueError: math domain error (at "), message
+    assert f"{__file__}:" in message, message
