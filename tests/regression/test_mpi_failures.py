@@ -138,8 +138,13 @@ def primordia_kinetics():
 """
 
 
+#: The line of FLAKY_KINETICS that raises: the error names it.
+RAISE_LINE = next(n for n, line in enumerate(FLAKY_KINETICS.splitlines(), start=1) if "raise RuntimeError" in line)
+
+
 @pytest.mark.parametrize("mode, message", [
-    ("raise", "kinetics flaky_kinetics: split_rates failed: RuntimeError: flaky kinetics"),
+    ("raise", "kinetics flaky_kinetics (primordia_plugin_flaky_kinetics.Flaky): split_rates failed: RuntimeError: "
+              "flaky kinetics (at PLUGIN:LINE)"),
     ("shape", "kinetics flaky_kinetics: split_rates must return {species: (production, loss_rate)} for its species "
               "m, e, f, b, got m, e, f"),
     ("nan", "chemotaxis.m: its equations differ between MPI ranks (rank 0 and rank 1): a plugin answers otherwise "
@@ -154,6 +159,7 @@ def test_kinetics_failing_on_one_rank_is_one_line(mode, message, dry_run, tmp_pa
     result = rc.run("-p", plugin, "run", small_config(), "--set", "kinetics.name=flaky_kinetics", "--out",
                     tmp_path / "out", "--no-progress", *dry_run, ranks=2, env={"KIN_MODE": mode}, timeout=60)
     assert result.returncode == 2, result.stderr[-2000:]
+    message = message.replace("PLUGIN", str(plugin)).replace("LINE", str(RAISE_LINE))
     assert rc.primordia_lines(result.stderr) == [f"primordia: error: {message}"], result.stderr[-2000:]
 
 

@@ -44,7 +44,7 @@ class Decay(Kinetics):
 
 
 def _kinetics(name, **attributes):
-    return type(f"Kinetics_{name}", (Decay,), {"name": name, **attributes})
+    return type(f"Kinetics_{name}", (Decay,), {"name": name, "__module__": __name__, **attributes})
 
 
 class Plugin:
@@ -138,6 +138,19 @@ def test_a_kinetics_breaking_its_contract_is_one_line_naming_it(attributes, mess
         _model("qa_broken_kinetics")
     assert "qa_broken_kinetics" in str(error.value) and message in str(error.value)
     assert "\n" not in str(error.value)
+
+
+def _raising_rates(self, c, t, ops):
+    raise RuntimeError("the rates' table is not loaded")
+
+
+def test_a_kinetics_bug_at_the_input_check_names_its_class_and_place():
+    """A RuntimeError in split_rates at the input check said "kinetics NAME: split_rates failed: ..." without the
+    class or where, as the same bug in the weak forms (kinetics_code) says (the plugin QA pass)."""
+    with registered(Plugin([_kinetics("qa_raising", split_rates=_raising_rates)])), pytest.raises(PluginError) as error:
+        _model("qa_raising")
+    assert str(error.value).startswith(f"kinetics qa_raising ({__name__}.Kinetics_qa_raising): split_rates failed: "
+                                       f"RuntimeError: the rates' table is not loaded (at {__file__}:"), str(error.value)
 
 
 ATTRACTED = (Species("q", "climbs r", diffusivity="D_q", attractant="r", perturbed=True),

@@ -234,6 +234,9 @@ def kinetics_code(kinetics: Kinetics, method: str, passes: tuple[type[BaseExcept
 
 
 def _call(kinetics: Kinetics, method: str, *args):
-    # arithmetic that fails (ValueError: a math domain error) is blamed on the parameters, by the caller
-    with plugin_code(f"kinetics {kinetics.name}: {method} failed", passes=(PluginError, ArithmeticError, ValueError)):
+    # arithmetic that fails (ValueError: a math domain error) is blamed on the parameters, by the caller; anything
+    # else is named as kinetics_code names it: the class and where in its files (a RuntimeError said neither)
+    cls = type(kinetics)
+    with plugin_code(f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed",
+                     passes=(PluginError, ArithmeticError, ValueError), source=cls):
         return getattr(kinetics, method)(*args)
