@@ -71,3 +71,18 @@ def test_a_plugin_written_for_another_contract_version_is_one_warning(primordia_
     assert warning.startswith("primordia: warning: plugin 'future' (primordia-future 9.0)")
     assert f"version 2 of primordia's hook contract, this is {CONTRACT_VERSION[0]}" in warning
     assert "painter2018" in listed.stdout  # the rest keeps working
+
+
+def test_the_guides_kinetics_options_table_is_what_painter2018_takes():
+    """The guide's ``[kinetics]`` example names a real option with a value of its type (the plugin QA pass found
+    the options undocumented)."""
+    import tomllib
+
+    from primordia.core.config import merge_options
+    from primordia.physics.kinetics.painter2018 import Painter2018
+
+    tables = [tomllib.loads(block) for block in re.findall(r"```toml\n(.*?)```", GUIDE.read_text(), flags=re.S)]
+    (kinetics,) = [table["kinetics"] for table in tables if "kinetics" in table]
+    name = kinetics.pop("name")
+    assert name == Painter2018.name and kinetics
+    assert merge_options(f"kinetics {name}", Painter2018.options, kinetics) == {**Painter2018.options, **kinetics}
