@@ -73,8 +73,10 @@ def assert_backends_agree(sims: Mapping[str, object], fields: Iterable[str] | No
     """Every field (or ``fields``) at the vertices agrees between the backends' runs to ``rtol``.
 
     The difference is relative to the largest value of the field in the first run; a
-    field that is uniform in the first run fails (nothing would be compared).  Returns
-    the differences by field, for a report.
+    field that is uniform in the first run fails (nothing would be compared).  So does a
+    field that is not finite (NaN or inf) in any run: ``NaN > rtol`` is false, and a run
+    that ended in NaN would pass; and one a run lacks or holds in another shape, each
+    named as such.  Returns the differences by field, for a report.
     """
     names = list(sims)
     if len(names) < 2:
@@ -83,17 +85,33 @@ def assert_backends_agree(sims: Mapping[str, object], fields: Iterable[str] | No
     reference = values[names[0]]
     differences = {}
     for field in fields or reference:
-        expected = np.asarray(reference[field])
+        expected = _field_of(values, names[0], field)
         scale = float(np.abs(expected).max())
         if not np.ptp(expected) > 0:
             raise AssertionError(f"field {field} is uniform on {names[0]}: nothing is compared")
         for other in names[1:]:
-            difference = float(np.abs(np.asarray(values[other][field]) - expected).max()) / scale
+            actual = _field_of(values, other, field)
+            if actual.shape != expected.shape:
+                raise AssertionError(f"field {field} has values of shape {actual.shape} on {other}, "
+                                     f"{expected.shape} on {names[0]}: not the same vertices")
+            difference = float(np.abs(actual - expected).max()) / scale
             differences[field] = max(differences.get(field, 0.0), difference)
             if difference > rtol:
                 raise AssertionError(f"field {field}: {other} differs from {names[0]} by {difference:.2e} "
                                      f"(relative), more than {rtol:g}")
     return differences
+
+
+def _field_of(values: Mapping[str, Mapping], backend: str, field: str) -> np.ndarray:
+    """``field``'s vertex values in the run on ``backend``, refused when it lacks the field or a value is not finite."""
+    if field not in values[backend]:
+        raise AssertionError(f"field {field} is not a field of the run on {backend} "
+                             f"(its fields: {', '.join(sorted(values[backend]))})")
+    array = np.asarray(values[backend][field], dtype=float)
+    bad = int(np.count_nonzero(~np.isfinite(array)))
+    if bad:
+        raise AssertionError(f"field {field} is not finite on {backend} (at {bad} of its {array.size} values)")
+    return array
 
 
 try:
