@@ -62,9 +62,21 @@ def run_on_backends(model_factory: Callable[[], object], out_dir: str | Path,
     """Run a fresh model from ``model_factory()`` on each backend; the finished simulations by backend.
 
     Each run writes to ``out_dir / backend``.  A backend that cannot be imported raises
-    (:class:`~primordia.core.errors.PluginError`), it is not skipped.
+    (:class:`~primordia.core.errors.PluginError`), it is not skipped.  So does one that cannot run
+    here (the serial skfem under ``mpirun``), and an unknown or repeated name: before the first
+    run, which would otherwise have run to its end before the next backend refused.
     """
-    out_dir = Path(out_dir)
+    from mpi4py import MPI
+
+    from primordia.core.errors import ConfigError
+    from primordia.core.plugins import make_backend
+
+    out_dir, backends = Path(out_dir), list(backends)
+    for backend in backends:
+        if backends.count(backend) > 1:
+            raise ConfigError(f"backend {backend!r} is named {backends.count(backend)} times: each backend runs "
+                              f"once, into out_dir / backend")
+        make_backend(backend, MPI.COMM_WORLD)  # what Model.run makes first: its refusal, before any run
     return {backend: model_factory().run(backend=backend, out=out_dir / backend) for backend in backends}
 
 

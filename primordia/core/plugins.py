@@ -452,19 +452,34 @@ def ask_backend_choosers(pm: pluggy.PluginManager | None = None) -> None:
     """
     from mpi4py import MPI
 
-    from primordia.core.backend import Backend
     from primordia.core.errors import PrimordiaError
 
     pm = pm or get_plugin_manager()
-    entries = {name: entry for name, (entry, _) in registry("backends", pm).items()}
-    for name, entry in sorted(entries.items()):
+    for name, (entry, _) in sorted(registry("backends", pm).items()):
         if entry.availability() is not None:
             continue
         try:
-            choose("primordia_select_backend", lambda answer: isinstance(answer, Backend), pm,
-                   name=name, entries=entries, comm=MPI.COMM_SELF)
+            make_backend(name, MPI.COMM_SELF, pm)
         except PrimordiaError:
             continue
+
+
+def make_backend(name: str, comm, pm: pluggy.PluginManager | None = None):
+    """The backend ``name`` on ``comm``, as the ``primordia_select_backend`` choosers make it.
+
+    What the backend refuses (an unknown name, one that cannot be imported, the serial skfem on several
+    ranks) raises here, in one line: before a run, or runs, do any work.
+    """
+    from primordia.core.backend import Backend
+    from primordia.core.errors import PluginError
+
+    pm = pm or get_plugin_manager()
+    entries = {entry_name: entry for entry_name, (entry, _) in registry("backends", pm).items()}
+    backend = choose("primordia_select_backend", lambda answer: isinstance(answer, Backend), pm,
+                     name=name, entries=entries, comm=comm)
+    if backend is None:
+        raise PluginError(f"no plugin chose a backend for '{name}'")
+    return backend
 
 
 def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):

@@ -40,7 +40,7 @@ from primordia.core.atomic_files import StorageError, make_directory, storage_er
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import existing_run, step_time_label, time_label
-from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, registry
+from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, make_backend, registry
 from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, largest_in_place, lowest_rank_where,
                                       on_every_rank)
 from primordia.core.signals import INTERRUPTS, copy_window, signal_name
@@ -221,19 +221,12 @@ class Simulation:
         self._setup_physics()
 
     def _choose_backend(self):
-        from primordia.core.backend import Backend
-
-        pm = get_plugin_manager()
         if self.comm is None:
             from mpi4py import MPI
 
             self.comm = MPI.COMM_WORLD
         self.is_root = self.comm.rank == 0
-        entries = {name: entry for name, (entry, _) in registry("backends", pm).items()}
-        self.backend = choose("primordia_select_backend", lambda answer: isinstance(answer, Backend), pm,
-                              name=self.backend_name, entries=entries, comm=self.comm)
-        if self.backend is None:
-            raise PluginError(f"no plugin chose a backend for '{self.backend_name}'")
+        self.backend = make_backend(self.backend_name, self.comm)
 
     def _claim_directory(self):
         """Make ``out_dir`` this run's: refuse, clear or keep a run already in it (decided on rank 0 for all)."""
