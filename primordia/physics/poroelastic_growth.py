@@ -157,6 +157,10 @@ class PoroelasticGrowth(Physics):
         number(self.settings["shear_modulus"], f"{where}.shear_modulus", above=0)
         for key in ("quadrature_degree", "initial_load_steps"):
             number(self.settings[key], f"{where}.{key}", at_least=1, integer=True)
+        if self.settings["quadrature_degree"] < 2:  # one point per cell: the P2 displacement's tangent is singular
+            raise ConfigError(f"{where}.quadrature_degree = 1 integrates at one point per cell, where the P2 "
+                              f"displacement's stiffness is singular (modes that strain no point): at least 2 (the "
+                              f"default, 3, keeps the optimal convergence rates)")
         flag(self.settings["initial_equilibrium"], f"{where}.initial_equilibrium")
         if self.settings["preconditioner"] not in PRECONDITIONERS:
             raise ConfigError(f"{where}.preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
