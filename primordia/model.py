@@ -359,7 +359,13 @@ class Model:
         return sorted({*map(float, span), *self.output["times"]})
 
     def resolved_config(self) -> dict:
-        """The fully resolved configuration (defaults filled in), as written to ``config.toml``."""
+        """The fully resolved configuration (defaults filled in), as written to ``config.toml``.
+
+        Except ``output.times`` when they were not given: the default is "at t_final", whatever t_final is, and
+        written out as [t_final] it froze there.  A run extended from its config.toml with a later t_final
+        (``Model.from_file(config.toml, ["time.t_final=..."])``, or that file given to ``--restart``) wrote no
+        fields at its end, where ``--restart OUT --set time.t_final=...`` wrote them.
+        """
         mesh = (copy.deepcopy(self._mesh_spec) if isinstance(self._mesh_spec, dict)
                 else self.mesh_data.source()  # a generator's or the reader's mesh, unchanged: its table
                 or {"type": "in-memory", "vertices": self.mesh_data.num_vertices,
@@ -373,7 +379,8 @@ class Model:
             "mesh": mesh,
             "time": {"t_start": self.t_start, "dt": self.dt, "t_final": self.t_final, "adaptive": self.adaptive,
                      "dt_min": self.dt_min},
-            "output": dict(self.output),
+            "output": {key: value for key, value in self.output.items()
+                       if not (key == "times" and self.output_times_default)},
             "checkpoint": dict(self.checkpoint),
             "coupling": {"scheme": self.coupling, **self.coupling_options},
         }

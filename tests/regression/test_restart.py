@@ -281,6 +281,30 @@ def test_a_restart_that_moves_t_final_writes_the_fields_there_when_output_times_
     assert _written_times(out) == pytest.approx([0.6, 1.0, 1.2])
 
 
+def test_a_run_rebuilt_from_its_config_toml_keeps_default_output_times_following_t_final(
+        primordia_cli, small_config, tmp_path):
+    """The README's way to extend a run from Python, Model.from_file(its config.toml, ["time.t_final=..."]), and
+    `primordia run OUT/config.toml --restart OUT`: config.toml froze the default output.times as [the old
+    t_final], so the longer run wrote no fields at its end, where `--restart OUT --set time.t_final=...` did."""
+    from primordia import Model
+
+    out = tmp_path / "default"
+    assert primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set", "time.t_final=0.6"
+                         ).returncode == 0
+    longer = Model.from_file(out / "config.toml", ["time.t_final=1.0"])
+    assert longer.output["times"] == [1.0]
+    longer.run(out=out, restart=True)
+    assert _written_times(out) == pytest.approx([0.6, 1.0])
+    again = primordia_cli("run", out / "config.toml", "--restart", out, "--no-progress", "--set", "time.t_final=1.4")
+    assert again.returncode == 0, again.stderr
+    assert _written_times(out) == pytest.approx([0.6, 1.0, 1.4])
+    # times that were given stay in config.toml as given
+    given = tmp_path / "given"
+    assert primordia_cli("run", small_config(), "--out", given, "--no-progress", "--set", "time.t_final=0.6",
+                         "--set", "output.times=[0.6]").returncode == 0
+    assert Model.from_file(given / "config.toml", ["time.t_final=1.0"]).output["times"] == [0.6]
+
+
 def test_a_killed_run_is_named_killed_and_a_restart_refuses_another_model(primordia_cli, small_config, tmp_path):
     out = tmp_path / "out"
     process = rc.start("run", small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[16,16]",
