@@ -126,7 +126,7 @@ class ResolvedConfig(Output):
 
     def start(self, run):
         if run.is_root:
-            write_toml(run.out_dir / "config.toml", run.model.resolved_config())
+            write_toml(run.out_dir / "config.toml", run.resolved_config())
 
 
 class FieldsXdmf(Output):

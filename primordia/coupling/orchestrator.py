@@ -491,7 +491,7 @@ class Simulation:
         """Rank 0 writes the checkpoint: (whether it is written, why a full disk refused it); another failure
         is warned about, and the run goes on."""
         tree = {
-            "config": self.model.resolved_config(), "output_times_default": self.model.output_times_default,
+            "config": self.resolved_config(), "output_times_default": self.model.output_times_default,
             "backend": self.backend.name, "mpi_ranks": self.comm.size,
             "named_plugins": os.environ.get(PLUGINS_VARIABLE, ""),  # -p's: what a restart must load again
             "mesh": self.model.mesh_data.fingerprint(),
@@ -518,6 +518,18 @@ class Simulation:
             return False, None
         return True, None
 
+    def resolved_config(self) -> dict:
+        """The model's resolved configuration (``config.toml``, the checkpoint's), naming the backend this run is on.
+
+        ``Model.run(backend=...)`` and ``Simulation(model, backend=...)`` may run a model on another backend than
+        its ``[model] backend``: both files named the model's, so config.toml misstated the run, and the command's
+        ``--restart`` of it was refused ("it was written on backend skfem, this run is on fenicsx"; with
+        ``--backend skfem``, "model.backend differs from the checkpointed run's").
+        """
+        resolved = self.model.resolved_config()
+        resolved["model"]["backend"] = self.backend_name
+        return resolved
+
     def _read_checkpoint(self) -> dict:
         tree, problem = None, None
         if self.is_root:
@@ -541,7 +553,10 @@ class Simulation:
                     f"and {why}")
         if tree["backend"] != self.backend.name:
             return f"{where}: it was written on backend {tree['backend']}, this run is on {self.backend.name}"
-        differences = self.model.differences(tree["config"])
+        from primordia.model import CHANGEABLE_ON_RESTART
+
+        # the backend is the one just checked, which Model.run(backend=...) may have chosen over the model's own
+        differences = self.model.differences(tree["config"], (*CHANGEABLE_ON_RESTART, "model.backend"))
         if differences:
             key = differences[0]
             return f"{where}: {key} differs from the checkpointed run's (a restart continues the same model)"

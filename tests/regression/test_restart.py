@@ -305,6 +305,30 @@ def test_a_run_rebuilt_from_its_config_toml_keeps_default_output_times_following
     assert Model.from_file(given / "config.toml", ["time.t_final=1.0"]).output["times"] == [0.6]
 
 
+def test_a_run_given_another_backend_from_python_names_it_and_is_continued_on_it(
+        primordia_cli, small_config, tmp_path):
+    """Model.run(backend="skfem") on a model of the default backend wrote model.backend = "fenicsx" into config.toml
+    and the checkpoint: `primordia run --restart OUT` said "it was written on backend skfem, this run is on
+    fenicsx", and with --backend skfem "model.backend differs from the checkpointed run's"."""
+    import tomllib
+
+    from primordia import Model
+
+    out = tmp_path / "skfem"
+    Model.from_file(small_config(), ["time.t_final=0.6"]).run(backend="skfem", out=out)
+    with open(out / "config.toml", "rb") as stream:
+        assert tomllib.load(stream)["model"]["backend"] == "skfem"
+    longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=0.8")
+    assert longer.returncode == 0, longer.stderr
+    assert "on skfem" in longer.stdout
+    # the model as it was built, run again on the backend it was given, continues too
+    sim = Model.from_file(small_config(), ["time.t_final=1.0"]).run(backend="skfem", out=out, restart=True)
+    assert (sim.status, sim.restarts, sim.time) == ("completed", 2, 1.0)
+    refused = primordia_cli("run", "--restart", out, "--no-progress", "--backend", "fenicsx")
+    assert refused.returncode == 2
+    assert refused.stderr.strip().endswith("it was written on backend skfem, this run is on fenicsx")
+
+
 def test_a_killed_run_is_named_killed_and_a_restart_refuses_another_model(primordia_cli, small_config, tmp_path):
     out = tmp_path / "out"
     process = rc.start("run", small_config(), "--set", "time.t_final=400.0", "--set", "mesh.cells=[16,16]",
