@@ -19,6 +19,7 @@ SIGUSR1 (what to send ``mpirun``) stop a run between two steps with a checkpoint
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import traceback
@@ -110,11 +111,12 @@ def command_run(args) -> int:
         overrides.append(f"model.backend={args.backend}")
     if args.restart is not None:
         out = Path(args.restart)
-        config = config_.load_config(args.config) if args.config is not None else _checkpointed_config(out)
-        try:
-            model = Model.from_config(config_.apply_overrides(config, overrides))
-        except PluginError as error:  # e.g. the run's kinetics came from a file given by -p, not given now
-            raise PluginError(f"{error}{_plugins_of_the_run(out)}") from None
+        with _start_up_of_a_restart(out, args.dry_run):
+            config = config_.load_config(args.config) if args.config is not None else _checkpointed_config(out)
+            try:
+                model = Model.from_config(config_.apply_overrides(config, overrides))
+            except PluginError as error:  # e.g. the run's kinetics came from a file given by -p, not given now
+                raise PluginError(f"{error}{_plugins_of_the_run(out)}") from None
     else:
         model = Model.from_file(args.config, overrides)
         out = Path(args.out) if args.out is not None else Path("out") / Path(args.config).stem
@@ -124,8 +126,9 @@ def command_run(args) -> int:
         existing = "restart" if args.restart is not None else "overwrite" if args.overwrite else "refuse"
         return _report_dry_run(model, out, existing)
     _warn_about_a_slow_blas()
-    sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
-                    restart=args.restart is not None, continue_with=f"primordia run --restart {out}")
+    with _start_up_of_a_restart(out if args.restart is not None else None):
+        sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
+                        restart=args.restart is not None, continue_with=f"primordia run --restart {out}")
     final = sim.summary(sim.status)  # collective (reductions over ranks): every rank calls it
     if sim.is_root:
         restarted = f" (restart {sim.restarts})" if sim.restarts else ""
@@ -133,6 +136,32 @@ def command_run(args) -> int:
         print(f"primordia: {sim.status}{restarted}: {sim.step_index} steps{rejected} on {final['backend']} "
               f"({final['cells']} cells, {final['dofs_total']} dofs) in {sim.wall_time:.1f} s -> {out}")
     return 0
+
+
+@contextlib.contextmanager
+def _start_up_of_a_restart(out: Path | None, dry_run: bool = False):
+    """A signal before the first step of a restart (of the run in ``out``; None: not a restart) is said as the
+    restart's, with how the run goes on: its checkpoint is as it was.  It was said as a new run's, "interrupted
+    (SIGTERM) during start-up, before the first step", of a run at t = 400 whose summary.json said where it was."""
+    try:
+        yield
+    except KeyboardInterrupt as interrupted:
+        if out is None or dry_run or str(interrupted):  # a run that stepped says where it stopped itself
+            raise
+        import signal
+
+        from primordia.core import checkpoint
+        from primordia.core.outputs import step_time_label
+
+        signum = getattr(interrupted, "signum", None) or INTERRUPTS.received or signal.SIGINT
+        try:
+            meta = checkpoint.read_meta(out / checkpoint.CHECKPOINT_FILE)
+            how = (f"; primordia run --restart {out} continues it from its checkpoint at "
+                   f"t = {step_time_label(meta['run']['time'])}")
+        except (PrimordiaError, KeyError, TypeError):
+            how = ""
+        raise InterruptedRun(signum, f"interrupted ({signal_name(signum)}) during the restart's start-up, before "
+                                     f"its first step{how}") from None
 
 
 def _warn_about_a_slow_blas() -> None:

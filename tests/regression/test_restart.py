@@ -211,6 +211,45 @@ def primordia_outputs():
 """
 
 
+SIGNAL_AT_RESUME = """\
+import os
+import signal
+
+from primordia.core.outputs import Output
+from primordia.core.plugins import hookimpl
+
+
+class SignalAtResume(Output):
+    name = "signal_at_resume"
+
+    def resume(self, run, state):
+        os.kill(os.getpid(), signal.SIGTERM)  # a scheduler's SIGTERM while the restart sets up
+
+
+@hookimpl
+def primordia_outputs():
+    return [SignalAtResume]
+"""
+
+
+def test_a_restart_stopped_during_its_start_up_says_how_the_run_goes_on(small_config, tmp_path):
+    """It said "interrupted (SIGTERM) during start-up, before the first step", as a new run's start-up, of a run
+    at t = 0.6 whose summary.json said "interrupted at t = 0.6": nothing said its checkpoint was still there."""
+    plugin = tmp_path / "signal_at_resume.py"
+    plugin.write_text(SIGNAL_AT_RESUME)
+    out = tmp_path / "out"
+    assert rc.run("run", small_config(), "--set", "time.t_final=0.6", "--no-progress", "--out", out).returncode == 0
+    stopped = rc.run("-p", plugin, "run", "--restart", out, "--set", "time.t_final=1.0", "--no-progress")
+    assert stopped.returncode == 128 + signal.SIGTERM, stopped.stderr
+    assert stopped.stderr.splitlines() == [
+        f"primordia: interrupted (SIGTERM) during the restart's start-up, before its first step; "
+        f"primordia run --restart {out} continues it from its checkpoint at t = 0.6"]
+    assert rc.summary(out)["status"] == "interrupted at t = 0.6 (SIGTERM)"
+    again = rc.run("run", "--restart", out, "--set", "time.t_final=1.0", "--no-progress")
+    assert again.returncode == 0, again.stderr
+    assert (rc.summary(out)["status"], rc.summary(out)["time"]) == ("completed", 1.0)
+
+
 def test_a_signal_while_a_failed_run_stops_leaves_the_failure_its_line(small_config, tmp_path):
     """The run had failed (dt_min) when the signal came: its line is the failure's, exit status 2.  It was
     "primordia: interrupted (SIGTERM) during start-up, before the first step" and 143 (seen under mpirun -n 4:
