@@ -735,6 +735,8 @@ class Simulation:
                 INTERRUPTS.reset()
             if isinstance(exc, StorageError):
                 raise StorageError(self._stopped_by_storage(str(exc))) from None
+            if isinstance(exc, SolverError) and exc.depends_on_step and self.is_root:
+                raise SolverError(self._failed_step(str(exc))) from None
             raise
         bar.close()
         with INTERRUPTS.installed(), INTERRUPTS.mode_of("shielded"):
@@ -758,6 +760,14 @@ class Simulation:
         if not self.is_root:
             return failure
         return f"{failure}; the run stopped at t = {step_time_label(self.time)} ({self._how_it_continues()})"
+
+    def _failed_step(self, failure: str) -> str:
+        """The line of a step that failed at every dt down to dt_min, with how the run goes on: the checkpoint
+        just written holds every step before it, and a restart may change what failed (README, "Long runs")."""
+        how = self._how_it_continues()
+        if how.startswith(self.restart_hint):
+            how += " (a restart may change [solver], time.adaptive and time.dt_min)"
+        return f"{(failure.splitlines() or [''])[0]}; {how}"
 
     def _how_it_continues(self) -> str:
         """How a run stopped before its last step was checkpointed goes on: from the checkpoint in its folder."""

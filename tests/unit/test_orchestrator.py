@@ -480,7 +480,11 @@ def test_without_adaptive_steps_a_failed_step_stops_the_run_naming_it(watching, 
     sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, adaptive=False), out_dir=tmp_path).setup()
     with pytest.raises(SolverError) as caught:
         sim.run()
-    assert one_line(caught) == "step 2 (t = 0.2 -> 0.4): recorder: injected failure at t = 0.4"
+    # with how the run goes on (the restart QA pass: the README said --restart continues it, the line
+    # did not): from the checkpoint of the steps before, with what a restart may change
+    assert one_line(caught) == ("step 2 (t = 0.2 -> 0.4): recorder: injected failure at t = 0.4; primordia run "
+                                f"--restart {tmp_path} continues it from its checkpoint at t = 0.2 (a restart may "
+                                "change [solver], time.adaptive and time.dt_min)")
     assert (sim.step_index, sim.time) == (1, DT)  # the failed step was undone
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["status"].startswith("stopped at t = 0.2: step 2 (t = 0.2 -> 0.4)")
