@@ -451,7 +451,7 @@ def test_strang_s_fluid_source_reads_the_chemistry_s_rate_over_its_own_half_step
     the mechanics runs over dt, and (m - m^n) / dt halved it: p moved away from the fixed-point solution as dt
     shrank (relative distances 7.8e-6, 1.18e-5, 1.39e-5 at dt = 0.05, 0.025, 0.0125).  Over the chemistry's own
     half step it converges at first order (9.49e-6, 4.65e-6, 2.30e-6, orders 1.03, 1.01; skfem the same).
-    Until 2026-12-06 this took two dt and asked only for a ratio below 0.7 (an order above 0.5), and its
+    Until 2026-12-05 this took two dt and asked only for a ratio below 0.7 (an order above 0.5), and its
     docstring and the README gave distances (2.68e-4, 1.33e-4) that this configuration does not give."""
     base = ["mesh.cells=[6,6]", "mesh.upper=[4.0,4.0]", "time.t_final=0.4", "output.times=[0.4]",
             "output.pictures=false", "parameters.ell_0=0.05", "kinetics.priming_wave=false",
