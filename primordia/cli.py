@@ -313,11 +313,14 @@ def _command(argv: list[str] | None) -> int:
         try:
             parser = build_parser()
             args = parser.parse_args(argv)
-            _refuse_an_unwritable_tmpdir()
-            _broken_pipes_raise()
-            _refuse_ranks_for_a_serial_command(args.command)
-            _errors_comm()
-            _name_plugins(args.plugins)
+            restart = getattr(args, "restart", None)  # its start-up begins here, with PETSc's and MPI's (0.5 s)
+            restart = Path(restart) if restart is not None else None
+            with _start_up_of_a_restart(restart, getattr(args, "dry_run", False)):
+                _refuse_an_unwritable_tmpdir()
+                _broken_pipes_raise()
+                _refuse_ranks_for_a_serial_command(args.command)
+                _errors_comm()
+                _name_plugins(args.plugins)
             return args.func(args)
         except BrokenPipeError:  # `primordia plugins | head`: the reader has all it wanted
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing more to flush at exit

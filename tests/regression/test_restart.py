@@ -250,6 +250,25 @@ def test_a_restart_stopped_during_its_start_up_says_how_the_run_goes_on(small_co
     assert (rc.summary(out)["status"], rc.summary(out)["time"]) == ("completed", 1.0)
 
 
+def test_a_restart_stopped_before_the_command_itself_starts_says_so_too(small_config, tmp_path, monkeypatch, capsys):
+    """A signal in the restart's first half second (PETSc's and MPI's start, before the command reads the
+    checkpoint) still said "during start-up, before the first step", as a new run's (the restart QA pass)."""
+    import primordia.cli
+    from primordia.core.errors import InterruptedRun
+
+    out = tmp_path / "out"
+    assert rc.run("run", small_config(), "--set", "time.t_final=0.6", "--no-progress", "--out", out).returncode == 0
+
+    def signalled():
+        raise InterruptedRun(signal.SIGTERM)
+
+    monkeypatch.setattr(primordia.cli, "_broken_pipes_raise", signalled)
+    assert primordia.cli.main(["run", "--restart", str(out), "--no-progress"]) == 128 + signal.SIGTERM
+    assert capsys.readouterr().err.splitlines() == [
+        f"primordia: interrupted (SIGTERM) during the restart's start-up, before its first step; "
+        f"primordia run --restart {out} continues it from its checkpoint at t = 0.6"]
+
+
 def test_a_signal_while_a_failed_run_stops_leaves_the_failure_its_line(small_config, tmp_path):
     """The run had failed (dt_min) when the signal came: its line is the failure's, exit status 2.  It was
     "primordia: interrupted (SIGTERM) during start-up, before the first step" and 143 (seen under mpirun -n 4:
