@@ -88,6 +88,13 @@ def place_in(error: BaseException, source: type | None) -> str:
     return f" (at {places[-1][0]}:{places[-1][1]})" if places else ""
 
 
+#: What primordia imports that pip does not install (``pyproject.toml`` declares none of them): built against the
+#: system's PETSc, MPI and HDF5, the ones dolfinx links (Debian's python3-dolfinx and python3-h5py-mpi, in a venv
+#: made with ``--system-site-packages``; README, "Backends").  pip's h5py wheel carries an HDF5 of its own, which
+#: fails beside dolfinx's in one process ("Not a datatype"), so h5py is not declared either.
+SYSTEM_PACKAGES = ("dolfinx", "basix", "petsc4py", "mpi4py", "h5py")
+
+
 class SolverError(PrimordiaError):
     """A solve failed (diverged linear or nonlinear solver, NaN in a field).
 

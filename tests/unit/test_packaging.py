@@ -1,0 +1,79 @@
+"""What a user who ``pip install``s primordia (not editable, outside this repository) gets.
+
+Every package the code imports is declared in its ``pyproject.toml`` (a dependency or an extra), or is one of
+the system's that pip must not install (:data:`primordia.core.errors.SYSTEM_PACKAGES`, README "Backends"): an
+import of a package declared nowhere works here, in the repository's venv that sees Debian's packages, and
+fails in the user's environment.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.metadata
+import re
+import sys
+import tomllib
+from pathlib import Path
+
+from packaging.requirements import Requirement
+
+from primordia.core.errors import SYSTEM_PACKAGES
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def canonical(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def imported_packages(package: Path) -> dict[str, str]:
+    """The top-level names of the third-party packages ``package``'s modules import (anywhere in a module, a
+    function's body too), each with the first place that imports it."""
+    own = {package.name, "primordia"}
+    found: dict[str, str] = {}
+    for path in sorted(package.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            for name in names:
+                top = name.partition(".")[0]
+                if top not in sys.stdlib_module_names and top not in own:
+                    found.setdefault(top, f"{path.relative_to(ROOT)}:{node.lineno}")
+    return found
+
+
+def declared_distributions(pyproject: Path) -> set[str]:
+    """The distributions ``pyproject``'s dependencies and extras bring: their names, and those of the extras they
+    ask for (``dask[distributed]`` brings distributed)."""
+    project = tomllib.loads(pyproject.read_text())["project"]
+    requirements = [Requirement(text) for text in project.get("dependencies", [])]
+    requirements += [Requirement(text) for extra in project.get("optional-dependencies", {}).values()
+                     for text in extra]
+    names = {canonical(requirement.name) for requirement in requirements}
+    for requirement in requirements:
+        for extra in requirement.extras:
+            for text in importlib.metadata.requires(requirement.name) or []:
+                brought = Requirement(text)
+                if brought.marker is not None and brought.marker.evaluate({"extra": extra}):
+                    names.add(canonical(brought.name))
+    return names
+
+
+def undeclared(package: Path, pyproject: Path) -> list[str]:
+    distributions = importlib.metadata.packages_distributions()
+    declared = declared_distributions(pyproject)
+    return [f"{name} (imported at {where})" for name, where in imported_packages(package).items()
+            if name not in SYSTEM_PACKAGES
+            and not {canonical(dist) for dist in distributions.get(name, [name])} & declared]
+
+
+def test_every_package_primordia_imports_is_declared_or_the_systems():
+    """h5py (every run's fields.xdmf, the mesh and run readers) was declared nowhere: not in pyproject.toml, not
+    among the system packages the README names beside petsc4py and mpi4py.  pip cannot declare it (its wheel's
+    own HDF5 fails beside dolfinx's), so it is the system's, and said so."""
+    assert undeclared(ROOT / "primordia", ROOT / "pyproject.toml") == []
+    assert "h5py" in SYSTEM_PACKAGES
