@@ -10,8 +10,8 @@
     primordia sweep CONFIG.toml --vary SECTION.KEY=LO:HI:N ... [--seeds N] [--scheduler ADDRESS]
 
 A user's mistake (unknown parameter, wrong sign, missing file, impossible mesh,
-unknown backend or plugin) is printed as one line ``primordia: error: ...`` and
-exits with status 2; outputs already written stay on disk.  Ctrl-C, SIGTERM and
+unknown backend or plugin, a system package not installed: petsc4py, mpi4py, h5py) is printed as one line
+``primordia: error: ...`` and exits with status 2; outputs already written stay on disk.  Ctrl-C, SIGTERM and
 SIGUSR1 (what to send ``mpirun``) stop a run between two steps with a checkpoint
 (exit status 128 + the signal: 130, 143, 138); ``--restart OUT_DIR`` continues it in place.
 """
@@ -26,7 +26,8 @@ import traceback
 from pathlib import Path
 
 from primordia.core import compiled
-from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, is_root_process, mpi_world
+from primordia.core.errors import (ConfigError, InterruptedRun, PluginError, PrimordiaError, is_root_process,
+                                   missing_system_package, mpi_world)
 from primordia.core.signals import HANDLED, INTERRUPTS, signal_name
 
 EXIT_USAGE = 2
@@ -327,13 +328,18 @@ def _command(argv: list[str] | None) -> int:
             return EXIT_BROKEN_PIPE
         except KeyboardInterrupt as interrupted:
             return _interrupted(interrupted)
-        except PrimordiaError as exc:
+        except (PrimordiaError, ModuleNotFoundError) as exc:
             if INTERRUPTS.received:  # a signal that came back as a failed solve or an unreadable file
                 return _interrupted(InterruptedRun(INTERRUPTS.received))
-            line = f"primordia: error: {(str(exc).splitlines() or [''])[0]}"
+            error = exc if isinstance(exc, PrimordiaError) else missing_system_package(exc)
+            if error is None:  # a module primordia's own dependencies should have brought: a bug
+                _abort_other_ranks(exc)
+                raise
+            line = f"primordia: error: {(str(error).splitlines() or [''])[0]}"
             if is_root_process():
                 print(line, file=sys.stderr)
-            _stop_together(line)
+            if error is exc or "mpi4py.MPI" in sys.modules:  # without mpi4py the ranks cannot agree: each stops
+                _stop_together(line)
             return EXIT_USAGE
         except Exception as exc:
             if INTERRUPTS.received:

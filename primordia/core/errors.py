@@ -95,6 +95,18 @@ def place_in(error: BaseException, source: type | None) -> str:
 SYSTEM_PACKAGES = ("dolfinx", "basix", "petsc4py", "mpi4py", "h5py")
 
 
+def missing_system_package(error: BaseException) -> PrimordiaError | None:
+    """The one line for a :data:`SYSTEM_PACKAGES` package that cannot be imported (``error`` a
+    ``ModuleNotFoundError``), or ``None`` for any other error: an installation to complete, not a bug."""
+    name = (getattr(error, "name", None) or "").partition(".")[0]
+    if not isinstance(error, ModuleNotFoundError) or name not in SYSTEM_PACKAGES:
+        return None
+    return PrimordiaError(f"{name} is not installed: primordia needs petsc4py, mpi4py and h5py built against the "
+                          f"system's PETSc, MPI and HDF5, which pip does not install (Debian: apt-get install "
+                          f"python3-dolfinx python3-h5py-mpi, and a venv made with --system-site-packages; "
+                          f"README, \"Backends\")")
+
+
 class SolverError(PrimordiaError):
     """A solve failed (diverged linear or nonlinear solver, NaN in a field).
 

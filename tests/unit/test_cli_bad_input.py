@@ -521,3 +521,26 @@ def test_a_reader_that_stops_reading_ends_the_command_quietly(args, tmp_path):
 def test_python_dash_m_primordia_is_the_command():
     result = subprocess.run([sys.executable, "-m", "primordia", "--help"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0 and result.stdout.startswith("usage: primordia") and "``" not in result.stdout
+
+
+@pytest.mark.parametrize("missing, command", [
+    ("petsc4py", ["plugins"]),
+    ("mpi4py", ["run", "CONFIG", "--backend", "skfem"]),
+    ("h5py", ["analyse", "RUN"]),
+], ids=["petsc4py-plugins", "mpi4py-run", "h5py-analyse"])
+def test_a_missing_system_package_is_one_line(primordia_cli, small_config, tmp_path, missing, command):
+    """petsc4py, mpi4py and h5py are the system's, not pip's (README, "Backends"): ``pip install primordia`` into
+    an environment without them gave every command a traceback ending in ModuleNotFoundError (from the plugin
+    manager's built-in modules for ``plugins``, ``run`` and ``stability``)."""
+    run = tmp_path / "run"
+    if "RUN" in command:
+        assert primordia_cli("run", small_config(), "--out", run, "--no-progress").returncode == 0
+    shadow = tmp_path / "shadow" / missing
+    shadow.mkdir(parents=True)
+    (shadow / "__init__.py").write_text(f"raise ModuleNotFoundError({f'No module named {missing!r}'!r}, "
+                                        f"name={missing!r})\n")
+    path = os.pathsep.join(filter(None, [str(shadow.parent), os.environ.get("PYTHONPATH")]))
+    env = {**os.environ, "PYTHONPATH": path}
+    arguments = [run if item == "RUN" else small_config() if item == "CONFIG" else item for item in command]
+    result = primordia_cli(*arguments, *(["--out", tmp_path / "out"] if command[0] == "run" else []), env=env)
+    assert_one_line_error(result, f"{missing} is not installed", "pip does not install", "python3-h5py-mpi")
