@@ -15,6 +15,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pytest
 from packaging.requirements import Requirement
 
 from primordia.core.errors import SYSTEM_PACKAGES
@@ -77,3 +78,15 @@ def test_every_package_primordia_imports_is_declared_or_the_systems():
     own HDF5 fails beside dolfinx's), so it is the system's, and said so."""
     assert undeclared(ROOT / "primordia", ROOT / "pyproject.toml") == []
     assert "h5py" in SYSTEM_PACKAGES
+
+
+PLUGINS = sorted(path.parent for path in (ROOT / "plugins").glob("*/pyproject.toml"))
+
+
+@pytest.mark.parametrize("plugin", PLUGINS, ids=[path.name for path in PLUGINS])
+def test_every_package_an_example_plugin_imports_is_declared(plugin):
+    """The example plugins, "complete packages to copy" (docs/plugins.md), imported numpy, pluggy and ufl and
+    declared only primordia: each was there only because primordia happens to depend on it too, which a plugin
+    copied from them (or a later primordia) need not keep."""
+    (package,) = tomllib.loads((plugin / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    assert undeclared(plugin / package, plugin / "pyproject.toml") == []
