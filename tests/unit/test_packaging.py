@@ -11,8 +11,11 @@ from __future__ import annotations
 import ast
 import importlib.metadata
 import re
+import shutil
+import subprocess
 import sys
 import tomllib
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -90,3 +93,19 @@ def test_every_package_an_example_plugin_imports_is_declared(plugin):
     copied from them (or a later primordia) need not keep."""
     (package,) = tomllib.loads((plugin / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
     assert undeclared(plugin / package, plugin / "pyproject.toml") == []
+
+
+def test_the_wheel_holds_every_file_of_the_package(tmp_path):
+    """A non-editable install has only what the wheel holds: primordia/analysis/README.md, which the
+    package's docstring points to ("see README.md here"), was left out (setuptools ships modules only)."""
+    tracked = subprocess.run(["git", "ls-files", "primordia"], cwd=ROOT, capture_output=True, text=True, check=True)
+    source = tmp_path / "source"
+    for name in ["pyproject.toml", "README.md", *tracked.stdout.split()]:
+        (source / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ROOT / name, source / name)
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
+                    "-w", tmp_path / "dist", source], capture_output=True, text=True, check=True, timeout=120)
+    (wheel,) = (tmp_path / "dist").glob("primordia-*.whl")
+    with zipfile.ZipFile(wheel) as archive:
+        shipped = set(archive.namelist())
+    assert [name for name in tracked.stdout.split() if name not in shipped] == []
