@@ -109,3 +109,7 @@ def test_the_wheel_holds_every_file_of_the_package(tmp_path):
     with zipfile.ZipFile(wheel) as archive:
         shipped = set(archive.namelist())
     assert [name for name in tracked.stdout.split() if name not in shipped] == []
+    # the version is written once, in primordia.__version__ (it was written twice, in pyproject.toml too)
+    import primordia
+
+    assert wheel.name.startswith(f"primordia-{primordia.__version__}-"), wheel.name
