@@ -301,6 +301,7 @@ def _compile(command: list[str], libraries: list[str], target: Path) -> Path:
                                     capture_output=True, text=True, timeout=120)
             if result.returncode != 0:
                 raise subprocess.SubprocessError(result.stderr or f"the compiler exited with {result.returncode}")
+            os.chmod(output.name, 0o755)  # a library's mode: the temporary file was the owner's alone (0600)
             os.replace(output.name, target)
         finally:
             if os.path.exists(output.name):

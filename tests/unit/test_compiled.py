@@ -63,6 +63,9 @@ def test_a_new_cache_is_built_once_and_then_loaded(fresh):
     assert compiled.kernels() is not None
     assert built[0].stat().st_ino == inode  # loaded, not built again (a build renames a new file over it)
     assert not [p for p in built[0].parent.iterdir() if p.name.startswith(".")]  # no temporary file left
+    # readable by the others who share a cache (PRIMORDIA_CACHE_DIR on a cluster): the compiler wrote into the
+    # private temporary file, whose 0600 it kept (0711 with the execute bits), and they built their own
+    assert built[0].stat().st_mode & 0o777 == 0o755, oct(built[0].stat().st_mode)
 
 
 def test_the_cache_keeps_the_builds_used_last_and_drops_older_ones_and_stale_temporaries(fresh):
