@@ -179,18 +179,26 @@ def _warn_about_a_slow_blas() -> None:
 
 
 def _plugins_of_the_run(out: Path) -> str:
-    """A hint naming the plugins the checkpointed run in ``out`` loaded by ``-p`` and this process did not."""
+    """A hint naming the plugins the checkpointed run in ``out`` loaded and this process did not: by ``-p``, or
+    installed (a distribution uninstalled since, or a venv without it: "unknown kinetics" said nothing more)."""
     from primordia.core import checkpoint
-    from primordia.core.plugins import PLUGINS_VARIABLE
+    from primordia.core.plugins import PLUGINS_VARIABLE, get_plugin_manager
 
     try:
-        named = checkpoint.read_meta(out / checkpoint.CHECKPOINT_FILE).get("named_plugins") or ""
+        meta = checkpoint.read_meta(out / checkpoint.CHECKPOINT_FILE)
     except PrimordiaError:
         return ""
+    named = meta.get("named_plugins") or ""
     loaded = os.environ.get(PLUGINS_VARIABLE, "").split(",")
     missing = [item for item in named.split(",") if item and item not in loaded]
-    return (f" (the run loaded {', '.join(missing)} with -p: give it again, primordia -p {missing[0]} run --restart "
-            f"{out})") if missing else ""
+    if missing:
+        return (f" (the run loaded {', '.join(missing)} with -p: give it again, primordia -p {missing[0]} run "
+                f"--restart {out})")
+    sources = get_plugin_manager().load_report.sources
+    plugins = (meta.get("software") or {}).get("plugins") or {}
+    gone = [f"{plugin} from {origin}" for plugin, origin in plugins.items()
+            if plugin not in sources and not origin.endswith(f"({PLUGINS_VARIABLE})")]
+    return f" (the run was made with the plugin {', '.join(gone)}, not installed here)" if gone else ""
 
 
 def _checkpointed_config(out: Path) -> dict:

@@ -482,6 +482,33 @@ def make_backend(name: str, comm, pm: pluggy.PluginManager | None = None):
     return backend
 
 
+#: The libraries whose versions a run records (:func:`software`), by the name they are imported as.
+RECORDED_LIBRARIES = ("numpy", "ufl", "dolfinx", "skfem")
+
+
+def software(pm: pluggy.PluginManager | None = None) -> dict:
+    """What this process computes with: primordia's, Python's, PETSc's and the imported numerical libraries'
+    versions, and every plugin loaded besides the built-ins with where it came from (a distribution and its
+    version, or the file given by ``-p``).  A run records it (``summary.json``, its checkpoint), so that a
+    result can be made again, and a restart where a plugin is missing names the one that made the run."""
+    import platform
+
+    from primordia import __version__
+
+    pm = pm or get_plugin_manager()
+    versions = {"primordia": __version__, "python": platform.python_version()}
+    petsc = sys.modules.get("petsc4py.PETSc")
+    if petsc is not None:
+        versions["petsc"] = ".".join(str(part) for part in petsc.Sys.getVersion())
+    for name in RECORDED_LIBRARIES:
+        module = sys.modules.get(name)
+        if module is not None and getattr(module, "__version__", None):
+            versions[name] = str(module.__version__)
+    plugins = {plugin: origin for plugin, origin in sorted(pm.load_report.sources.items())
+               if origin != BUILT_IN and plugin not in pm.load_report.broken}
+    return {**versions, "plugins": plugins}
+
+
 def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):
     """The registered piece of ``kind`` called ``name``; an unknown name names the known ones."""
     pm = pm or get_plugin_manager()

@@ -40,7 +40,7 @@ from primordia.core.atomic_files import StorageError, make_directory, storage_er
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
 from primordia.core.outputs import existing_run, step_time_label, time_label
-from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, make_backend, registry
+from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, make_backend, registry, software
 from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, largest_in_place, lowest_rank_where,
                                       on_every_rank)
 from primordia.core.signals import INTERRUPTS, copy_window, signal_name
@@ -494,6 +494,7 @@ class Simulation:
             "config": self.resolved_config(), "output_times_default": self.model.output_times_default,
             "backend": self.backend.name, "mpi_ranks": self.comm.size,
             "named_plugins": os.environ.get(PLUGINS_VARIABLE, ""),  # -p's: what a restart must load again
+            "software": software(),  # the installed plugins among them: a restart that lacks one names it
             "mesh": self.model.mesh_data.fingerprint(),
             "run": {"step": self.step_index, "time": self.time, "last_dt": self.last_dt,
                     "step_begin": self.step_begin, "step_done": self.step_done,
@@ -1319,6 +1320,7 @@ class Simulation:
                                          for scheme, its in self.coupling_iterations.items() if its},
             "splitting_scheme": self.scheme.name,
             "peak_memory_mb": self.memory_use()["peak_memory_mb"],
+            "software": software(),  # the versions and plugins it was computed with (this process's)
         }
 
 

@@ -368,3 +368,25 @@ def test_a_plugin_registered_after_another_was_unregistered_is_the_one_looked_up
             assert registry("physics", pm)["registry_probe"][0].generation == generation
         finally:
             pm.unregister(name="tests.registry_probe")
+
+
+def test_a_run_records_its_software_and_a_restart_without_its_installed_plugin_names_it(
+        primordia_cli, small_config, plugin_distribution, tmp_path):
+    """summary.json said nothing of the versions or plugins a result was computed with, and a restart where the
+    plugin's distribution was gone said only "unknown kinetics 'frozen'" (the packaging QA pass)."""
+    env = plugin_distribution("primordia-frozen-kinetics", "0.3", {"frozen_kinetics": FROZEN_KINETICS},
+                              {"frozen": "frozen_kinetics"})
+    out = tmp_path / "out"
+    ran = primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set", "kinetics.name=frozen", env=env)
+    assert ran.returncode == 0, ran.stderr
+    software = json.loads((out / "summary.json").read_text())["software"]
+    import dolfinx
+    import primordia
+
+    assert software["primordia"] == primordia.__version__ and software["dolfinx"] == dolfinx.__version__
+    assert software["petsc"].startswith("3.") and software["plugins"]["frozen"] == "primordia-frozen-kinetics 0.3"
+    longer = primordia_cli("run", "--restart", out, "--no-progress", "--set", "time.t_final=1.4")  # not installed
+    assert longer.returncode == 2 and len(longer.stderr.splitlines()) == 1, longer.stderr
+    assert longer.stderr.startswith("primordia: error: unknown kinetics 'frozen'")
+    assert "(the run was made with the plugin frozen from primordia-frozen-kinetics 0.3, not installed here)" \
+        in longer.stderr
