@@ -420,10 +420,24 @@ class Model:
     def differences(self, resolved: dict, allowed=CHANGEABLE_ON_RESTART) -> list[str]:
         """Dotted keys where ``resolved`` (another run's resolved config) differs from this model's, except ``allowed``.
 
-        A key ``resolved`` lacks is an option added since it was written, at its default: not a difference.
+        A key ``resolved`` lacks is an option added since it was written, or one unset there (None, which TOML
+        cannot hold, so config.toml leaves it out): the other run had the option's default, and this model differs
+        only where it holds another value.  Every key ``resolved`` lacked was taken for the same: a restart of
+        example 4 with ``--set growth_law.directions=...`` (default None, the axes) continued with the frame
+        turned, as did linear Biot's ``shear_modulus`` (default None, from E and nu) set on a restart.
         """
-        return [key for key in _differences(self.resolved_config(), resolved)
-                if not any(key == a or key.startswith(a + ".") for a in allowed) and _has(resolved, key)]
+        current, defaults = self.resolved_config(), self._option_defaults()
+        return [key for key in _differences(current, resolved)
+                if not any(key == a or key.startswith(a + ".") for a in allowed)
+                and (_has(resolved, key) or _away_from_default(current, defaults, key))]
+
+    def _option_defaults(self) -> dict:
+        """The defaults of the pieces' options, laid out as :meth:`resolved_config` lays out their values."""
+        defaults = {"physics": {module.name: dict(type(module).options) for module in self.physics_objects}}
+        for section, piece in (("kinetics", self.kinetics_object), ("growth_law", self.growth_law_object)):
+            if piece is not None:
+                defaults[section] = dict(type(piece).options)
+        return defaults
 
 
 def _refuse_a_parameter_of_another_piece(name: str, used: list[str]) -> None:
@@ -522,6 +536,19 @@ def _has(table: dict, dotted: str) -> bool:
             return False
         table = table[part]
     return True
+
+
+def _away_from_default(current: dict, defaults: dict, dotted: str) -> bool:
+    """Whether the option ``dotted`` of the resolved config ``current`` holds another value than its default
+    (``defaults``, :meth:`Model._option_defaults`).  A key of no piece's options (a table added since) is taken
+    to be at its default, as before."""
+    if not _has(defaults, dotted):
+        return False
+    value, default = current, defaults
+    for part in dotted.split("."):
+        value = value.get(part) if isinstance(value, dict) else None
+        default = default[part]
+    return value != config_.as_toml_reads_it(default)
 
 
 def _as_list(value, where: str) -> list[str]:

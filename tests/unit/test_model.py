@@ -127,6 +127,19 @@ def test_differences_from_another_run_leave_out_what_a_restart_may_change():
     assert model.differences(resolved) == []
 
 
+def test_a_restart_that_sets_an_option_unset_in_the_checkpointed_run_differs_from_it():
+    """An unset option (None) is not in config.toml, TOML having no null: a restart of example 4 that set
+    growth_law.directions (default None, the axes) continued with the frame turned, as another model."""
+    growing = dict(physics=["chemotaxis", "poroelastic_growth"], growth_law="seed2d",
+                   physics_options={"poroelastic_growth": {"boundary": [{"boundary": "left", "type": "robin",
+                                                                          "value": 1e-3}]}})
+    resolved = small(**growing).resolved_config()
+    assert "directions" not in resolved["growth_law"]
+    assert small(**growing).differences(resolved) == []
+    turned = small(**{**growing, "growth_law": {"name": "seed2d", "directions": [[0, 1], [1, 0]]}})
+    assert turned.differences(resolved) == ["growth_law.directions"]
+
+
 # -- what a model refuses, in one line -----------------------------------------------------------------
 @pytest.mark.parametrize("changes, fragments", [
     ({"physics": ["chemotaxis", "chemotaxis"]}, "model.physics lists 'chemotaxis' twice"),
