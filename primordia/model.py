@@ -180,6 +180,7 @@ class Model:
         declared = {parameter.name for parameter in declarations}
         for name in overrides:
             if name not in declared:
+                _refuse_a_law_of_another_dimension(self.growth_law_class, self._mesh_spec)
                 _refuse_a_parameter_of_another_piece(name, [owner for owner, _ in pieces])
         return ParameterSet(declarations, overrides)
 
@@ -438,6 +439,26 @@ class Model:
             if piece is not None:
                 defaults[section] = dict(type(piece).options)
         return defaults
+
+
+#: The dimension of the meshes the generators of a ``[mesh]`` table make, known before the mesh is.
+_GENERATED_DIMENSIONS = {"rectangle": 2, "box": 3}
+
+
+def _refuse_a_law_of_another_dimension(law, mesh) -> None:
+    """The growth law against the mesh's dimension where it is known before the mesh is made (a MeshData, a
+    generator's table; a file's is checked once it is read), when a parameter is not the model's: example 4 with its
+    law switched to seed2d was told to remove seed3d's delta_1, and the next attempt that seed2d is written for
+    2D, the mistake made."""
+    if law is None:
+        return
+    kind = mesh.get("type") if isinstance(mesh, dict) else None
+    dimension = mesh.gdim if isinstance(mesh, MeshData) else _GENERATED_DIMENSIONS.get(kind if isinstance(kind, str)
+                                                                                       else None)
+    if dimension is not None:
+        from primordia.physics.growth_laws import refuse_another_dimension
+
+        refuse_another_dimension(law, dimension)
 
 
 def _refuse_a_parameter_of_another_piece(name: str, used: list[str]) -> None:

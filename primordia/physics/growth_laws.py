@@ -90,9 +90,7 @@ class GrowthLaw(Configured, ABC):
         """gamma_1, ..., gamma_d (UFL expressions or numbers, dimensionless) at ``fields``, time ``t``, point ``X``."""
 
     def check_dimension(self, dimension: int) -> None:
-        if dimension not in self.dimensions:
-            raise ConfigError(f"growth law {self.name} is written for {' or '.join(map(str, self.dimensions))}D, "
-                              f"the mesh is {dimension}D")
+        refuse_another_dimension(type(self), dimension)
 
     def frame(self, dimension: int) -> np.ndarray:
         """The directions k_1, ..., k_d as rows (default: the coordinate axes), checked orthonormal."""
@@ -129,6 +127,13 @@ class GrowthLaw(Configured, ABC):
         for stretch, k in zip(stretches, _checked_terms(self, "directions_at", (dimension,), dimension, X, dimension)):
             tensor = tensor + stretch * ufl.outer(k, k)  # F_g, after (4.12c)
         return tensor
+
+
+def refuse_another_dimension(law: type[GrowthLaw], dimension: int) -> None:
+    """One line when the class ``law`` is not written for meshes of ``dimension`` (its ``dimensions``)."""
+    if dimension not in law.dimensions:
+        raise ConfigError(f"growth law {law.name} is written for {' or '.join(map(str, law.dimensions))}D, "
+                          f"the mesh is {dimension}D")
 
 
 def _dimension_meant(directions, dimensions: Sequence[int]) -> int | None:

@@ -125,6 +125,16 @@ def test_a_law_refuses_a_mesh_of_the_wrong_dimension():
               mesh=rectangle((0, 0), (1, 1), (2, 2)), dt=0.1, t_final=0.2, output={"pictures": False})
 
 
+@pytest.mark.parametrize("mesh", [{"type": "box", "upper": [2.0, 2.0, 1.0], "cells": [2, 2, 1]},
+                                  box((0, 0, 0), (2, 2, 1), (2, 2, 1))], ids=["table", "MeshData"])
+def test_a_2d_law_on_a_3d_mesh_is_refused_for_its_dimension_before_the_3d_laws_parameters(mesh):
+    """Example 4 with its law switched to seed2d was told to remove delta_1 (seed3d's), and once that was done,
+    that seed2d is written for 2D: the dimension is the mistake, and is said first."""
+    with pytest.raises(ConfigError, match="seed2d is written for 2D, the mesh is 3D"):
+        Model(physics=["chemotaxis", "poroelastic_growth"], growth_law="seed2d", parameters={"delta_1": 0.02},
+              mesh=mesh, dt=0.1, t_final=0.2, output={"pictures": False})
+
+
 GROWTH_MODEL = dict(physics=["poroelastic_growth"], mesh=box((0, 0, 0), (1, 1, 1), (1, 1, 1)), dt=0.1, t_final=0.2)
 
 
