@@ -485,8 +485,9 @@ class LinearSolver(_Solver):
     def _finish(self, iterations: int, reason: int) -> SolveStats:
         sub, backend = self.sub, self.backend
         if reason < 0:
-            raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {KSP_REASONS.get(reason, reason)}); "
-                              f"try other options under -{sub.prefix}")
+            hint = f" ({sub.failure_hint})" if sub.failure_hint else ""  # as a Newton solve's failure says it
+            raise SolverError(f"{sub.name}: the linear solver diverged (PETSc reason {KSP_REASONS.get(reason, reason)})"
+                              f"{hint}; try other options under -{sub.prefix}")
         x = backend.petsc_vector(sub.unknown)
         if not self._for_unknown:
             x.axpy(-1.0, self._increment)

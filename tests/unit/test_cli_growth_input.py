@@ -102,3 +102,13 @@ def test_whether_the_conditions_enclose_the_tissue_is_found_once_a_set_up(tmp_pa
     for _ in range(3):
         subproblems_of(growth), subproblems_of(growth, initial=True)
     assert len(calls) == 2  # once per set-up (the dry run's, then this one)
+
+
+def test_a_slab_thin_for_its_cells_that_stops_the_schur_split_says_so(primordia_cli, tmp_path):
+    """Example 4 on (0, 10)^2 x (0, 0.01) with 4 x 4 x 2 boxes stopped at its initial velocity with GMRES's
+    DIVERGED_BREAKDOWN and "try other options" alone; the direct solve runs it."""
+    thin = ["--set", "mesh.cells=[4,4,2]", "--set", "mesh.upper=[10.0,10.0,0.01]", "--set", "time.t_final=0.5",
+            "--set", "output.times=[0.5]", "--set", "output.pictures=false", "--no-progress"]
+    result = primordia_cli("run", EX04_SMALL, *thin, "--out", tmp_path / "out")
+    assert_one_line_error(result, "poroelastic_growth", "the cells' edges differ up to 707-fold in length",
+                          'physics.poroelastic_growth.preconditioner = "lu" solves directly')
