@@ -10,7 +10,8 @@
         A file without [model] (or none) is a parameter set of the seed's full model.
 
     primordia stability map [CONFIG.toml] --x NAME:LO:HI:N --y NAME:LO:HI:N [--coupled|--uncoupled]
-                            [--critical NAME] [--theta corrected|seed] [--nk N] [--set ...] [--out DIR]
+                            [--chemistry-only] [--critical NAME] [--theta corrected|seed] [--nk N] [--set ...]
+                            [--out DIR]
         the patterning space over two parameters of the seed's model, from the conditions and from the
         growth rates, as DIR/patterning_X_Y.nc + .png (seed Figures 3.1-3.3)
 

@@ -300,3 +300,13 @@ def test_the_sweep_map_has_no_seed_analysis_for_a_growing_tissue_or_another_kine
     assert coupled and (params["tau"], params["xi_f"]) == (0.001, 0.001)
     params, coupled = linear_model(load_config(EXAMPLES / "ex01a.toml"))
     assert not coupled and (params["tau"], params["xi_f"]) == (0.0, 0.0)
+
+
+def test_the_map_usage_names_chemistry_only_which_its_refusal_of_a_growing_tissue_suggests():
+    """``stability map`` of a growing tissue says "--chemistry-only analyses the chemistry alone", which map takes,
+    but its usage did not list it (the 3D QA pass)."""
+    import primordia.analysis.cli as stability_cli
+
+    usage = stability_cli.__doc__
+    map_usage = usage[usage.index("primordia stability map"):usage.index("the patterning space")]
+    assert "[--chemistry-only]" in map_usage, map_usage
