@@ -359,6 +359,12 @@ class Model:
         span = np.linspace(self.t_start, self.t_final, count)
         return sorted({*map(float, span), *self.output["times"]})
 
+    @property
+    def mesh_in_memory(self) -> bool:
+        """Whether the mesh was made in Python with no ``[mesh]`` table that builds it: a config.toml of the model
+        cannot rebuild it (``primordia run --restart`` refuses such a run in one line)."""
+        return not isinstance(self._mesh_spec, dict) and self.mesh_data.source() is None
+
     def resolved_config(self) -> dict:
         """The fully resolved configuration (defaults filled in), as written to ``config.toml``.
 

@@ -86,8 +86,11 @@ class Simulation:
         if isinstance(out_dir, str) and not out_dir.strip():  # Path("") is the current directory, files and all
             raise ConfigError("a run's out needs a directory name (\".\" for the current directory)")
         self.out_dir = Path(out_dir)
-        #: how a stopped run is continued, in its lines (Model.run gives its own, in Python's words)
-        self.restart_hint = f"primordia run --restart {self.out_dir}"
+        #: how a stopped run is continued, in its lines (Model.run gives its own, in Python's words); the command
+        #: cannot rebuild a mesh made in Python (config.toml holds no table of it), so Python's words then too
+        self.restart_hint = (f"Simulation(model, out_dir={str(self.out_dir)!r}, existing=\"restart\")"
+                             if model.mesh_in_memory
+                             else f"primordia run --restart {self.out_dir}")
         self.comm = comm
         self._output_comm = None  # see _outputs_comm
         self._output_seconds: dict[tuple[str, str], float] = {}  # the longest call of each output, at each moment

@@ -491,6 +491,22 @@ def test_without_adaptive_steps_a_failed_step_stops_the_run_naming_it(watching, 
     assert summary["checkpoint_step"] == 1  # the whole steps are kept for a restart
 
 
+def test_a_run_on_a_mesh_made_in_python_says_how_python_continues_it(watching, tmp_path):
+    """It said "primordia run --restart OUT", which cannot rebuild a mesh config.toml holds no table of (it refuses
+    such a run in one line): Python's words instead (the restart QA pass)."""
+    from primordia.core.mesh_data import MeshData
+
+    generated = rectangle((0.0, 0.0), (4.0, 4.0), cells=(4, 4))
+    by_hand = MeshData(generated.points.copy(), generated.cells.copy(), dict(generated.boundaries))
+    sim = Simulation(model(t_final=0.6, recorder={"fail_at": 0.4}, adaptive=False, mesh=by_hand), out_dir=tmp_path)
+    with pytest.raises(SolverError) as caught:
+        sim.setup().run()
+    assert one_line(caught).endswith(f"; Simulation(model, out_dir={str(tmp_path)!r}, existing=\"restart\") "
+                                     "continues it from its checkpoint at t = 0.2 (a restart may change [solver], "
+                                     "time.adaptive and time.dt_min)"), one_line(caught)
+    assert not Simulation(model(), out_dir=tmp_path / "other").restart_hint.startswith("Simulation(")
+
+
 def test_memory_the_process_freed_is_given_back_to_the_system():
     """glibc keeps freed heap memory for later: without a trim the resident size stays at its peak
     (example 2b at 171^2: 2.77 GB kept, 1.83 GB after a trim)."""
