@@ -182,7 +182,10 @@ class Model:
             if name not in declared:
                 _refuse_a_law_of_another_dimension(self.growth_law_class, self._mesh_spec)
                 _refuse_a_parameter_of_another_piece(name, [owner for owner, _ in pieces])
-        return ParameterSet(declarations, overrides)
+        try:
+            return ParameterSet(declarations, overrides)
+        except ConfigError as error:  # a value out of a third party's parameter's range: whose parameter it is
+            raise ConfigError(f"{error}{_declared_by_a_plugin(str(error), pieces)}") from None
 
     def _physics_options(self, table: dict) -> dict:
         names = {cls.name for cls in self.physics_classes}
@@ -478,6 +481,16 @@ def _refuse_a_parameter_of_another_piece(name: str, used: list[str]) -> None:
     if owners:
         raise ConfigError(f"parameter '{name}' belongs to {' and '.join(owners)}, which this model does not use "
                           f"(it uses {', '.join(used)}): remove it from [parameters], or use that piece")
+
+
+def _declared_by_a_plugin(message: str, pieces) -> str:
+    """`` (declared by kinetics NAME, a plugin)`` for the parameter ``message`` (a ParameterSet's refusal) names,
+    when a third party's piece declares it: "parameter k_g must be >= 0" said neither which plugin's parameter
+    it is nor where its range comes from.  Empty for primordia's own (the seed's Table 3.1, mostly)."""
+    name = message.removeprefix("parameter ").partition(" ")[0]
+    owners = [owner for owner, piece in pieces if not piece.__module__.startswith("primordia.")
+              and any(getattr(parameter, "name", None) == name for parameter in piece.parameters)]
+    return f" (declared by {', '.join(owners)}, a plugin)" if owners and message.startswith("parameter ") else ""
 
 
 def _declarations(pieces) -> list[Parameter]:

@@ -139,3 +139,19 @@ def test_a_third_party_initial_state_that_raises_is_placed_in_its_file():
     assert message.startswith("kinetics painter2018_unevaluable: the initial state cannot be evaluated with these "
                               "parameters (ValueError: math domain error (at "), message
     assert f"{__file__}:" in message, message
+
+
+def test_a_plugins_parameter_out_of_range_names_the_plugin():
+    """"parameter k_g must be > 0 (signal secretion per cell), got -1" did not say whose parameter it is (the
+    plugin QA pass)."""
+    from primordia.core.errors import ConfigError
+
+    with pytest.raises(ConfigError) as caught:
+        Model(physics=["chemotaxis"], kinetics={"name": "painter2018_signal"}, parameters={"k_g": -1.0},
+              mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.1, t_final=0.2, output={"pictures": False})
+    assert str(caught.value) == ("parameter k_g must be > 0 (signal secretion per cell), got -1 (declared by "
+                                 "kinetics painter2018_signal, a plugin)")
+    with pytest.raises(ConfigError) as caught:  # primordia's own kinetics: the seed's parameter, as before
+        Model(physics=["chemotaxis"], kinetics={"name": "painter2018"}, parameters={"D_m": -1.0},
+              mesh=rectangle((0, 0), (4, 4), (4, 4)), dt=0.1, t_final=0.2, output={"pictures": False})
+    assert str(caught.value) == "parameter D_m must be > 0 (cell diffusivity), got -1"
