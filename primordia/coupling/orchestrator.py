@@ -46,7 +46,8 @@ from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, 
 from primordia.core.signals import INTERRUPTS, copy_window, signal_name
 from primordia.core.timestepping import StepController
 from primordia.coupling.batched import batch_remainders
-from primordia.coupling.solvers import SubproblemSolver, accumulate, independent_batches, solve_in_turn
+from primordia.coupling.solvers import (SubproblemSolver, accumulate, check_settings, independent_batches,
+                                       solve_in_turn)
 from primordia.coupling.splitting import grouped_direct
 from primordia.physics.base import module_code, subproblems_of
 from primordia.physics.discretisation import Discretisation
@@ -203,13 +204,18 @@ class Simulation:
         subproblems = [subproblems_of(physics, disc=self.disc) for physics in self.model.physics_objects]
         for subproblem in (sub for own in subproblems for sub in own):
             self._refuse_forms_differing_across_ranks(subproblem)
+        initial = []
         if self.existing != "restart":  # the initial solves too (a restart does not solve them again)
             for physics in self.model.physics_objects:
                 for subproblem in subproblems_of(physics, initial=True):
-                    self._refuse_forms_differing_across_ranks(self._holding_the_others(subproblem, physics))
+                    initial.append(self._holding_the_others(subproblem, physics))
+                    self._refuse_forms_differing_across_ranks(initial[-1])
         self.scheme.check_subproblems(subproblems)  # e.g. strang with one module that solves anything
         # a misspelt [solver.NAME] table (the initial subproblems are built for their names here)
         self.scheme.check_table_names(self.model, self.scheme.solver_prefixes(subproblems))
+        # what the solvers refuse before they are made: splits under a solver that is no fieldsplit, ...
+        for subproblem in initial + self.scheme.solved_subproblems(self.disc, subproblems):
+            check_settings(subproblem, self.model.solver.get(subproblem.prefix[:-1]), self.comm.size > 1)
         self.disc.check_contributions()
         if self.existing == "restart":  # after the subproblems: they make some of the state (Discretisation.at_balance)
             self._restore_fields(self._checked_checkpoint or self._read_checkpoint())

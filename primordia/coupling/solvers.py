@@ -231,6 +231,12 @@ def SubproblemSolver(backend, subproblem, overrides: dict | None = None):
     return cls(backend, subproblem, overrides)
 
 
+def check_settings(subproblem, overrides: dict | None, parallel: bool) -> None:
+    """What :func:`SubproblemSolver` would refuse in the options of ``subproblem``'s solver before making it
+    (``overrides``: its ``[solver.*]`` table; ``parallel``: on more than one rank), with no solver made."""
+    (LinearSolver if subproblem.linear else NewtonSolver).settings(subproblem, overrides, parallel)
+
+
 class _Solver:
     """What both paths share: options, the algebraic operator, assembly of residual and tangent."""
 
@@ -239,24 +245,14 @@ class _Solver:
     def __init__(self, backend, subproblem, overrides: dict | None = None):
         self.backend, self.sub = backend, subproblem
         self.where = f"solver.{subproblem.prefix[:-1]}"
-        options, self._user_keys = solver_options({**self.defaults, **subproblem.petsc_options}, overrides,
-                                                  self.where, backend.comm.size > 1)
+        options, self._user_keys = self.settings(subproblem, overrides, backend.comm.size > 1)
         self._splits = options.pop(SPLITS, None)
-        if self._splits is not None and str(options.get("pc_type")) != "fieldsplit":
-            raise ConfigError(f"{self.where}.{SPLITS} names the splits of pc_type = \"fieldsplit\"; this solver's "
-                              f"pc_type is {option_text(options.get('pc_type', 'PETSc default'))!r}")
         self._rebuild_after = options.pop(REBUILD, 0) or None  # see NewtonSolver
         gather = bool(options.pop(GATHER, False))
         self._gather = gather and backend.comm.size > 1  # see LinearSolver
         #: the rank that solves the whole system when it is gathered; set by independent_batches so that
         #: subproblems solved at once go to different ranks
         self.owner = 0
-        if gather and not subproblem.linear:
-            raise ConfigError(f"{self.where}.{GATHER}: a Newton solve is not gathered to one rank; the option "
-                              f"is for linear subproblems")
-        if gather and str(options.get("pc_type")) == "fieldsplit":
-            raise ConfigError(f"{self.where}.{GATHER}: a system solved on one rank takes a whole-matrix "
-                              f"preconditioner, not fieldsplit")
         self.options = options
         #: the options the user gave, as PETSc holds them (named in a failure whose reason quotes one's value)
         self.user_options = {key: options[key] for key in self._user_keys if key in options}
@@ -274,6 +270,26 @@ class _Solver:
         #: "wall"; hold a step's time against the same clock (numpy's BLAS threads, which spin
         #: after a product, count in CPU time while the main thread solves).
         self.linear_solve_seconds = no_time()
+
+    @classmethod
+    def settings(cls, subproblem, overrides: dict | None, parallel: bool) -> tuple[dict, list[str]]:
+        """The options of this solver of ``subproblem`` (its own keys included: ``splits``, ...) and the keys the
+        user gave, or one line for what can be told of them before a solver is made: by the solver, and by
+        ``primordia run --dry-run`` (:func:`check_settings`), which makes none.  The dry run said "the input is
+        valid" to ``splits`` under a solver that is no fieldsplit, which the run refused."""
+        where = f"solver.{subproblem.prefix[:-1]}"
+        options, user_keys = solver_options({**cls.defaults, **subproblem.petsc_options}, overrides, where, parallel)
+        if options.get(SPLITS) is not None and str(options.get("pc_type")) != "fieldsplit":
+            raise ConfigError(f"{where}.{SPLITS} names the splits of pc_type = \"fieldsplit\"; this solver's "
+                              f"pc_type is {option_text(options.get('pc_type', 'PETSc default'))!r}")
+        gather = bool(options.get(GATHER, False))
+        if gather and not subproblem.linear:
+            raise ConfigError(f"{where}.{GATHER}: a Newton solve is not gathered to one rank; the option "
+                              f"is for linear subproblems")
+        if gather and str(options.get("pc_type")) == "fieldsplit":
+            raise ConfigError(f"{where}.{GATHER}: a system solved on one rank takes a whole-matrix "
+                              f"preconditioner, not fieldsplit")
+        return options, user_keys
 
     def step_size_changed(self) -> None:
         """dt changed (an adaptive time step): a constant Jacobian holds 1/dt, so the next solve assembles it again."""

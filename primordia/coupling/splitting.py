@@ -108,6 +108,11 @@ class SplittingScheme(Configured, ABC):
         ``primordia run --dry-run``, which makes none, checks the ``[solver.*]`` tables against."""
         return [sub.prefix for own in subproblems for sub in own]
 
+    def solved_subproblems(self, disc, subproblems: list[list[Subproblem]]) -> list[Subproblem]:
+        """The subproblems :meth:`build` makes solvers of, from the modules' ``subproblems`` on ``disc``: what
+        ``primordia run --dry-run``, which makes none, checks the solvers' options of."""
+        return [sub for own in subproblems for sub in own]
+
     @abstractmethod
     def advance(self, sim, t0: float, dt: float) -> dict:
         """Advance all fields from ``t0`` to ``t0 + dt``; return solver statistics by subproblem."""
@@ -226,21 +231,24 @@ class Monolithic(SplittingScheme):
     def solver_prefixes(self, subproblems):
         return [f"{self.SOLVE}_"]
 
-    def build(self, sim):
-        own = [subproblems_of(module, disc=sim.disc) for module in self.physics]
-        self.check_subproblems(own)
-        subproblems = [sub for module_subproblems in own for sub in module_subproblems]
+    def solved_subproblems(self, disc, subproblems):
+        """The one subproblem of every field: the modules' residuals summed, solved by Newton."""
+        subproblems = [sub for module_subproblems in subproblems for sub in module_subproblems]
         unknown = subproblems[0].unknown
         residual = sum((sub.residual for sub in subproblems[1:]), subproblems[0].residual)
         stabilisations = [sub.preconditioner for sub in subproblems if sub.preconditioner is not None]
-        combined = Subproblem(
+        return [Subproblem(
             name=self.SOLVE, unknown=unknown, residual=residual, jacobian=ufl.derivative(residual, unknown),
             bcs=[bc for sub in subproblems for bc in sub.bcs], linear=False,
             petsc_options=grouped_direct(sub.petsc_options for sub in subproblems),
-            fields=sim.disc.unknown_fields(sim.disc.field_names()[0]),
+            fields=disc.unknown_fields(disc.field_names()[0]),
             rigid_body=next((sub.rigid_body for sub in subproblems if sub.rigid_body), None),
-            preconditioner=sum(stabilisations[1:], stabilisations[0]) if stabilisations else None)
-        self.flows = [[sim.solver_for(combined)]]
+            preconditioner=sum(stabilisations[1:], stabilisations[0]) if stabilisations else None)]
+
+    def build(self, sim):
+        own = [subproblems_of(module, disc=sim.disc) for module in self.physics]
+        self.check_subproblems(own)
+        self.flows = [[sim.solver_for(combined) for combined in self.solved_subproblems(sim.disc, own)]]
         sim.solvers = self.flows[0]
         self.check_solver_tables(sim)
 

@@ -225,3 +225,21 @@ def test_an_algebraic_operator_under_the_monolithic_scheme_is_refused_by_the_dry
     config.write_text(config.read_text() + '\n[coupling]\nscheme = "monolithic"\n')
     _both_refuse(primordia_cli, tmp_path, plugin_file, config,
                  "the monolithic scheme cannot include quiet: its algebraic operator acts on its own field alone")
+
+
+@pytest.mark.parametrize("assignments, fragments", [
+    (['solver.chemotaxis_m.splits=[["m"]]'],
+     ['solver.chemotaxis_m.splits names the splits of pc_type = "fieldsplit"', "this solver's pc_type is 'bjacobi'"]),
+    (['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"',
+      'solver.monolithic.solve_on_one_rank=true'],
+     ["solver.monolithic.solve_on_one_rank: a Newton solve is not gathered to one rank"]),
+], ids=["splits-without-fieldsplit", "monolithic-gathered"])
+def test_options_a_solver_refuses_before_it_is_made_are_refused_by_the_dry_run(primordia_cli, small_config, tmp_path,
+                                                                              assignments, fragments):
+    """The solver refuses them as it is made, from the options alone: --dry-run, which makes none, said "the input
+    is valid"."""
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    settings = [argument for assignment in assignments for argument in ("--set", assignment)]
+    dry = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", *settings)
+    ran = primordia_cli("run", config, "--out", tmp_path / "out", "--no-progress", *settings)
+    assert assert_one_line_error(dry, *fragments) == assert_one_line_error(ran, *fragments)
