@@ -420,20 +420,30 @@ class LinearSolver(_Solver):
         self._rebuild_rule = self._kept_preconditioner()
         self.preconditioner_builds = 0  # solves that built the preconditioner (for a changed matrix)
 
-    def _kept_preconditioner(self) -> "KeptPreconditioner | None":
-        """The rule of ``rebuild_preconditioner_after``, where it can work (a user's setting elsewhere is one line)."""
-        if self._rebuild_after is None:
-            return None
-        refusal = None
-        if str(self.options.get("ksp_type")) == "preonly":
-            refusal = f"{NEEDS_KRYLOV} the preconditioner is the whole solve, and a kept one would solve with an old matrix"
-        elif self._gather:
-            refusal = f"does not apply to a system solved on one rank ({GATHER})"
-        if refusal is None:
-            return KeptPreconditioner(self._rebuild_after)
-        if REBUILD in self._user_keys:
-            raise ConfigError(f"{self.where}.{REBUILD} {refusal}")
+    @classmethod
+    def settings(cls, subproblem, overrides: dict | None, parallel: bool) -> tuple[dict, list[str]]:
+        """Also a ``rebuild_preconditioner_after`` the user gave where it cannot work (:meth:`_kept_preconditioner`)."""
+        options, user_keys = super().settings(subproblem, overrides, parallel)
+        refusal = cls._why_not_kept(options, bool(options.get(GATHER)) and parallel)
+        if options.get(REBUILD) and refusal is not None and REBUILD in user_keys:
+            raise ConfigError(f"solver.{subproblem.prefix[:-1]}.{REBUILD} {refusal}")
+        return options, user_keys
+
+    @staticmethod
+    def _why_not_kept(options: dict, gathered: bool) -> str | None:
+        """Why a preconditioner cannot be kept over steps under ``options`` (None: it can)."""
+        if str(options.get("ksp_type")) == "preonly":
+            return f"{NEEDS_KRYLOV} the preconditioner is the whole solve, and a kept one would solve with an old matrix"
+        if gathered:
+            return f"does not apply to a system solved on one rank ({GATHER})"
         return None
+
+    def _kept_preconditioner(self) -> "KeptPreconditioner | None":
+        """The rule of ``rebuild_preconditioner_after``, where it can work (a user's setting elsewhere was refused by
+        :meth:`settings`)."""
+        if self._rebuild_after is None or self._why_not_kept(self.options, self._gather) is not None:
+            return None
+        return KeptPreconditioner(self._rebuild_after)
 
     def step_size_changed(self) -> None:
         super().step_size_changed()
@@ -785,6 +795,17 @@ class NewtonSolver(_Solver):
 
     defaults = NEWTON_DEFAULTS
 
+    @classmethod
+    def settings(cls, subproblem, overrides: dict | None, parallel: bool) -> tuple[dict, list[str]]:
+        """Also a ``rebuild_preconditioner_after`` the user gave to a solve that is the preconditioner alone: the
+        preconditioner is the whole solve, and kept, it would freeze the tangent (and a single application never
+        counts more than one iteration)."""
+        options, user_keys = super().settings(subproblem, overrides, parallel)
+        if str(options.get("ksp_type")) == "preonly" and options.get(REBUILD) and REBUILD in user_keys:
+            raise ConfigError(f"solver.{subproblem.prefix[:-1]}.{REBUILD} {NEEDS_KRYLOV} a kept preconditioner would "
+                              f"freeze the tangent")
+        return options, user_keys
+
     def __init__(self, backend, subproblem, overrides: dict | None = None):
         super().__init__(backend, subproblem, overrides)
         self.snes = PETSc.SNES().create(backend.comm)
@@ -796,11 +817,7 @@ class NewtonSolver(_Solver):
         self._F = state.duplicate()
         self.snes.setFunction(_weakly(self._function), self._F)
         self._tangent_matrices = None
-        if str(self.options.get("ksp_type")) == "preonly" and self._rebuild_after is not None:
-            # the preconditioner is the whole solve: kept, it would freeze the tangent (and a single
-            # application never counts more than one iteration)
-            if REBUILD in self._user_keys:
-                raise ConfigError(f"{self.where}.{REBUILD} {NEEDS_KRYLOV} a kept preconditioner would freeze the tangent")
+        if str(self.options.get("ksp_type")) == "preonly":  # a user's rule here was refused by settings()
             self._rebuild_after = None
         self._kept = None  # the preconditioning matrix kept while it works (rebuild_preconditioner_after)
         self._rebuild_rule = KeptPreconditioner(self._rebuild_after) if self._rebuild_after is not None else None

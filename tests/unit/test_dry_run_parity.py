@@ -233,7 +233,12 @@ def test_an_algebraic_operator_under_the_monolithic_scheme_is_refused_by_the_dry
     (['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"',
       'solver.monolithic.solve_on_one_rank=true'],
      ["solver.monolithic.solve_on_one_rank: a Newton solve is not gathered to one rank"]),
-], ids=["splits-without-fieldsplit", "monolithic-gathered"])
+    (['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"',
+      'solver.monolithic.rebuild_preconditioner_after=3'],
+     ['solver.monolithic.rebuild_preconditioner_after needs a Krylov method', "would freeze the tangent"]),
+    (['solver.chemotaxis_f.rebuild_preconditioner_after=3'],
+     ['solver.chemotaxis_f.rebuild_preconditioner_after needs a Krylov method', "with an old matrix"]),
+], ids=["splits-without-fieldsplit", "monolithic-gathered", "kept-newton-preonly", "kept-linear-preonly"])
 def test_options_a_solver_refuses_before_it_is_made_are_refused_by_the_dry_run(primordia_cli, small_config, tmp_path,
                                                                               assignments, fragments):
     """The solver refuses them as it is made, from the options alone: --dry-run, which makes none, said "the input
