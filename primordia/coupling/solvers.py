@@ -43,8 +43,9 @@ from primordia.core.clocks import now as clock_now
 from primordia.core.errors import ConfigError, SolverError, warn
 from primordia.coupling.affine import AffineResidual
 from primordia.coupling.solver_options import (
-    FRESH, GATHER, ORDERING, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine, depends_on_step,
-    flatten, mumps_orders_itself, option_text, parallel_safe, petsc_reason, quoted_option, read_options)
+    FRESH, GATHER, ORDERING, OWN_OPTIONS, PACKAGE, REBUILD, SPLITS, check_types, check_used, check_values, combine,
+    depends_on_step, flatten, mumps_orders_itself, option_text, parallel_safe, petsc_reason, quoted_option,
+    read_options)
 from primordia.physics.kinematics import rigid_motions
 
 
@@ -233,8 +234,23 @@ def SubproblemSolver(backend, subproblem, overrides: dict | None = None):
 
 def check_settings(subproblem, overrides: dict | None, parallel: bool) -> None:
     """What :func:`SubproblemSolver` would refuse in the options of ``subproblem``'s solver before making it
-    (``overrides``: its ``[solver.*]`` table; ``parallel``: on more than one rank), with no solver made."""
-    (LinearSolver if subproblem.linear else NewtonSolver).settings(subproblem, overrides, parallel)
+    (``overrides``: its ``[solver.*]`` table; ``parallel``: on more than one rank), with no solver made, and a
+    value PETSc cannot read as the solver reads its options (``ksp_gmres_haptol = "zz"``, a line search type it
+    lacks): read by a KSP or SNES of this process alone, with no operator, whose options are then taken away
+    (the dry run said "the input is valid" to them, and the run stopped at set-up)."""
+    cls = LinearSolver if subproblem.linear else NewtonSolver
+    options, _ = cls.settings(subproblem, overrides, parallel)
+    options = {key: value for key, value in options.items() if key not in OWN_OPTIONS}
+    write_options(subproblem.prefix, options)
+    solver = (PETSc.KSP if subproblem.linear else PETSc.SNES)().create(PETSc.COMM_SELF)
+    try:
+        solver.setOptionsPrefix(subproblem.prefix)
+        if str(options.get("pc_type")) == "fieldsplit":  # as _configure: the splits' index sets need the mesh
+            (solver if subproblem.linear else solver.getKSP()).getPC().setType("fieldsplit")
+        read_options(solver, f"solver.{subproblem.prefix[:-1]}", options)
+    finally:
+        solver.destroy()
+        write_options(subproblem.prefix, {})
 
 
 class _Solver:

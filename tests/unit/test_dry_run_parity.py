@@ -248,3 +248,21 @@ def test_options_a_solver_refuses_before_it_is_made_are_refused_by_the_dry_run(p
     dry = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", *settings)
     ran = primordia_cli("run", config, "--out", tmp_path / "out", "--no-progress", *settings)
     assert assert_one_line_error(dry, *fragments) == assert_one_line_error(ran, *fragments)
+
+
+@pytest.mark.parametrize("assignments, fragments", [
+    (['solver.chemotaxis_m.ksp_gmres_haptol="zz"'],
+     ["solver.chemotaxis_m: PETSc refused the options: Input string zz has no numeric value",
+      "(in ksp_gmres_haptol = 'zz')"]),
+    (['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"',
+      'solver.monolithic.snes_linesearch_type="nosuch"'],
+     ["solver.monolithic: PETSc refused the options", "(in snes_linesearch_type = 'nosuch')"]),
+], ids=["linear", "newton"])
+def test_a_value_petsc_cannot_read_is_refused_by_the_dry_run(primordia_cli, small_config, tmp_path, assignments,
+                                                             fragments):
+    """PETSc reads the options as the solver is made, which the dry run never does: it said "the input is valid"."""
+    config = small_config(small_config.text.replace("cells = [8, 8]", "cells = [2, 2]"))
+    settings = [argument for assignment in assignments for argument in ("--set", assignment)]
+    dry = primordia_cli("run", config, "--out", tmp_path / "out", "--dry-run", *settings)
+    ran = primordia_cli("run", config, "--out", tmp_path / "out", "--no-progress", *settings)
+    assert assert_one_line_error(dry, *fragments) == assert_one_line_error(ran, *fragments)
