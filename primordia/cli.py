@@ -110,26 +110,26 @@ def command_run(args) -> int:
         if not args.backend.strip():
             raise ConfigError("--backend needs a name (registered backends: see primordia plugins)")
         overrides.append(f"model.backend={args.backend}")
-    if args.restart is not None:
-        out = Path(args.restart)
-        with _start_up_of_a_restart(out, args.dry_run):
+    restart = Path(args.restart) if args.restart is not None else None
+    with _start_up_of_a_restart(restart, args.dry_run):  # from the checkpoint's reading to the restart's first step
+        if restart is not None:
+            out = restart
             config = config_.load_config(args.config) if args.config is not None else _checkpointed_config(out)
             try:
                 model = Model.from_config(config_.apply_overrides(config, overrides))
             except PluginError as error:  # e.g. the run's kinetics came from a file given by -p, not given now
                 raise PluginError(f"{error}{_plugins_of_the_run(out)}") from None
-    else:
-        model = Model.from_file(args.config, overrides)
-        out = Path(args.out) if args.out is not None else Path("out") / Path(args.config).stem
-        if not str(args.out if args.out is not None else out).strip():
-            raise ConfigError("--out needs a directory name")
-    if args.dry_run:
-        existing = "restart" if args.restart is not None else "overwrite" if args.overwrite else "refuse"
-        return _report_dry_run(model, out, existing)
-    _warn_about_a_slow_blas()
-    with _start_up_of_a_restart(out if args.restart is not None else None):
+        else:
+            model = Model.from_file(args.config, overrides)
+            out = Path(args.out) if args.out is not None else Path("out") / Path(args.config).stem
+            if not str(args.out if args.out is not None else out).strip():
+                raise ConfigError("--out needs a directory name")
+        if args.dry_run:
+            existing = "restart" if restart is not None else "overwrite" if args.overwrite else "refuse"
+            return _report_dry_run(model, out, existing)
+        _warn_about_a_slow_blas()
         sim = model.run(out=out, progress=not args.no_progress, overwrite=args.overwrite,
-                        restart=args.restart is not None, continue_with=f"primordia run --restart {out}")
+                        restart=restart is not None, continue_with=f"primordia run --restart {out}")
     final = sim.summary(sim.status)  # collective (reductions over ranks): every rank calls it
     if sim.is_root:
         restarted = f" (restart {sim.restarts})" if sim.restarts else ""
@@ -151,16 +151,11 @@ def _start_up_of_a_restart(out: Path | None, dry_run: bool = False):
             raise
         import signal
 
-        from primordia.core import checkpoint
-        from primordia.core.outputs import step_time_label
+        from primordia.core.outputs import continued_from_checkpoint
 
         signum = getattr(interrupted, "signum", None) or INTERRUPTS.received or signal.SIGINT
-        try:
-            meta = checkpoint.read_meta(out / checkpoint.CHECKPOINT_FILE)
-            how = (f"; primordia run --restart {out} continues it from its checkpoint at "
-                   f"t = {step_time_label(meta['run']['time'])}")
-        except (PrimordiaError, KeyError, TypeError):
-            how = ""
+        how = continued_from_checkpoint(out, f"primordia run --restart {out}")
+        how = f"; {how}" if how is not None else ""
         raise InterruptedRun(signum, f"interrupted ({signal_name(signum)}) during the restart's start-up, before "
                                      f"its first step{how}") from None
 
@@ -194,10 +189,9 @@ def _plugins_of_the_run(out: Path) -> str:
     if missing:
         return (f" (the run loaded {', '.join(missing)} with -p: give it again, primordia -p {missing[0]} run "
                 f"--restart {out})")
-    sources = get_plugin_manager().load_report.sources
+    sources = get_plugin_manager().load_report.sources  # the -p ones among them are all loaded again (above)
     plugins = (meta.get("software") or {}).get("plugins") or {}
-    gone = [f"{plugin} from {origin}" for plugin, origin in plugins.items()
-            if plugin not in sources and not origin.endswith(f"({PLUGINS_VARIABLE})")]
+    gone = [f"{plugin} from {origin}" for plugin, origin in plugins.items() if plugin not in sources]
     return f" (the run was made with the plugin {', '.join(gone)}, not installed here)" if gone else ""
 
 

@@ -37,7 +37,7 @@ import numpy as np
 
 from primordia.core.atomic_files import StorageError, nearest_existing, reason_of, refusal_to_write
 from primordia.core.checkpoint import CHECKPOINT_FILE, read_meta
-from primordia.core.errors import ConfigError, PluginError
+from primordia.core.errors import ConfigError, PluginError, PrimordiaError
 from primordia.core.json_toml import write_json, write_toml
 from primordia.core.pictures import plot_field, plot_fields_grid
 from primordia.core.plugins import hookimpl
@@ -589,6 +589,17 @@ def existing_run(directory: str | Path) -> str | None:
         return f"a run in progress (process {process.get('pid')} on {process.get('host')})"
     return (f"a run that was killed without a word after {_last_seen(directory, summary)} (its process "
             f"{process.get('pid', '?')} is gone)")
+
+
+def continued_from_checkpoint(directory: str | Path, hint: str) -> str | None:
+    """``"HINT continues it from its checkpoint at t = T"`` for the run in ``directory``, or None when it holds no
+    readable checkpoint: the words of every line that says how a stopped run goes on (``HINT``: the command or
+    Python call that continues it)."""
+    try:
+        time = read_meta(Path(directory) / CHECKPOINT_FILE)["run"]["time"]
+        return f"{hint} continues it from its checkpoint at t = {step_time_label(time)}"
+    except (PrimordiaError, KeyError, TypeError):
+        return None
 
 
 def _last_seen(directory: Path, summary: dict) -> str:

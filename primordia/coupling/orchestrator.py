@@ -39,7 +39,7 @@ from primordia.core import checkpoint as checkpoint_file
 from primordia.core.atomic_files import StorageError, make_directory, storage_error
 from primordia.core.clocks import no_time
 from primordia.core.errors import ConfigError, InterruptedRun, PluginError, PrimordiaError, SolverError, warn
-from primordia.core.outputs import existing_run, step_time_label, time_label
+from primordia.core.outputs import continued_from_checkpoint, existing_run, step_time_label, time_label
 from primordia.core.plugins import PLUGINS_VARIABLE, choose, get_plugin_manager, make_backend, registry, software
 from primordia.core.reductions import (RanksMissing, every_rank_stops, largest, largest_in_place, lowest_rank_where,
                                       on_every_rank)
@@ -56,6 +56,9 @@ from primordia.physics.discretisation import Discretisation
 #: relative to the field's largest value: the solves' errors scale with it (a fixed 1e-8 rejected m = -1.3e-7
 #: beside m = 2.6e8, a relative 5e-16, and would pass m = -1e-9 beside m = 1e-10).
 NEGATIVE_TOLERANCE = 1e-8
+
+#: What a stopped run's line says when its folder holds no checkpoint to continue from.
+NO_CHECKPOINT = "it wrote no checkpoint to continue from"
 
 #: (long_name, units) of :meth:`Simulation.step_sizes`' keys.
 STEP_SIZES = {"dt": ("the last sub-step's length", "1"),  # the seed's dimensionless time (UDUNITS: "1")
@@ -774,19 +777,14 @@ class Simulation:
     def _failed_step(self, failure: str) -> str:
         """The line of a step that failed at every dt down to dt_min, with how the run goes on: the checkpoint
         just written holds every step before it, and a restart may change what failed (README, "Long runs")."""
-        how = self._how_it_continues()
-        if how.startswith(self.restart_hint):
-            how += " (a restart may change [solver], time.adaptive and time.dt_min)"
+        how = continued_from_checkpoint(self.out_dir, self.restart_hint)
+        how = (f"{how} (a restart may change [solver], time.adaptive and time.dt_min)" if how is not None
+               else NO_CHECKPOINT)
         return f"{(failure.splitlines() or [''])[0]}; {how}"
 
     def _how_it_continues(self) -> str:
         """How a run stopped before its last step was checkpointed goes on: from the checkpoint in its folder."""
-        try:
-            meta = checkpoint_file.read_meta(self.out_dir / checkpoint_file.CHECKPOINT_FILE)
-            return (f"{self.restart_hint} continues it from its checkpoint at "
-                    f"t = {step_time_label(meta['run']['time'])}")
-        except (PrimordiaError, KeyError, TypeError):
-            return "it wrote no checkpoint to continue from"
+        return continued_from_checkpoint(self.out_dir, self.restart_hint) or NO_CHECKPOINT
 
     def _snapshot(self) -> None:
         self._notify("snapshot")
