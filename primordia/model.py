@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from primordia.core import config as config_
-from primordia.core.errors import ConfigError, PluginError, plugin_code, warn
+from primordia.core.errors import ConfigError, PluginError, is_third_party, plugin_code, warn
 from primordia.core.mesh_data import MeshData
 from primordia.core.parameters import Parameter, ParameterSet
 from primordia.core.plugins import lookup, registry
@@ -177,15 +177,17 @@ class Model:
         if not isinstance(overrides, Mapping):  # a dict, or another model's parameters (a ParameterSet)
             raise ConfigError(f"[parameters] must be a table of name = value, got {_kind(overrides)}")
         overrides = dict(overrides)
-        declared = {parameter.name for parameter in declarations}
-        for name in overrides:
+        declared = {parameter.name: parameter for parameter in declarations}
+        for name, value in overrides.items():  # in the order ParameterSet takes them
             if name not in declared:
                 _refuse_a_law_of_another_dimension(self.growth_law_class, self._mesh_spec)
                 _refuse_a_parameter_of_another_piece(name, [owner for owner, _ in pieces])
-        try:
-            return ParameterSet(declarations, overrides)
-        except ConfigError as error:  # a value out of a third party's parameter's range: whose parameter it is
-            raise ConfigError(f"{error}{_declared_by_a_plugin(str(error), pieces)}") from None
+                break  # unknown to every piece: ParameterSet says so, with the names it may mean
+            try:
+                declared[name].check(value)
+            except ConfigError as error:  # a value out of a third party's parameter's range: whose parameter it is
+                raise ConfigError(f"{error}{_declared_by_a_plugin(name, pieces)}") from None
+        return ParameterSet(declarations, overrides)
 
     def _physics_options(self, table: dict) -> dict:
         names = {cls.name for cls in self.physics_classes}
@@ -483,14 +485,13 @@ def _refuse_a_parameter_of_another_piece(name: str, used: list[str]) -> None:
                           f"(it uses {', '.join(used)}): remove it from [parameters], or use that piece")
 
 
-def _declared_by_a_plugin(message: str, pieces) -> str:
-    """`` (declared by kinetics NAME, a plugin)`` for the parameter ``message`` (a ParameterSet's refusal) names,
-    when a third party's piece declares it: "parameter k_g must be >= 0" said neither which plugin's parameter
-    it is nor where its range comes from.  Empty for primordia's own (the seed's Table 3.1, mostly)."""
-    name = message.removeprefix("parameter ").partition(" ")[0]
-    owners = [owner for owner, piece in pieces if not piece.__module__.startswith("primordia.")
-              and any(getattr(parameter, "name", None) == name for parameter in piece.parameters)]
-    return f" (declared by {', '.join(owners)}, a plugin)" if owners and message.startswith("parameter ") else ""
+def _declared_by_a_plugin(name: str, pieces) -> str:
+    """`` (declared by kinetics NAME, a plugin)`` when a third party's piece declares the parameter ``name``:
+    "parameter k_g must be >= 0" said neither which plugin's parameter it is nor where its range comes from.
+    Empty for primordia's own (the seed's Table 3.1, mostly)."""
+    owners = [owner for owner, piece in pieces
+              if is_third_party(piece) and any(parameter.name == name for parameter in piece.parameters)]
+    return f" (declared by {', '.join(owners)}, a plugin)" if owners else ""
 
 
 def _declarations(pieces) -> list[Parameter]:

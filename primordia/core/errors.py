@@ -66,11 +66,16 @@ def _below_error(record: logging.LogRecord) -> bool:
     return record.levelno < logging.ERROR
 
 
+def is_third_party(source) -> bool:
+    """Whether ``source`` (a class, a function) is a plugin's, not defined in ``primordia.``."""
+    return not getattr(source, "__module__", "").startswith("primordia.")
+
+
 def third_party_code(what: str, source, passes: tuple[type[BaseException], ...] = (PrimordiaError,)):
     """:func:`plugin_code` for code that may be primordia's own or a plugin's (a physics module's method, a term
-    it contributes): a plugin's bug is one line; primordia's own (``source`` defined in ``primordia.``) keeps
-    its traceback, since it is primordia's bug."""
-    if getattr(source, "__module__", "").startswith("primordia."):
+    it contributes): a plugin's bug is one line; primordia's own (:func:`is_third_party` false) keeps its
+    traceback, since it is primordia's bug."""
+    if not is_third_party(source):
         return contextlib.nullcontext()
     return plugin_code(what, passes, source=source)
 

@@ -33,7 +33,7 @@ import ufl
 from ufl.algorithms import expand_derivatives
 
 from primordia.core.config import Configured, merge_options
-from primordia.core.errors import ConfigError, PluginError, third_party_code
+from primordia.core.errors import ConfigError, PluginError, is_third_party, third_party_code
 from primordia.core.parameters import Parameter
 
 if TYPE_CHECKING:
@@ -332,7 +332,7 @@ def module_code(module: Physics, method: str):
         with third_party_code(f"physics {module.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls):
             yield
     except ConfigError as error:
-        if (cls.__module__.startswith("primordia.") or method not in _BUILDING_FORMS
+        if (not is_third_party(cls) or method not in _BUILDING_FORMS
                 or f"physics {module.name}" in str(error)):
             raise
         raise ConfigError(f"physics {module.name}: {method}: {error}") from error

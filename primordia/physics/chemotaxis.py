@@ -64,7 +64,7 @@ import numpy as np
 import ufl
 
 from primordia.core import compiled
-from primordia.core.errors import ConfigError, place_in, warn
+from primordia.core.errors import ConfigError, is_third_party, place_in, warn
 from primordia.core.ops import NUMPY, UFL
 from primordia.core.validation import number, numbers
 from primordia.physics.base import GATHERED_RANKS, Diagnostic, FieldSpec, Physics, Subproblem, jacobian_is_constant
@@ -192,8 +192,7 @@ class Chemotaxis(Physics):
         except (ArithmeticError, ValueError) as error:
             reason = "it overflows" if isinstance(error, OverflowError) else f"{type(error).__name__}: {error}"
             # a third party's kinetics: where in its files, as for its other errors (its bug, or the parameters)
-            reason += place_in(error, type(self.kinetics)) if not type(self.kinetics).__module__.startswith(
-                "primordia.") else ""
+            reason += place_in(error, type(self.kinetics)) if is_third_party(type(self.kinetics)) else ""
             raise ConfigError(f"{where}: the initial state cannot be evaluated with these parameters ({reason}); "
                               f"are they in the model's (dimensionless) units?") from None
         if bad is not None:

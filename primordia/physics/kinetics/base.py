@@ -228,15 +228,18 @@ def kinetics_code(kinetics: Kinetics, method: str, passes: tuple[type[BaseExcept
     ``if`` on a species, which numbers take and UFL and dual numbers do not) is one line naming the kinetics and
     where in its files it happened, not a traceback; primordia's own keep theirs.  ``passes``: what the caller
     handles itself."""
+    return third_party_code(_failed(kinetics, method), type(kinetics), passes)
+
+
+def _failed(kinetics: Kinetics, method: str) -> str:
+    """How a failure of ``method`` of ``kinetics`` begins: its name, its class and the method."""
     cls = type(kinetics)
-    return third_party_code(f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed", cls,
-                            passes)
+    return f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed"
 
 
 def _call(kinetics: Kinetics, method: str, *args):
     # arithmetic that fails (ValueError: a math domain error) is blamed on the parameters, by the caller; anything
     # else is named as kinetics_code names it: the class and where in its files (a RuntimeError said neither)
-    cls = type(kinetics)
-    with plugin_code(f"kinetics {kinetics.name} ({cls.__module__}.{cls.__qualname__}): {method} failed",
-                     passes=(PluginError, ArithmeticError, ValueError), source=cls):
+    with plugin_code(_failed(kinetics, method), passes=(PluginError, ArithmeticError, ValueError),
+                     source=type(kinetics)):
         return getattr(kinetics, method)(*args)
