@@ -509,6 +509,12 @@ def software(pm: pluggy.PluginManager | None = None) -> dict:
     return {**versions, "plugins": plugins}
 
 
+def why_skipped(kind: str, name: str, pm: pluggy.PluginManager | None = None) -> str | None:
+    """Why the piece ``name`` of ``kind`` that a plugin gives was skipped at loading (two plugins give it, or the
+    contribution was junk), or None: what a config naming it is told instead of "unknown"."""
+    return (pm or get_plugin_manager()).load_report.skipped.get((kind, name))
+
+
 def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):
     """The registered piece of ``kind`` called ``name``; an unknown name names the known ones."""
     pm = pm or get_plugin_manager()
@@ -519,8 +525,9 @@ def lookup(kind: str, name: str, pm: pluggy.PluginManager | None = None):
         known = ", ".join(sorted(table)) or "none"
         label = kind.replace("_", " ") if kind in ("physics", "kinetics") else kind.replace("_", " ")[:-1]
         report = pm.load_report
-        if (kind, name) in report.skipped:
-            raise PluginError(f"{label} '{name}' was skipped: {report.skipped[kind, name]}") from None
+        why = why_skipped(kind, name, pm)
+        if why is not None:
+            raise PluginError(f"{label} '{name}' was skipped: {why}") from None
         broken = "" if not report.broken else (f"; plugin{'s' if len(report.broken) > 1 else ''} skipped as broken: "
                                                f"{', '.join(sorted(report.broken))}")
         raise PluginError(f"unknown {label} '{name}' (registered: {known}{broken})") from None

@@ -275,9 +275,9 @@ def condition_kinds() -> dict[str, type]:
 def _refuse_a_skipped_kind(kind: str) -> None:
     """A kind a plugin gives but that was skipped (two plugins give it, or its contribution was junk): why, in one
     line, as a kinetics or a growth law so skipped says (:func:`primordia.core.plugins.lookup`), not "unknown"."""
-    from primordia.core.plugins import get_plugin_manager
+    from primordia.core.plugins import why_skipped
 
-    why = get_plugin_manager().load_report.skipped.get(("boundary_conditions", kind))
+    why = why_skipped("boundary_conditions", kind)
     if why is not None:
         raise PluginError(f"boundary condition type {kind!r} was skipped: {why}")
 
@@ -287,8 +287,12 @@ def condition_code(kind: type, boundary: str, method: str):
     class, the boundary and where in the plugin's files it happened, not a traceback.  The built-in modules
     that hold the conditions (poroelasticity, growth) are primordia's, so their own wrapping leaves a third
     party's kind alone; primordia's own kinds keep their tracebacks."""
-    return third_party_code(f"boundary condition '{kind.kind}' on '{boundary}' ({kind.__module__}."
-                            f"{kind.__qualname__}): {method} failed", kind)
+    return third_party_code(f"{_named(kind, boundary)}: {method} failed", kind)
+
+
+def _named(kind: type, boundary: str) -> str:
+    """A condition in a plugin's error line: its type, its boundary and its class."""
+    return f"boundary condition '{kind.kind}' on '{boundary}' ({kind.__module__}.{kind.__qualname__})"
 
 
 class Conditions(list):
@@ -307,9 +311,8 @@ class Conditions(list):
             terms = condition.terms(disc)
         if not isinstance(terms, dict) or not all(isinstance(name, str) and isinstance(forms, (list, tuple))
                                                    for name, forms in terms.items()):
-            cls = type(condition)
-            raise PluginError(f"boundary condition '{cls.kind}' on '{condition.boundary}' ({cls.__module__}."
-                              f"{cls.__qualname__}): terms must return {{field name: [form, ...]}}, got {terms!r}")
+            raise PluginError(f"{_named(type(condition), condition.boundary)}: terms must return "
+                              f"{{field name: [form, ...]}}, got {terms!r}")
         return terms
 
     def dirichlet(self, disc) -> list:
