@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from machine import describe, last_words  # benchmarks/machine.py
+from machine import describe, last_words, require_at_least  # benchmarks/machine.py
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -63,7 +63,8 @@ def full_run(out: Path = Path("/tmp/primordia-bench-full"), extra: tuple[str, ..
     a second ``--full`` was refused, a CalledProcessError traceback); a failed run is its own last line, exit 1."""
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "primordia.cli", "run", str(ROOT / "examples/ex01a.toml"),
-                           "--out", str(out), "--no-progress", "--overwrite", *extra], stderr=subprocess.PIPE, text=True)
+                           "--out", str(out), "--no-progress", "--overwrite", *extra],
+                          stderr=subprocess.PIPE, text=True)
     if done.returncode != 0:
         sys.exit(f"bench_examples: the full example 1a failed: {last_words(done.stderr)}")
     wall = time.perf_counter() - start
@@ -80,9 +81,8 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="also run the whole example 1a")
     parser.add_argument("--ex01b", action="store_true", help="also time example 1b per backend and scheme")
     args = parser.parse_args()
-    for option, value in (("--steps", args.steps), ("--repeats", args.repeats), ("--sizes", min(args.sizes))):
-        if value < 1:
-            parser.error(f"{option} must be at least 1, got {value}")
+    require_at_least(parser, ("--steps", args.steps, 1), ("--repeats", args.repeats, 1),
+                     ("--sizes", min(args.sizes), 1))
     print(describe(), flush=True)
 
     from primordia.core.plugins import BackendEntry

@@ -31,12 +31,9 @@ from pathlib import Path
 
 from primordia.core.clocks import CLOCKS  # the clocks the solvers time themselves on (no PETSc import)
 
-from machine import describe  # benchmarks/machine.py
+from machine import EXAMPLES, describe, require_at_least  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
-
-#: The examples ``--full`` can run: the seed's, in examples/.
-EXAMPLES = sorted(path.stem for path in (ROOT / "examples").glob("ex*.toml"))
 
 clock = time.perf_counter
 
@@ -105,9 +102,7 @@ def main() -> None:
                         help="cpu: this process's CPU time, fair on a machine others are using (run with "
                              "OPENBLAS_NUM_THREADS=1)")
     args = parser.parse_args()
-    for option, value in (("--steps", args.steps), ("--sizes", min(args.sizes))):
-        if value < 1:
-            parser.error(f"{option} must be at least 1, got {value}")
+    require_at_least(parser, ("--steps", args.steps, 1), ("--sizes", min(args.sizes), 1))
     print(describe(), flush=True)
     global clock
     clock = CLOCKS[args.clock]

@@ -27,7 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from machine import describe  # benchmarks/machine.py
+from machine import describe, require_at_least  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -81,10 +81,8 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=4)
     parser.add_argument("--rebuilds", type=int, default=3)
     args = parser.parse_args()
-    for option, value, least in (("--steps", args.steps, 1), ("--warmup", args.warmup, 0),
-                                 ("--rebuilds", args.rebuilds, 1)):
-        if value < least:
-            parser.error(f"{option} must be at least {least}, got {value}")
+    require_at_least(parser, ("--steps", args.steps, 1), ("--warmup", args.warmup, 0),
+                     ("--rebuilds", args.rebuilds, 1))
     print(describe(), flush=True)
     if not sys.platform.startswith("linux"):
         sys.exit("bench_memory: needs glibc's mallinfo2 (Linux)")

@@ -38,7 +38,7 @@ import sys
 import time
 from pathlib import Path
 
-from machine import describe, last_words, launch_environment  # benchmarks/machine.py
+from machine import describe, last_words, launch_environment, require_at_least  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -86,8 +86,6 @@ def finish(example: str, ranks: int, process: subprocess.Popen, out: Path) -> di
     return json.loads((out / "summary.json").read_text())
 
 
-
-
 def at_once(example: str, copies: int, steps: int | None, extra: list[str], out: Path) -> dict:
     """The mean ms/step (whole runs, and after the first step) of ``copies`` serial runs started together."""
     outs = [out / f"copy{k}" for k in range(copies)]
@@ -119,10 +117,7 @@ def main() -> None:
     parser.add_argument("--as-shipped", action="store_true",
                         help="run each example as its TOML states it and time the whole command")
     args = parser.parse_args()
-    for option, value, least in (("--ranks", args.ranks, 2), ("--steps", args.steps, 1),
-                                 ("--repeats", args.repeats, 1)):
-        if value is not None and value < least:
-            parser.error(f"{option} must be at least {least}, got {value}")
+    require_at_least(parser, ("--ranks", args.ranks, 2), ("--steps", args.steps, 1), ("--repeats", args.repeats, 1))
     if args.as_shipped and (args.steps is not None or args.ceiling):
         parser.error("--as-shipped runs each example as its TOML states it: it takes neither --steps nor --ceiling")
     print(describe(), flush=True)

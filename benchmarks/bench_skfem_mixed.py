@@ -32,7 +32,7 @@ from mpi4py import MPI
 from primordia.core.meshes import box, rectangle
 from primordia.core.clocks import CLOCKS
 
-from machine import describe  # benchmarks/machine.py
+from machine import describe, require_at_least  # benchmarks/machine.py
 
 
 def growth_system(backend, data):
@@ -89,10 +89,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--clock", choices=CLOCKS, default="wall")
     args = parser.parse_args()
-    for option, value in (("--repeats", args.repeats), ("--sizes", min(args.sizes)),
-                          ("--box", min(args.box, default=1))):
-        if value < 1:
-            parser.error(f"{option} must be at least 1, got {value}")
+    require_at_least(parser, ("--repeats", args.repeats, 1), ("--sizes", min(args.sizes), 1),
+                     ("--box", min(args.box, default=1), 1))
     print(describe(), flush=True)
     clock = CLOCKS[args.clock]
 

@@ -55,12 +55,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from machine import describe, last_words, launch_environment  # benchmarks/machine.py
+from machine import EXAMPLES, describe, last_words, launch_environment, require_at_least  # benchmarks/machine.py
 
 ROOT = Path(__file__).resolve().parent.parent
-
-#: The examples ``--share`` can time: the seed's, in examples/.
-EXAMPLES = sorted(path.stem for path in (ROOT / "examples").glob("ex*.toml"))
 
 #: The cell density by BoomerAMG with HMIS coarsening and extended+i interpolation (hypre's advice for 2D and 3D).
 HMIS = ["solver.chemotaxis_m.pc_type=\"hypre\"", "solver.chemotaxis_m.pc_hypre_boomeramg_coarsen_type=\"HMIS\"",
@@ -229,8 +226,6 @@ def _run_child(what: list[str], label: str, args) -> dict | None:
     return json.loads(lines[-1])
 
 
-
-
 def share_table(args) -> None:
     print(f"{'example':>8} {'backend':>8} {'size':>5} {'ms/step':>9} {'solves ms':>10} {'step/solves':>11}", flush=True)
     ratios: dict = {}  # (example, backend, size) -> [step/solves of each repeat]
@@ -281,12 +276,8 @@ def main() -> None:
                         help="backends of --share")
     parser.add_argument("--share-one", nargs=3, metavar=("EXAMPLE", "BACKEND", "SIZE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if args.repeats < 1:
-        parser.error(f"--repeats must be at least 1, got {args.repeats}")
-    for option, value, least in (("--steps", args.steps, 1), ("--warmup", args.warmup, 0), ("--ranks", args.ranks, 1),
-                                 ("--sizes", min(args.sizes), 1)):
-        if value < least:
-            parser.error(f"{option} must be at least {least}, got {value}")
+    require_at_least(parser, ("--repeats", args.repeats, 1), ("--steps", args.steps, 1), ("--warmup", args.warmup, 0),
+                     ("--ranks", args.ranks, 1), ("--sizes", min(args.sizes), 1))
     for system in args.systems if args.preconditioners and not args.share else []:
         unknown = [name for name in args.preconditioners if name not in SYSTEMS[system]["preconditioners"]]
         if unknown:

@@ -71,6 +71,18 @@ def launch_environment() -> dict[str, str]:
     return {**without_launcher(os.environ), "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
 
 
+#: The seed's examples in examples/ (``ex*.toml``): what the scripts' ``--share`` and ``--full`` may name.
+EXAMPLES = sorted(path.stem for path in (Path(__file__).resolve().parent.parent / "examples").glob("ex*.toml"))
+
+
+def require_at_least(parser, *bounds: tuple[str, int | None, int]) -> None:
+    """``parser.error`` (one line, exit 2) for the first (option, value, least) whose value is below its least (a
+    value None: the option was not given)."""
+    for option, value, least in bounds:
+        if value is not None and value < least:
+            parser.error(f"{option} must be at least {least}, got {value}")
+
+
 def last_words(stderr: str) -> str:
     """The last line a failed child wrote, before mpirun's own report (which opens with a line of dashes)."""
     lines = stderr.strip().splitlines()

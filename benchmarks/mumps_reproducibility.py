@@ -17,6 +17,8 @@ import hashlib
 import numpy as np
 from petsc4py import PETSc
 
+from machine import require_at_least  # benchmarks/machine.py
+
 
 def operator(n: int) -> PETSc.Mat:
     """The fixed test matrix: a 5-point stencil with unequal, slightly varying weights (no symmetry to exploit)."""
@@ -37,8 +39,7 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=60, help="grid points per side (n^2 unknowns)")
     parser.add_argument("--package", default="mumps", help="the factor package (mumps, superlu_dist, ...)")
     arguments = parser.parse_args()
-    if arguments.n < 1:
-        parser.error(f"--n must be at least 1, got {arguments.n}")
+    require_at_least(parser, ("--n", arguments.n, 1))
     matrix = operator(arguments.n)
     rhs = matrix.createVecLeft()
     first, last = rhs.getOwnershipRange()
