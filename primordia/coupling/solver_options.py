@@ -12,7 +12,8 @@ tables stand for option prefixes::
     fieldsplit_u = { ksp_type = "preonly", pc_type = "gamg" }
     fieldsplit_psi_p = { ksp_type = "preonly", pc_type = "hypre" }
 
-is ``-poroelastic_growth_fieldsplit_u_pc_type gamg`` and so on.  ``splits`` says
+is ``-poroelastic_growth_fieldsplit_u_pc_type gamg`` and so on.  A monitor or view set to ``true``
+(``ksp_monitor = true``) is the option given bare, ``false`` leaves it out (:func:`reads_a_viewer`).  ``splits`` says
 which fields (by name, as the physics module declares them) form each split of a
 ``fieldsplit`` preconditioner; a split is named by its fields joined with ``_``
 (``psi_p``), which is the prefix of its options.  Without ``splits`` every field
@@ -129,9 +130,25 @@ def flatten(table: Mapping, where: str, prefix: str = "", spelled: dict[str, str
             flat[name] = value
         elif isinstance(value, (list, tuple, dict)):
             raise ConfigError(f"{where}.{name} must be a number, a string or true/false, got {value!r}")
+        elif isinstance(value, bool) and reads_a_viewer(name):
+            if value:
+                flat[name] = ""  # the bare flag: PETSc's default viewer (its own "true" is no viewer)
         else:
             flat[name] = value
     return flat
+
+
+#: Options PETSc reads as a viewer (``ksp_monitor``, ``snes_converged_reason``, ``ksp_view_pre``, at any level),
+#: whose value says where to print (``"stdout"``, ``"ascii:FILE"``): PETSc takes "true" and "false" there for
+#: viewer names and stops at the first solve.  Their ``_cancel`` and ``pause_final`` options are true/false.
+_VIEWER = re.compile(r"(?:^|_)(?:ksp|snes|linesearch|mat|vec|dm|pc)_(?:monitor|view|converged_reason|converged_rate)"
+                     r"(?:_[a-z0-9_]+)?$")
+
+
+def reads_a_viewer(name: str) -> bool:
+    """Whether PETSc reads option ``name`` as a viewer: ``true`` there is the option given bare (printed to
+    standard output), ``false`` the option left out, as PETSc itself has no "false" viewer."""
+    return bool(_VIEWER.search(name)) and not name.endswith(("_cancel", "_pause_final"))
 
 
 def _rebuild_after(value, where: str) -> int | str:

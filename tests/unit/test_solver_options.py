@@ -27,8 +27,18 @@ def test_nested_tables_are_option_prefixes_as_in_firedrake():
     assert flatten(table, "solver.x") == {
         "ksp_type": "gmres", "pc_type": "fieldsplit", "splits": (("u",), ("psi", "p")),
         "fieldsplit_u_ksp_type": "preonly", "fieldsplit_u_pc_type": "gamg", "fieldsplit_u_mg_levels_ksp_max_it": 2,
-        "snes_monitor": True}
+        "snes_monitor": ""}
     assert option_text(True) == "true" and option_text(1e-2) == "0.01"
+
+
+def test_true_gives_a_viewer_option_bare_and_false_leaves_it_out():
+    # PETSc reads "-ksp_monitor true" as a viewer named "true" and stopped the first solve: "Unsupported viewer true"
+    table = {"ksp_monitor": True, "ksp_converged_reason": False, "snes_mf_operator": False,
+             "ksp_monitor_cancel": True, "fieldsplit_u": {"ksp_view": True, "ksp_monitor_true_residual": False},
+             "snes_linesearch_monitor": True, "ksp_initial_guess_nonzero": True, "ksp_monitor_short": "stdout"}
+    assert flatten(table, "solver.x") == {
+        "ksp_monitor": "", "snes_mf_operator": False, "ksp_monitor_cancel": True, "fieldsplit_u_ksp_view": "",
+        "snes_linesearch_monitor": "", "ksp_initial_guess_nonzero": True, "ksp_monitor_short": "stdout"}
 
 
 @pytest.mark.parametrize("table, spellings", [
@@ -298,6 +308,20 @@ mg_levels = { ksp_type = "chebyshev", ksp_max_it = 2 }
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["status"] == "completed"
     assert summary["mean_linear_iterations"]["chemotaxis.f"] > 1  # GMRES + AMG, not the default direct solve
+
+
+@pytest.mark.parametrize("value, printed", [("true", True), ("false", False)])
+def test_a_monitor_set_true_prints_and_false_does_not(capfd, small_config, tmp_path, value, printed):
+    # "true" was written as PETSc's value: the first step failed, "Unsupported viewer true" (and so for false)
+    from primordia.cli import main
+
+    status = main(["run", str(small_config()), "--out", str(tmp_path / "out"), "--no-progress",
+                   "--set", f"solver.chemotaxis_m.ksp_converged_reason={value}",
+                   "--set", f"solver.chemotaxis_f.ksp_monitor={value}"])
+    out, err = capfd.readouterr()
+    assert status == 0, err
+    assert ("Linear chemotaxis_m_ solve converged" in out) is printed, out
+    assert ("0 KSP Residual norm" in out) is printed, out
 
 
 @pytest.mark.parametrize("assignment, fragment", [
