@@ -461,9 +461,17 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # against 4.0, 4.9, 6.8, 10.9 with ILU(0), the solve 0.20, 0.82, 4.2-4.3, 24.6 against 0.19, 0.85,
         # 4.6-4.9, 32.2 ms/step (skfem at 171 4.38 against 4.88); on 2 ranks at 171 6.2 against 7.5
         # iterations, 2.9-3.2 against 3.0-4.0 ms, at 342 8.5 against 10.9, 15.1 against 19.2 ms (the step
-        # 37.9 against 47.8); peak memory the same to 1% (session of 2026-12-05, 40-1,000 steps a size)
+        # 37.9 against 47.8); peak memory the same to 1% (session of 2026-12-05, 40-1,000 steps a size).
+        # On several ranks the additive Schwarz is PETSc's GASM, not ASM: the same restricted additive
+        # Schwarz with one subdomain a rank (two layers of overlap gave the same 6.22 GMRES iterations at 171
+        # on 2 ranks), with fewer copies an application (2.26 against 2.45-2.53 ms a step).  Three layers:
+        # at 171 on 2 ranks over 1,000 steps 5.75 iterations (5.72 in serial) and 2.2 ms a step; at 342 over
+        # 200 steps 8.6 (8.5 in serial), 12.7 against ASM's 18.0 ms (13.0 iterations with two layers, 12.95
+        # with three); four layers no fewer (5.73, 8.54); ILU(0) and ILU(2) slower (2.54 and 2.33 ms at 171).
+        # Example 1a's 2-rank speedup 1.52 -> 1.59 (bench_scaling.py --examples ex01a --solves --steps 1000
+        # --repeats 3; AVX-512 EPYC, a later session of 2026-12-05)
         if ranks > 1:
-            preconditioner = {"pc_type": "asm", "pc_asm_overlap": 2}
+            preconditioner = {"pc_type": "gasm", "pc_gasm_overlap": 3}
         else:
             preconditioner = {"pc_type": "bjacobi"}
         return {"ksp_type": "gmres", **preconditioner, "ksp_rtol": 1e-12, "ksp_atol": 1e-14,

@@ -204,7 +204,7 @@ def test_an_option_given_outside_wins_in_any_case():
 @pytest.mark.parametrize("key, value", [
     ("ksp_rtol", -0.5), ("ksp_rtol", 1.0), ("snes_rtol", "abc"), ("ksp_atol", -1e-3), ("snes_stol", True),
     ("ksp_divtol", 0), ("fieldsplit_u_ksp_max_it", -3), ("snes_max_it", 2.5), ("sub_pc_factor_levels", -1),
-    ("pc_asm_overlap", "1.5"), ("ksp_rtol", float("nan"))])
+    ("pc_asm_overlap", "1.5"), ("pc_gasm_overlap", -1), ("ksp_rtol", float("nan"))])
 def test_a_tolerance_or_count_petsc_would_misread_is_named(key, value):
     with pytest.raises(ConfigError, match=rf"^solver\.x\.{key} must be "):
         check_values({key: value}, "solver.x")
@@ -380,12 +380,14 @@ def test_a_constant_species_matrix_is_solved_whole_by_one_rank_up_to_eight_ranks
         ("cg", "bjacobi", "icc"), ("cg", "bjacobi", "icc"), ("cg", "hypre", None)]
     assert [d.get("rebuild_preconditioner_after") for d in changing] == ["fresh+1", "fresh+1", None]
     cells = Species("m", "cells", diffusivity="D_m", attractant="f")
-    # rebuilt every step: no factorisation to keep; ILU, with two layers of overlap between ranks
-    assert [_solver_defaults(cells, ranks, constant=False)["pc_type"] for ranks in (1, 2, 16)] == ["bjacobi", "asm", "asm"]
-    assert [_solver_defaults(cells, ranks, constant=False).get("pc_asm_overlap") for ranks in (1, 2, 16)] == [None, 2, 2]
+    # rebuilt every step: no factorisation to keep; ILU, with three layers of overlap between ranks (GASM)
+    assert [_solver_defaults(cells, ranks, constant=False)["pc_type"] for ranks in (1, 2, 16)] == [
+        "bjacobi", "gasm", "gasm"]
+    assert [_solver_defaults(cells, ranks, constant=False).get("pc_gasm_overlap") for ranks in (1, 2, 16)] == [
+        None, 3, 3]
     # another preconditioner set by the user takes none of additive Schwarz's settings with it
     chosen = combine(_solver_defaults(cells, 2, constant=False), {"pc_type": "bjacobi"})
-    assert "pc_asm_overlap" not in chosen and chosen["pc_type"] == "bjacobi"
+    assert "pc_gasm_overlap" not in chosen and chosen["pc_type"] == "bjacobi"
 
 
 def test_a_rebuild_bound_is_a_number_or_a_number_above_the_fresh_count():
