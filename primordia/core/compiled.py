@@ -40,6 +40,7 @@ from primordia.core.reductions import on_every_rank
 
 SOURCE = r"""
 #include <stddef.h>
+#include <string.h>
 
 #ifdef PRIMORDIA_VECTOR_MATH  /* glibc's libmvec: the first declarations carry the simd attribute */
 #define SIMD __attribute__((__simd__("notinbranch")))
@@ -113,6 +114,16 @@ void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restric
       values[high_diagonal[e]] += weights[b] * toward;
     }
   }
+}
+
+/* dst[to[r] : to[r] + length[r]] = src[from[r] : from[r] + length[r]] for each run r: the values of a
+   parallel PETSc matrix written into its diagonal or off-diagonal block by whole runs of entries
+   (primordia/core/petsc_library.py, BlockRuns). */
+void primordia_copy_runs(ptrdiff_t n, const long long *restrict from, const long long *restrict to,
+                         const long long *restrict length, const double *restrict src, double *restrict dst)
+{
+  for (ptrdiff_t r = 0; r < n; ++r)
+    memcpy(dst + to[r], src + from[r], (size_t)length[r] * sizeof(double));
 }
 
 /* The P1 advection load of terms sharing one velocity r: for each term t,
@@ -191,6 +202,7 @@ _SIGNATURES = {
     "primordia_edge_bernoulli": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4, ctypes.c_double, ctypes.c_void_p],
     "primordia_edge_entries": [ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 8],
     "primordia_p1_advection": [ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 9],
+    "primordia_copy_runs": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 5],
 }
 
 _loaded: dict = {}  # "library" -> the CDLL or None, once decided in this process

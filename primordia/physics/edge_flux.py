@@ -30,7 +30,7 @@ from petsc4py import PETSc
 from scipy.sparse import csr_matrix as _csr
 
 from primordia.core import compiled
-from primordia.core.petsc_library import update_mpiaij_values
+from primordia.core.petsc_library import BlockRuns, update_mpiaij_values
 from primordia.core.reductions import largest, smallest
 from primordia.physics.base import AlgebraicOperator
 from primordia.physics.discretisation import Discretisation
@@ -89,6 +89,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._shift = None  # that diagonal (a Vec, made once)
         self._compiled = None  # the compiled loops, False for numpy's (decided at the first update, collectively)
         self._midpoints = self._addresses = None  # the species at the edge midpoints, and the loops' arrays
+        self._block_runs = None  # on several processes with the compiled loops: the values' copy by runs
 
     def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
@@ -271,6 +272,8 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self._set_weights(self._stiffness.getValuesCSR()[2])
         if self._compiled is None:
             self._compiled = compiled.kernels(self.disc.comm) or False
+            if self._by_rows and self._compiled:  # collective, as the decision above
+                self._block_runs = BlockRuns.of(self._A, self._columns, self._compiled.primordia_copy_runs)
         c, a = self._gather(self.species), self._gather(self.attractant)
         if self._compiled:
             self._compiled_values(c, a)
@@ -287,7 +290,9 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
             self._entries.mult(self._table_vector, self._values_vector)
         self._shifted = False  # every value was just rewritten
-        if self._by_rows:
+        if self._block_runs is not None:
+            self._block_runs.write(self._values)
+        elif self._by_rows:
             update_mpiaij_values(self._A, self._values)
         elif not self._in_place:
             self._A.setValuesCSR(self._indptr, self._columns, self._values)

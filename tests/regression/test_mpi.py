@@ -110,6 +110,50 @@ def test_the_fitted_operator_is_shifted_in_place_on_two_ranks():
     assert done.stdout.strip() == "ranks [2, 2]"
 
 
+BY_RUNS = """
+import numpy as np
+from mpi4py import MPI
+from primordia.backends.fenicsx import FenicsxBackend
+from primordia.core.meshes import rectangle
+from primordia.physics.base import FieldSpec
+from primordia.physics.discretisation import Discretisation
+from primordia.physics.edge_flux import ExponentiallyFittedFlux
+
+disc = Discretisation(FenicsxBackend(MPI.COMM_WORLD), rectangle((0.0, 0.0), (2.0, 1.0), (14, 8)))
+for name in ("m", "f"):
+    disc.add_group(name, [FieldSpec(name)], owners={name: "test"})
+operator = ExponentiallyFittedFlux(disc, "m", "f", diffusivity=0.05, sensitivity=lambda m: 4.0 * np.exp(-m))
+runs = None
+for shift in (0.0, 0.7, 1.3):
+    disc.backend.interpolate(disc.previous("m"), lambda x: 2.0 + np.sin(3.0 * x[0] + shift) * np.cos(2.0 * x[1]))
+    disc.backend.interpolate(disc.previous("f"), lambda x: 1.5 + np.cos(5.0 * x[0] + x[1] - shift))
+    operator._block_runs = runs
+    operator.update()
+    runs = operator._block_runs
+    assert runs is not None, "the values were not copied by runs"
+    indptr, columns, by_runs = operator.matrix().getValuesCSR()
+    operator._block_runs = None  # MatUpdateMPIAIJWithArray, as before
+    operator.update()
+    assert np.array_equal(operator.matrix().getValuesCSR()[2], by_runs)
+    assert np.array_equal(by_runs, operator._values) and np.abs(by_runs).max() > 0
+ranks = MPI.COMM_WORLD.gather(MPI.COMM_WORLD.size)
+if MPI.COMM_WORLD.rank == 0:
+    print("ranks", ranks)
+"""
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_the_fitted_operator_s_values_reach_the_parallel_matrix_by_runs(ranks):
+    """On several ranks each update copies the fitted operator's values into PETSc's diagonal and off-diagonal
+    blocks by whole runs (``BlockRuns``): the same matrix as ``MatUpdateMPIAIJWithArray`` gave, update after
+    update."""
+    done = subprocess.run(["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, "-c", BY_RUNS], env=ENV,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == f"ranks {[ranks] * ranks}"
+
+
 @pytest.mark.mpi
 def test_a_first_run_with_an_empty_jit_cache_runs_on_two_ranks(tmp_path):
     """FFCx replaced the mesh's coordinate element by an equispaced one in each form it compiled: on rank 0

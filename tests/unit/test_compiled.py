@@ -191,3 +191,25 @@ def test_addresses_are_checked():
         compiled.address(np.zeros(4, dtype=np.int32), np.int64)
     with pytest.raises(ValueError, match="contiguous float64"):
         compiled.address(np.zeros(8)[::2])
+
+
+def test_runs_of_a_mask_and_their_copy():
+    """The runs a parallel matrix's blocks are written by (``petsc_library.BlockRuns``): each maximal run of
+    chosen entries is one copy, to its place among the chosen ones."""
+    from primordia.core.petsc_library import _runs
+
+    mask = np.array([True, True, False, True, False, False, True, True, True])
+    count, sources, targets, lengths = _runs(mask)
+    assert (count, sources.tolist(), targets.tolist(), lengths.tolist()) == (3, [0, 3, 6], [0, 2, 3], [2, 1, 3])
+    count, sources, targets, lengths = _runs(~mask)
+    assert (count, sources.tolist(), targets.tolist(), lengths.tolist()) == (2, [2, 4], [0, 1], [1, 2])
+    library = compiled.kernels()
+    assert library is not None, compiled.status()
+    values = np.arange(10.0, 19.0)
+    for chosen in (mask, ~mask):
+        count, sources, targets, lengths = _runs(chosen)
+        block = np.full(int(chosen.sum()), -1.0)
+        library.primordia_copy_runs(count, compiled.address(sources, np.int64), compiled.address(targets, np.int64),
+                                    compiled.address(lengths, np.int64), compiled.address(values),
+                                    compiled.address(block))
+        assert block.tolist() == values[chosen].tolist()
