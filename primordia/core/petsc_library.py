@@ -77,8 +77,8 @@ class BlockRuns:
         if error:
             raise PETSc.Error(error)
         self._matrix, self._copy_runs = matrix, copy_runs  # the blocks live as long as the matrix
-        self._blocks = [(block, _runs(mask)) for block, mask in ((diagonal, in_diagonal), (off_diagonal, ~in_diagonal))
-                        if mask.any()]
+        self._blocks = [(block, _runs(mask)) for block, mask in ((diagonal, in_diagonal),
+                                                                 (off_diagonal, ~in_diagonal)) if mask.any()]
 
     @classmethod
     def of(cls, matrix, columns: np.ndarray, copy_runs) -> "BlockRuns | None":
@@ -86,7 +86,13 @@ class BlockRuns:
         None on every rank if on any rank the matrix does not read back, by rows, what the runs wrote
         (collective).  Leaves every value zero."""
         start, end = matrix.getOwnershipRangeColumn()
-        runs = cls(matrix, (columns >= start) & (columns < end), copy_runs)
+        in_diagonal = (columns >= start) & (columns < end)
+        # the blocks hold as many entries as the runs write, before anything is written through them
+        held = matrix.getDiagonalBlock().getValuesCSR()[0][-1], matrix.getValuesCSR()[0][-1]
+        sized = held == (np.count_nonzero(in_diagonal), len(columns))
+        if not all(matrix.getComm().tompi4py().allgather(sized)):
+            return None
+        runs = cls(matrix, in_diagonal, copy_runs)
         numbered = np.arange(1.0, len(columns) + 1.0, dtype=PETSc.ScalarType)
         runs.write(numbered)
         matrix.assemble()

@@ -344,7 +344,8 @@ NUMERIC_OPTIONS = {
     "ksp_divtol": _POSITIVE,
     "ksp_max_it": _COUNT, "snes_max_it": _COUNT, "snes_max_funcs": _COUNT, "ksp_gmres_restart": _COUNT,
     "pc_mg_levels": _COUNT,
-    "pc_factor_levels": _LEVELS, "pc_asm_overlap": _LEVELS, "pc_gasm_overlap": _LEVELS, "pc_gamg_agg_nsmooths": _LEVELS,
+    "pc_factor_levels": _LEVELS, "pc_asm_overlap": _LEVELS, "pc_gasm_overlap": _LEVELS,
+    "pc_gamg_agg_nsmooths": _LEVELS,
 }
 #: Words PETSc reads in place of a number (its defaults and infinities): left to PETSc.
 _PETSC_WORDS = {"default", "petsc_default", "decide", "petsc_decide", "determine", "petsc_determine",
