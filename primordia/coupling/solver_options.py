@@ -388,11 +388,13 @@ def quoted_option(reason: str, options: Mapping[str, Any] | None) -> str:
 
 
 #: PETSc's error classes that say a solver was set up wrongly, not that it met numbers it could not solve
-#: (petscerror.h): no support (56, 57), argument errors (60-64, 68-70, 73, 75, 80, 85, 86, 89), a missing
+#: (petscerror.h): no support (56, 57), argument errors (60-64, 68-70, 73, 75, 80, 85, 86, 89), a file it
+#: cannot open, read or write (65-67, 79: a monitor's ``"ascii:FILE"`` in a missing directory), a missing
 #: factor package (92), an option overwritten (93), the wrong number of ranks (94), bad user input (95).  A
 #: smaller time step cannot mend them.  A zero pivot (71, 81), a floating-point error (72), a failed
 #: convergence (82, 91), memory (55) and an external library's failure (76, 77) may depend on the step.
-USAGE_ERRORS = frozenset({56, 57, 60, 61, 62, 63, 64, 68, 69, 70, 73, 75, 80, 85, 86, 89, 92, 93, 94, 95})
+USAGE_ERRORS = frozenset({56, 57, 60, 61, 62, 63, 64, 65, 66, 67, 68, 69, 70, 73, 75, 79, 80, 85, 86, 89, 92, 93, 94,
+                          95})
 
 
 def depends_on_step(error_code: int) -> bool:

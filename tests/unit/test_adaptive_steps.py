@@ -194,10 +194,23 @@ def test_a_solver_petsc_cannot_set_up_stops_an_adaptive_run_at_once(primordia_cl
     assert summary["rejected_steps"] == 0 and summary["status"].startswith("stopped at t = 0")
 
 
+def test_a_monitor_file_petsc_cannot_open_stops_an_adaptive_run_at_once(primordia_cli, small_config, tmp_path):
+    """PETSc error 65 (a viewer's file in a missing directory) was taken for a failure a smaller step might mend:
+    the run halved dt down to dt_min, then said it had retried, for a path no step size changes."""
+    out = tmp_path / "out"
+    result = primordia_cli("run", small_config(), "--out", out, "--no-progress", "--set",
+                           f"solver.chemotaxis_m.ksp_converged_reason='ascii:{tmp_path}/missing/reason.txt'")
+    line = assert_one_line_error(result, "step 1 (t = 0 -> 0.2)", "chemotaxis.m", "PETSc error 65",
+                                 "Cannot open PetscViewer file")
+    assert "retried" not in line
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["rejected_steps"] == 0
+
+
 def test_petsc_usage_errors_do_not_depend_on_the_step_and_numerical_failures_may():
     from primordia.coupling.solver_options import depends_on_step
 
-    assert not any(depends_on_step(code) for code in (56, 62, 63, 73, 75, 86, 92))  # support, arguments, factor
+    assert not any(depends_on_step(code) for code in (56, 62, 63, 65, 73, 75, 86, 92))  # support, args, file, factor
     assert all(depends_on_step(code) for code in (55, 71, 72, 76, 77, 81, 82, 91))  # memory, pivots, FP, libs
 
 
