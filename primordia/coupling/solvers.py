@@ -58,6 +58,9 @@ def petsc_failure(solve: str, code: int, reason: str, prefix: str, options: dict
                        f"try other options under -{prefix}", depends_on_step=depends_on_step(code))
 
 
+#: PETSc's error codes of a zero pivot in an LU and a Cholesky factorisation (petscerror.h).
+ZERO_PIVOTS = frozenset({71, 81})
+
 #: A solve repeated within a step (a fixed-point pass after the first) stops at this fraction of the step's
 #: first initial residual: about 5e4 machine epsilons, sixty times the floor at which Newton stalled.
 ROUND_OFF_FLOOR = 1e-11
@@ -595,11 +598,15 @@ class LinearSolver(_Solver):
         self._check_options_used()
 
     def _solve_linear_once(self, b, solution):
+        """A zero pivot is a failed set-up, or PETSc's error 71 or 81 when it was told to raise
+        (``ksp_error_if_not_converged``); any other error it raised is its own (a viewer it cannot open, a value
+        it cannot read), which MUMPS would not mend: it was taken for a zero pivot, a warning said so, and
+        the option that caused it was then reported unread (the switch writes the options anew)."""
         try:
             self.ksp.solve(b, solution)
             failed = self.ksp.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
         except PETSc.Error as error:
-            failed, raised = True, error
+            failed, raised = error.ierr in ZERO_PIVOTS, error
         else:
             raised = None
         if failed and self._switch_to_mumps(self.ksp):

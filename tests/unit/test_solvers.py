@@ -55,21 +55,40 @@ def test_the_fallback_to_mumps_drops_a_default_ordering_for_its_own():
     assert solver.ksp.getConvergedReason() > 0
 
 
-def test_a_petsc_error_in_an_iterative_solve_is_one_solver_error_not_swallowed():
-    from primordia.core.errors import SolverError
-
+def _reaction_diffusion(name, petsc_options):
+    """A symmetric positive definite linear subproblem on a 4 x 4 mesh, and its backend."""
     backend = FenicsxBackend()
     mesh = backend.create_mesh(rectangle((0, 0), (1, 1), (4, 4)))
     space = backend.function_space(mesh, ufl.FiniteElement("Lagrange", mesh.ufl_cell(), 1))
     u, v = backend.function(space, "u"), ufl.TestFunction(space)
     residual = (ufl.inner(ufl.grad(u), ufl.grad(v)) + u * v - v) * backend.measure("dx", mesh)
+    return backend, Subproblem(name, u, residual, ufl.derivative(residual, u), petsc_options=petsc_options)
+
+
+def test_a_petsc_error_in_an_iterative_solve_is_one_solver_error_not_swallowed():
+    from primordia.core.errors import SolverError
+
     # A preconditioner PETSc cannot set up (composite without sub-preconditioners) raises inside KSPSolve.
     # Not ksp_error_if_not_converged: after any earlier PETSc error inside a KSPSolve (another test's), PETSc
     # 3.18's static nesting level of KSPSolve stays raised and DIVERGED_ITS no longer raises.
-    problem = Subproblem("raising_test", u, residual, ufl.derivative(residual, u),
-                         petsc_options={"ksp_type": "gmres", "pc_type": "composite"})
+    backend, problem = _reaction_diffusion("raising_test", {"ksp_type": "gmres", "pc_type": "composite"})
     with pytest.raises(SolverError, match=r"^raising_test: the linear solve failed \(PETSc error 73: No composite"):
         SubproblemSolver(backend, problem).solve()
+
+
+def test_a_petsc_error_in_a_factorisation_is_its_own_not_a_zero_pivot(capsys):
+    """Any error PETSc raised under an unpivoted LU was taken for a zero pivot: a warning said so, MUMPS was tried,
+    and the run then stopped on the option that caused it as one PETSc "did not use" (here a factor viewer
+    named "true", which PETSc cannot open)."""
+    from primordia.core.errors import SolverError
+
+    backend, problem = _reaction_diffusion("factor_view_test", {"ksp_type": "preonly", "pc_type": "lu"})
+    solver = SubproblemSolver(backend, problem, {"mat_factor_view": "true"})
+    with pytest.raises(SolverError, match=r"^factor_view_test: the linear solve failed \(PETSc error 56: "
+                                          r"Unsupported viewer true \(in mat_factor_view = 'true'\)\)"):
+        solver.solve()
+    assert "zero pivot" not in capsys.readouterr().err
+    assert solver.ksp.getPC().getFactorSolverType() == "petsc"
 
 
 def _fake_solver(name, reads=(), gathered=True, ranks=2):
