@@ -141,8 +141,12 @@ def flatten(table: Mapping, where: str, prefix: str = "", spelled: dict[str, str
 #: Options PETSc reads as a viewer (``ksp_monitor``, ``snes_converged_reason``, ``ksp_view_pre``, at any level),
 #: whose value says where to print (``"stdout"``, ``"ascii:FILE"``): PETSc takes "true" and "false" there for
 #: viewer names and stops at the first solve.  Their ``_cancel`` and ``pause_final`` options are true/false.
-_VIEWER = re.compile(r"(?:^|_)(?:ksp|snes|linesearch|mat|vec|dm|pc)_(?:monitor|view|converged_reason|converged_rate)"
-                     r"(?:_[a-z0-9_]+)?$")
+#: Any word ``monitor`` or ``view`` of the name, not only after ``ksp_``, ``snes_``, ...: the viewers
+#: ``snes_test_jacobian_view``, ``mat_factor_view`` (read as a factorisation is made), ``snes_fas_monitor`` and
+#: ``ksp_lsqr_monitor`` stopped the run at "true".  The true/false options so named (``pc_gasm_view_subdomains``,
+#: ``snes_vi_monitor``) are false unless given, so the bare flag and its absence mean what true and false do;
+#: and where PETSc asks only whether the option is given (``ksp_gmres_krylov_monitor``), "false" turned it on.
+_VIEWER = re.compile(r"(?:^|_)(?:monitor|view|converged_reason|converged_rate)(?:_[a-z0-9_]+)?$")
 
 
 def reads_a_viewer(name: str) -> bool:

@@ -41,6 +41,30 @@ def test_true_gives_a_viewer_option_bare_and_false_leaves_it_out():
         "snes_linesearch_monitor": "", "ksp_initial_guess_nonzero": True, "ksp_monitor_short": "stdout"}
 
 
+def test_true_gives_bare_every_option_named_a_monitor_or_view_not_only_after_ksp_or_snes():
+    # snes_test_jacobian_view, mat_factor_view, snes_fas_monitor and ksp_lsqr_monitor are viewers too: "true"
+    # reached PETSc and stopped the run; a ksp_gmres_krylov_monitor PETSc asks only for presence: "false" was on
+    table = {"snes_test_jacobian_view": True, "sub": {"mat_factor_view": True}, "snes_fas_monitor": True,
+             "ksp_lsqr_monitor": True, "ksp_gmres_krylov_monitor": False, "pc_gasm_view_subdomains": True,
+             "snes_converged_reason_view_cancel": True, "snes_test_jacobian": 1e-8, "snes_monitor_pause_final": False}
+    assert flatten(table, "solver.x") == {
+        "snes_test_jacobian_view": "", "sub_mat_factor_view": "", "snes_fas_monitor": "", "ksp_lsqr_monitor": "",
+        "pc_gasm_view_subdomains": "", "snes_converged_reason_view_cancel": True, "snes_test_jacobian": 1e-8,
+        "snes_monitor_pause_final": False}
+
+
+def test_a_jacobian_test_view_set_true_prints_the_difference(capfd, tmp_path):
+    from primordia.cli import main
+
+    status = main(["run", str(EXAMPLES / "ex02a.toml"), "--out", str(tmp_path / "out"), "--no-progress",
+                   "--set", "mesh.cells=[4,4]", "--set", "time.t_final=0.2", "--set", "output.times=[0.2]",
+                   "--set", "output.pictures=false", "--set", "solver.poroelastic_growth.snes_test_jacobian=1e-12",
+                   "--set", "solver.poroelastic_growth.snes_test_jacobian_view=true"])
+    out, err = capfd.readouterr()
+    assert status == 0, err
+    assert "Hand-coded minus finite-difference Jacobian" in out, out[:2000]
+
+
 @pytest.mark.parametrize("table, spellings", [
     ({"sub": {"pc_type": "lu"}, "sub_pc_type": "icc"}, "sub_pc_type is given twice, as sub.pc_type and as sub_pc_type"),
     ({"fieldsplit_u_pc_type": "gamg", "fieldsplit_u": {"pc_type": "hypre"}},
