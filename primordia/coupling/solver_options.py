@@ -375,7 +375,10 @@ def check_values(options: Mapping[str, Any], where: str) -> None:
 
 def read_options(petsc_object, where: str, options: Mapping[str, Any] | None = None) -> None:
     """``petsc_object.setFromOptions()``, with a value PETSc refuses one line naming the solver table, PETSc's
-    own reason (not its traceback) and the option of ``options`` whose value the reason quotes, if one does."""
+    own reason (not its traceback) and the option of ``options`` whose value the reason quotes, if one does.
+
+    ``options`` are the user's: with the defaults among them, a value the user gave that a default shares
+    ("true" with ``snes_mf_operator``, 1 with ``sub_pc_factor_levels``) quoted two options, and so none."""
     try:
         petsc_object.setFromOptions()
     except PETSc.Error as error:

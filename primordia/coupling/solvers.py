@@ -242,7 +242,7 @@ def check_settings(subproblem, overrides: dict | None, parallel: bool) -> None:
     lacks): read by a KSP or SNES of this process alone, with no operator, whose options are then taken away
     (the dry run said "the input is valid" to them, and the run stopped at set-up)."""
     cls = LinearSolver if subproblem.linear else NewtonSolver
-    options, _ = cls.settings(subproblem, overrides, parallel)
+    options, user_keys = cls.settings(subproblem, overrides, parallel)
     options = {key: value for key, value in options.items() if key not in OWN_OPTIONS}
     write_options(subproblem.prefix, options)
     solver = (PETSc.KSP if subproblem.linear else PETSc.SNES)().create(PETSc.COMM_SELF)
@@ -250,7 +250,8 @@ def check_settings(subproblem, overrides: dict | None, parallel: bool) -> None:
         solver.setOptionsPrefix(subproblem.prefix)
         if str(options.get("pc_type")) == "fieldsplit":  # as _configure: the splits' index sets need the mesh
             (solver if subproblem.linear else solver.getKSP()).getPC().setType("fieldsplit")
-        read_options(solver, f"solver.{subproblem.prefix[:-1]}", options)
+        read_options(solver, f"solver.{subproblem.prefix[:-1]}", {key: options[key] for key in user_keys
+                                                                   if key in options})
     finally:
         solver.destroy()
         write_options(subproblem.prefix, {})
@@ -424,7 +425,7 @@ class LinearSolver(_Solver):
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF if self._gather else backend.comm)
         self.ksp.setOptionsPrefix(subproblem.prefix)
         self._configure(self.ksp.getPC())
-        read_options(self.ksp, self.where, self.options)
+        read_options(self.ksp, self.where, self.user_options)
         self._increment = None
         self._affine = AffineResidual(backend, subproblem)
         self._pointwise = (not self._user_keys and subproblem.operator is None and self.options.get("ksp_type") == "preonly"
@@ -849,7 +850,7 @@ class NewtonSolver(_Solver):
         self.ksp = self.snes.getKSP()
         self._assembly_seconds = no_time()  # in the SNES callbacks, taken off its solve time
         self._configure(self.ksp.getPC())
-        read_options(self.snes, self.where, self.options)
+        read_options(self.snes, self.where, self.user_options)
         self.history: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
         #: within :meth:`repeated_within_a_step`: the first solve's initial residual norm (None before it)
         self._step_reference: float | None = None

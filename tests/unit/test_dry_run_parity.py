@@ -257,7 +257,10 @@ def test_options_a_solver_refuses_before_it_is_made_are_refused_by_the_dry_run(p
     (['coupling.scheme="monolithic"', 'physics.chemotaxis.flux_scheme="galerkin"',
       'solver.monolithic.snes_linesearch_type="nosuch"'],
      ["solver.monolithic: PETSc refused the options", "(in snes_linesearch_type = 'nosuch')"]),
-], ids=["linear", "newton"])
+    # a value a default shares (m's sub_pc_factor_levels = 1) named no option
+    (['solver.chemotaxis_m.ksp_monitor=1'],
+     ["solver.chemotaxis_m: PETSc refused the options: Unsupported viewer 1 (in ksp_monitor = '1')"]),
+], ids=["linear", "newton", "a-default-s-value"])
 def test_a_value_petsc_cannot_read_is_refused_by_the_dry_run(primordia_cli, small_config, tmp_path, assignments,
                                                              fragments):
     """PETSc reads the options as the solver is made, which the dry run never does: it said "the input is valid"."""
