@@ -424,7 +424,10 @@ def _ends_level(key: str, suffix: str) -> bool:
 
 
 def _suggestion(value: str, known: Iterable[str]) -> str:
-    close = difflib.get_close_matches(value, list(known), n=3)
+    """`` (did you mean ...?)`` with the closest of ``known``, compared in any case: PETSc's type names are
+    case-sensitive, and "GASM" was far from "gasm" by its letters' case alone."""
+    by_lower = {name.lower(): name for name in known}
+    close = [by_lower[name] for name in difflib.get_close_matches(value.lower(), list(by_lower), n=3)]
     return f" (did you mean {', '.join(close)}?)" if close else ""
 
 

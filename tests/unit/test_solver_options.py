@@ -259,6 +259,8 @@ def run(capsys, config, out, *assignments) -> tuple[int, str]:
 BAD_SOLVER_SETTINGS = [
     (['solver.chemotaxis_m.pc_type="ilu0"'], ["solver.chemotaxis_m", "unknown PC type 'ilu0'"]),
     (['solver.chemotaxis_f.ksp_type="cgg"'], ["solver.chemotaxis_f", "unknown KSP type 'cgg'", "did you mean cg"]),
+    # PETSc's type names are case-sensitive: the suggestion is not ("GASM" had none)
+    (['solver.chemotaxis_m.pc_type="GASM"'], ["unknown PC type 'GASM'", "did you mean gasm"]),
     # a type petsc4py knows and this PETSc was built without (it suggested the very name before)
     pytest.param(['solver.chemotaxis_m.pc_type="h2opus"'], ["PC type 'h2opus' in pc_type is not available in this PETSc"],
                  marks=pytest.mark.skipif(_try_type(PETSc.PC, "h2opus"), reason="this PETSc has H2OPUS")),
