@@ -351,7 +351,9 @@ NUMERIC_OPTIONS = {
     "pc_factor_levels": _LEVELS, "pc_asm_overlap": _LEVELS, "pc_gasm_overlap": _LEVELS,
     "pc_gamg_agg_nsmooths": _LEVELS,
 }
-#: Words PETSc reads in place of a number (its defaults and infinities): left to PETSc.
+#: Words PETSc reads in place of a number (its defaults and infinities): left to PETSc, but for a level count
+#: (fill levels, overlap layers, smoothing steps), where PETSc reads its default as -2 and stops at set-up
+#: without naming the option ("Negative overlap value requested" for ``pc_gasm_overlap = "default"``).
 _PETSC_WORDS = {"default", "petsc_default", "decide", "petsc_decide", "determine", "petsc_determine",
                 "infinity", "-infinity", "petsc_infinity", "petsc_ninfinity"}
 
@@ -364,7 +366,7 @@ def check_values(options: Mapping[str, Any], where: str) -> None:
         for name, bounds in NUMERIC_OPTIONS.items():
             if key.endswith(name) and _ends_level(key, name):
                 if isinstance(value, str):
-                    if value.strip().lower() in _PETSC_WORDS:
+                    if value.strip().lower() in _PETSC_WORDS and bounds is not _LEVELS:
                         continue
                     try:
                         value = int(value) if bounds.get("integer") else float(value)

@@ -228,7 +228,8 @@ def test_an_option_given_outside_wins_in_any_case():
 @pytest.mark.parametrize("key, value", [
     ("ksp_rtol", -0.5), ("ksp_rtol", 1.0), ("snes_rtol", "abc"), ("ksp_atol", -1e-3), ("snes_stol", True),
     ("ksp_divtol", 0), ("fieldsplit_u_ksp_max_it", -3), ("snes_max_it", 2.5), ("sub_pc_factor_levels", -1),
-    ("pc_asm_overlap", "1.5"), ("pc_gasm_overlap", -1), ("ksp_rtol", float("nan"))])
+    ("pc_asm_overlap", "1.5"), ("pc_gasm_overlap", -1), ("pc_gasm_overlap", "default"),
+    ("sub_pc_factor_levels", "PETSC_DEFAULT"), ("ksp_rtol", float("nan"))])
 def test_a_tolerance_or_count_petsc_would_misread_is_named(key, value):
     with pytest.raises(ConfigError, match=rf"^solver\.x\.{key} must be "):
         check_values({key: value}, "solver.x")
