@@ -77,6 +77,7 @@ class BlockRuns:
         if error:
             raise PETSc.Error(error)
         self._matrix, self._copy_runs = matrix, copy_runs  # the blocks live as long as the matrix
+        self._size = len(in_diagonal)
         self._blocks = [(block, _runs(mask)) for block, mask in ((diagonal, in_diagonal),
                                                                  (off_diagonal, ~in_diagonal)) if mask.any()]
 
@@ -84,13 +85,17 @@ class BlockRuns:
     def of(cls, matrix, columns: np.ndarray, copy_runs) -> "BlockRuns | None":
         """The runs of ``matrix`` (``columns``: the global column of each local entry, sorted in each row), or
         None on every rank if on any rank the matrix does not read back, by rows, what the runs wrote
-        (collective).  Leaves every value zero."""
+        (collective).  Leaves every value zero.
+
+        The runs are copied into PETSc's own arrays: a block holding fewer entries than ``columns`` puts in it
+        would be written past its end before anything could be read back, so the blocks' sizes are compared
+        with ``columns`` first, and a matrix whose sizes differ on any rank is not written at all."""
         start, end = matrix.getOwnershipRangeColumn()
         in_diagonal = (columns >= start) & (columns < end)
-        # the blocks hold as many entries as the runs write, before anything is written through them
-        held = matrix.getDiagonalBlock().getValuesCSR()[0][-1], matrix.getValuesCSR()[0][-1]
-        sized = held == (np.count_nonzero(in_diagonal), len(columns))
-        if not all(matrix.getComm().tompi4py().allgather(sized)):
+        diagonal_entries = matrix.getDiagonalBlock().getInfo()["nz_used"]
+        local_entries = matrix.getInfo(PETSc.Mat.InfoType.LOCAL)["nz_used"]
+        fits = diagonal_entries == np.count_nonzero(in_diagonal) and local_entries == len(columns)
+        if not all(matrix.getComm().tompi4py().allgather(fits)):
             return None
         runs = cls(matrix, in_diagonal, copy_runs)
         numbered = np.arange(1.0, len(columns) + 1.0, dtype=PETSc.ScalarType)
@@ -104,6 +109,8 @@ class BlockRuns:
     def write(self, values: np.ndarray) -> None:
         """``values`` (contiguous PETSc scalars, in the rows' order) into the blocks; assembling the matrix
         then marks it changed."""
+        if values.dtype != PETSc.ScalarType or not values.flags.c_contiguous or len(values) != self._size:
+            raise ValueError(f"BlockRuns.write: values must be a contiguous array of {self._size} PETSc scalars")
         library = petsc_library()
         for block, (count, source, target, length) in self._blocks:
             array = ctypes.c_void_p()

@@ -6,6 +6,7 @@ fall-back there would be a silent slow-down, so it is a failure, not a skip.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import platform
 import shutil
@@ -213,3 +214,47 @@ def test_runs_of_a_mask_and_their_copy():
                                     compiled.address(lengths, np.int64), compiled.address(values),
                                     compiled.address(block))
         assert block.tolist() == values[chosen].tolist()
+
+
+def _one_rank_mpiaij(rows_columns: list[list[int]]):
+    """A parallel AIJ matrix on one process (its off-diagonal block empty) with these entries, each 1."""
+    from petsc4py import PETSc
+
+    matrix = PETSc.Mat().create(comm=PETSc.COMM_SELF)
+    matrix.setSizes((len(rows_columns), len(rows_columns)))
+    matrix.setType("mpiaij")
+    matrix.setPreallocationNNZ(([len(columns) for columns in rows_columns], 0))
+    for row, columns in enumerate(rows_columns):
+        matrix.setValues(row, columns, np.ones(len(columns)))
+    matrix.assemble()
+    return matrix
+
+
+def test_block_runs_never_write_past_a_block_smaller_than_the_columns_given():
+    """``BlockRuns.of`` writes into PETSc's own arrays before it reads the matrix back: given the columns of a
+    tridiagonal matrix and a diagonal one, it wrote 16 entries into a block of 6 (on a larger matrix, a heap
+    corrupted and an abort at exit).  A matrix whose blocks hold other counts than the columns is not written."""
+    from primordia.core.petsc_library import BlockRuns
+
+    n = 6
+    tridiagonal = [[c for c in (i - 1, i, i + 1) if 0 <= c < n] for i in range(n)]
+    columns = np.concatenate(tridiagonal).astype(np.int64)
+    written = []
+
+    def copy_runs(count, sources, targets, lengths, values, array):
+        ends = [np.ctypeslib.as_array(ctypes.cast(pointer, ctypes.POINTER(ctypes.c_int64)), (count,))
+                for pointer in (targets, lengths)]
+        written.append(int((ends[0] + ends[1]).max()))
+
+    assert BlockRuns.of(_one_rank_mpiaij([[i] for i in range(n)]), columns, copy_runs) is None
+    assert written == []
+    library = compiled.kernels()
+    assert library is not None, compiled.status()
+    matrix = _one_rank_mpiaij(tridiagonal)
+    runs = BlockRuns.of(matrix, columns, library.primordia_copy_runs)
+    assert runs is not None
+    runs.write(np.arange(1.0, len(columns) + 1.0))
+    matrix.assemble()
+    assert matrix.getValuesCSR()[2].tolist() == list(range(1, len(columns) + 1))
+    with pytest.raises(ValueError, match="contiguous array of 16 PETSc scalars"):
+        runs.write(np.zeros(len(columns) - 1))
