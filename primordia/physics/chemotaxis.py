@@ -442,9 +442,10 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
     if species.diffusivity is None:  # lumped mass + lumped reaction: a diagonal matrix
         return {"ksp_type": "preonly", "pc_type": "jacobi"}
     if species.attractant is not None:  # nonsymmetric M-matrix, rebuilt every step
-        # ILU on each rank's rows; on several ranks with one layer of overlap (additive Schwarz): per step
+        # ILU on each rank's rows; on several ranks additive Schwarz (one layer of overlap at first: per step
         # on 2 ranks at 171, 342, 684 cells per side 4.8, 33.9, 255 ms against 5.6, 39.8, 331 for block
-        # Jacobi, whose iterations double on 2 ranks.  On one rank it is the same ILU with more overhead
+        # Jacobi, whose iterations double on 2 ranks; GASM with three layers since, below).  On one rank
+        # additive Schwarz is the same ILU with more overhead
         # (7.4 against 5.3 ms at 171), so serial keeps block Jacobi.  The preconditioner of an earlier
         # step's matrix is kept until a solve needs one iteration more than the first after its build
         # (f moves little in a step): additive Schwarz extracts its overlapping blocks and factorises them
