@@ -162,6 +162,25 @@ def test_a_spectrum_that_only_falls_has_no_dominant_wavelength(shape):
     assert metrics.prominence == 1.0  # nothing stands above its surroundings: measured, not missing
 
 
+@pytest.mark.parametrize("shape", ["gradient", "hump"])
+@pytest.mark.parametrize("upper", [(40.0, 10.0), (10.0, 40.0)])
+def test_a_trend_along_a_long_narrow_box_is_no_pattern(shape, upper):
+    """On a 40 x 10 box a gradient along the long side was "stripes" of wavelength 4.16 with prominence 39, and one
+    hump of it (cos^2) 86: the short side's window leaked the trend into a side lobe at 2.5 periods of the short
+    side, which the band searches (from 4 pi / 10) and where nothing else has power."""
+    mesh = rectangle((0.0, 0.0), upper, cells=(160, 40) if upper[0] > upper[1] else (40, 160))
+    along = mesh.points[:, 0 if upper[0] > upper[1] else 1]
+    field = {"gradient": along / max(upper), "hump": np.cos(np.pi * along / max(upper)) ** 2}[shape]
+    metrics = mesh_pattern_metrics(mesh.points, mesh.cells, field)[0]
+    assert metrics.kind == "none"
+    assert 1 <= metrics.prominence < 2  # nothing stands above what the trend leaks: 1, as for a front
+    # a pattern on the same trend still stands out
+    stripes = np.cos(2 * np.pi / 3.0 * along) + field
+    metrics = mesh_pattern_metrics(mesh.points, mesh.cells, stripes)[0]
+    assert metrics.kind == "stripes"
+    assert metrics.dominant_wavelength == pytest.approx(3.0, rel=0.05)
+
+
 def test_hexatic_order_of_known_point_sets():
     hexagonal = hexagonal_lattice(2.0, margin=0.0)
     assert hexatic_order(hexagonal)[0] == pytest.approx(1.0, abs=1e-9)

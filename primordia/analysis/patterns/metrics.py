@@ -9,7 +9,8 @@ else works on that grid:
   :func:`dominant_wavenumber` -- its peak, and how far the peak stands above
   the spectrum around it (``prominence``: ~1-5 for noise or a front, >> 10
   for a pattern); NaN, and prominence 1, where the spectrum has no peak (it
-  falls across the whole band: a front, a gradient, a lone spot);
+  falls across the whole band: a front, a gradient, a lone spot); a peak
+  stands above what the long waves leak into the band (:func:`long_wave_leakage`);
 * :func:`find_blobs` -- connected regions above ``level`` (halfway between the
   field's minimum and maximum).  A region is a *spot* if it is compact: its
   second-moment aspect ratio is below :data:`MAX_SPOT_ASPECT` and its area
@@ -185,12 +186,37 @@ def radial_spectrum(field: GriddedField) -> tuple[np.ndarray, np.ndarray]:
     return step * np.arange(last + 1), sums / np.maximum(counts, 1)
 
 
-def dominant_wavenumber(k: np.ndarray, power: np.ndarray, k_low: float, k_high: float) -> tuple[float, float]:
+def long_wave_leakage(field: GriddedField, k_low: float) -> np.ndarray:
+    """The radial spectrum (:func:`radial_spectrum`'s k) of the field's waves longer than 2 pi / ``k_low`` alone.
+
+    The window multiplies the field, so each wave's power spreads into side lobes about 2 pi / L apart, L the
+    box's side along which they lie.  On a long, narrow box a trend along the long side (a gradient, a front,
+    one hump) leaks through the side lobes of the short side's window into wavenumbers far above its own,
+    4 pi / L_short and up, where :func:`dominant_wavenumber` looks for peaks: a gradient along a 40 x 10 box
+    had a "peak" at wavelength 4.16 with prominence 39 (stripes).  These waves are the field's cosine modes
+    (its zero-flux walls' own series, so a trend has no edges to ring at) below ``k_low``.
+    """
+    values = field.values
+    valid = np.isfinite(values)
+    if not valid.any():
+        return radial_spectrum(field)[1]
+    modes = scipy.fft.dctn(np.where(valid, values - values[valid].mean(), 0.0), type=2, norm="ortho")
+    ny, nx = values.shape
+    width, height = nx * field.spacing[0], ny * field.spacing[1]
+    k = np.pi * np.hypot(np.arange(nx)[None, :] / width, np.arange(ny)[:, None] / height)
+    trend = scipy.fft.idctn(np.where(k < k_low, modes, 0.0), type=2, norm="ortho")
+    return radial_spectrum(GriddedField(np.where(valid, trend, np.nan), field.origin, field.spacing))[1]
+
+
+def dominant_wavenumber(k: np.ndarray, power: np.ndarray, k_low: float, k_high: float,
+                        leakage: np.ndarray | None = None) -> tuple[float, float]:
     """The peak of P(k) in [k_low, k_high] (parabolic refinement) and its prominence.
 
     The prominence is the peak power over the larger of the band's median
-    power and the lowest power between ``k_low`` and the peak: a peak that is
-    only the end of a long-wave trend (a front, a gradient) has prominence ~1.
+    power, the lowest power between ``k_low`` and the peak, and the power
+    ``leakage`` (:func:`long_wave_leakage`) says the waves below ``k_low``
+    put there: a peak that is only the end of a long-wave trend (a front, a
+    gradient), or its window's side lobe, has prominence ~1.
     ``k_low`` keeps out trends longer than half the domain; ``k_high`` (the
     mesh's Nyquist wavenumber) keeps the median out of the band the mesh cannot resolve.
     When the spectrum has no peak in the band, only a trend that keeps rising past
@@ -210,7 +236,8 @@ def dominant_wavenumber(k: np.ndarray, power: np.ndarray, k_low: float, k_high: 
         curvature = left - 2.0 * centre + right
         if curvature < 0:
             k_peak += 0.5 * (left - right) / curvature * (k[1] - k[0])
-    background = max(float(np.median(power[band])), float(power[band[0]:i + 1].min()), np.finfo(float).tiny)
+    leaked = min(float(leakage[i]), float(power[i])) if leakage is not None else 0.0  # explains all of it at most
+    background = max(float(np.median(power[band])), float(power[band[0]:i + 1].min()), leaked, np.finfo(float).tiny)
     return k_peak, float(power[i] / background)
 
 
@@ -422,7 +449,8 @@ def pattern_metrics(field: GriddedField, resolution: float | None = None) -> Pat
     k, power = radial_spectrum(field)
     size = min(field.extent[1] - field.extent[0], field.extent[3] - field.extent[2])
     resolution = 2.0 * max(field.spacing) if resolution is None else resolution
-    k_peak, prominence = dominant_wavenumber(k, power, k_low=4.0 * np.pi / size, k_high=np.pi / resolution)
+    k_low = 4.0 * np.pi / size
+    k_peak, prominence = dominant_wavenumber(k, power, k_low, np.pi / resolution, long_wave_leakage(field, k_low))
     level = threshold_level(field) if np.isfinite(field.values).any() else np.nan
     if not level > np.nanmin(field.values) + 1e-9 * max(abs(level), 1e-300):  # uniform: no spectrum to speak of
         k_peak, prominence = np.nan, np.nan
