@@ -345,6 +345,27 @@ def test_a_broken_summary_only_loses_the_run_status(tmp_path):
     assert analyse_run(tmp_path, species=["m"], pictures=False).attrs["run_status"] == "unknown"
 
 
+def test_a_run_whose_process_is_gone_is_called_killed_not_running(tmp_path):
+    """A run killed without a word (a sweep's --timeout kills it) left summary.json saying "running", and analyse
+    said "(run running)" of it; a run whose process is alive is still running."""
+    import os
+    import socket
+
+    from primordia.core.outputs import process_start
+
+    write_run(tmp_path, stretch=1.0)
+    gone = {"host": socket.gethostname(), "pid": 2**22 + 1, "started": 1}
+    write_json(tmp_path / "summary.json", {"status": "running", "process": gone})
+    assert analyse_run(tmp_path, species=["m"], pictures=False).attrs["run_status"] == "killed"
+    parent = os.getppid()  # alive, and not this process (which wrote no run)
+    alive = {"host": socket.gethostname(), "pid": parent, "started": process_start(parent)}
+    write_json(tmp_path / "summary.json", {"status": "running", "process": alive})
+    assert analyse_run(tmp_path, species=["m"], pictures=False).attrs["run_status"] == "running"
+    # a run on another machine (a sweep's worker, a shared file system) cannot be told from here
+    write_json(tmp_path / "summary.json", {"status": "running", "process": gone | {"host": "another-host"}})
+    assert analyse_run(tmp_path, species=["m"], pictures=False).attrs["run_status"] == "running"
+
+
 def test_a_run_without_its_config_predicts_nothing(tmp_path):
     """Without config.toml the prediction came from Table 3.1's defaults: another model's wavelength."""
     write_run(tmp_path, stretch=1.0)

@@ -14,6 +14,7 @@ configuration (:func:`predicted_mode`).
 
 from __future__ import annotations
 
+import socket
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ from primordia.analysis.patterns.metrics import (
     pattern_metrics,
 )
 from primordia.core.errors import ConfigError, one_line
-from primordia.core.outputs import ANALYSIS_FILE, SERIES_OWN
+from primordia.core.outputs import ANALYSIS_FILE, SERIES_OWN, run_is_alive
 
 METRICS_FILE = ANALYSIS_FILE
 
@@ -140,7 +141,7 @@ class RunFields:
     times: tuple[float, ...]
     snapshots: tuple[dict[str, np.ndarray], ...]  #: per time, field name -> vertex values
     config: dict  #: the resolved config.toml (empty if absent)
-    status: str  #: summary.json's status, or "unknown"
+    status: str  #: summary.json's status ("killed": "running" by a process gone from this host), or "unknown"
     surface: str = "the mesh"  #: what is measured: the 2D mesh, or a slab's top face
 
     @property
@@ -208,6 +209,11 @@ def read_run(directory: str | Path) -> RunFields:
     try:
         summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
         status = str(summary.get("status", "unknown"))
+        # a run killed without a word (SIGKILL, a sweep's --timeout, the machine) left "running" behind: "run
+        # running" was said of it, as if more output times were to come; one on another host cannot be told
+        process = summary.get("process") or {}
+        if status == "running" and process.get("host") == socket.gethostname() and not run_is_alive(process):
+            status = "killed"
     except (OSError, ValueError, AttributeError):
         status = "unknown"  # only the run's status is read from it, for the report
     return RunFields(directory, points[vertices][:, :2], triangles, tuple(times), tuple(snapshots), config, status,
