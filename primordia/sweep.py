@@ -927,11 +927,16 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
 
 
 def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | None:
-    """The simulated patterning map over the two varied keys with the linear analysis over it (None if not 2)."""
+    """The simulated patterning map over the two varied keys with the linear analysis over it (None if not 2).
+
+    Without a map (not two keys, or no run completed) a map at ``path`` is removed: an earlier sweep into the
+    same folder drew it, and it stood beside a sweep.nc it does not describe, as this sweep's.
+    """
     from primordia.analysis.patterns.figures import sweep_figure
     from primordia.analysis.patterns.metrics import PATTERN_KINDS
 
     if len(sweep.axes) != 2 or "time" not in ds.dims:
+        Path(path).unlink(missing_ok=True)
         return None
     x, y = (axis.name for axis in sweep.axes)
     species = species or ("m" if "m" in ds["species"].values else str(ds["species"].values[0]))

@@ -590,6 +590,16 @@ def test_the_map_shows_each_run_at_its_last_output_time(small_config, tmp_path, 
     assert "the last output time of each run (t = 0.6-1)" in drawn["map"].attrs["title"]
 
 
+def test_a_sweep_without_a_map_leaves_no_earlier_sweeps_map(small_config, tmp_path):
+    """A sweep over one key into a folder where a sweep over two had drawn sweep_map.png said "no map" and left that
+    map beside its own sweep.nc, which it does not describe."""
+    stale = tmp_path / "sweep_map.png"
+    stale.write_bytes(b"an earlier sweep's map")
+    sweep = Sweep(small_config(), (Axis.parse("parameters.alpha=4:5:2"),), out=tmp_path)
+    assert sweep_picture(xr.Dataset(), sweep, stale) is None
+    assert not stale.exists()
+
+
 def test_a_point_starting_as_its_sweep_is_interrupted_runs_nothing(small_config, tmp_path, monkeypatch):
     """A Ctrl-C between a point's start and its run's: the point had passed its check, and its run was not
     yet one to stop, so it ran to its end while the interrupted sweep waited for it."""
