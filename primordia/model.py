@@ -571,25 +571,32 @@ def _differences(a, b, prefix: str = "") -> list[str]:
     return [] if a == b else [prefix.rstrip(".")]
 
 
-def _has(table: dict, dotted: str) -> bool:
+#: What :func:`_at` gives for a dotted key a table does not hold.
+_MISSING = object()
+
+
+def _at(table: dict, dotted: str):
+    """The value of the dotted key ``dotted`` in the nested ``table``, or :data:`_MISSING`."""
     for part in dotted.split("."):
         if not isinstance(table, dict) or part not in table:
-            return False
+            return _MISSING
         table = table[part]
-    return True
+    return table
+
+
+def _has(table: dict, dotted: str) -> bool:
+    return _at(table, dotted) is not _MISSING
 
 
 def _away_from_default(current: dict, defaults: dict, dotted: str) -> bool:
     """Whether the option ``dotted`` of the resolved config ``current`` holds another value than its default
-    (``defaults``, :meth:`Model._option_defaults`).  A key of no piece's options (a table added since) is taken
-    to be at its default, as before."""
-    if not _has(defaults, dotted):
+    (``defaults``, :meth:`Model._option_defaults`; an option unset in ``current`` holds None).  A key of no
+    piece's options (a table added since) is taken to be at its default, as before."""
+    default = _at(defaults, dotted)
+    if default is _MISSING:
         return False
-    value, default = current, defaults
-    for part in dotted.split("."):
-        value = value.get(part) if isinstance(value, dict) else None
-        default = default[part]
-    return value != config_.as_toml_reads_it(default)
+    value = _at(current, dotted)
+    return (None if value is _MISSING else value) != config_.as_toml_reads_it(default)
 
 
 def _as_list(value, where: str) -> list[str]:
