@@ -160,6 +160,13 @@ def _start_up_of_a_restart(out: Path | None, dry_run: bool = False):
                                      f"its first step{how}") from None
 
 
+def _write_line(line: str) -> None:
+    """``line`` and its newline to stderr in one write, flushed: ``print`` writes them apart, and under mpirun the
+    abort's banner, forwarded between the two, ended the error line ("...flaky_kinetics.py:20)-----")."""
+    sys.stderr.write(f"{line}\n")
+    sys.stderr.flush()
+
+
 def _warn_about_a_slow_blas() -> None:
     """One line on stderr when PETSc runs on the reference BLAS (:mod:`primordia.core.blas`); the run goes on."""
     try:
@@ -339,7 +346,7 @@ def _command(argv: list[str] | None) -> int:
                 raise
             line = f"primordia: error: {(str(error).splitlines() or [''])[0]}"
             if is_root_process():
-                print(line, file=sys.stderr)
+                _write_line(line)
             if error is exc or "mpi4py.MPI" in sys.modules:  # without mpi4py the ranks cannot agree: each stops
                 _stop_together(line)
             return EXIT_USAGE
@@ -450,7 +457,7 @@ def _stop_together(line: str) -> None:
     if comm is None or every_rank_stops(comm, ERROR_PATIENCE_S):
         return
     if not is_root_process():
-        print(line, file=sys.stderr, flush=True)
+        _write_line(line)
     sys.stderr.flush()
     from mpi4py import MPI
 

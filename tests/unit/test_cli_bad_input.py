@@ -544,3 +544,25 @@ def test_a_missing_system_package_is_one_line(primordia_cli, small_config, tmp_p
     arguments = [run if item == "RUN" else small_config() if item == "CONFIG" else item for item in command]
     result = primordia_cli(*arguments, *(["--out", tmp_path / "out"] if command[0] == "run" else []), env=env)
     assert_one_line_error(result, f"{missing} is not installed", "pip does not install", "python3-h5py-mpi")
+
+
+def test_an_error_line_reaches_stderr_in_one_write(monkeypatch, tmp_path):
+    """Under mpirun a rank's output is forwarded in the pieces it was written in: ``print`` wrote the line and its
+    newline apart, and the abort's banner, forwarded between them, ended the error line (an intermittent failure
+    of ``test_kinetics_failing_on_one_rank_is_one_line``)."""
+    from primordia.cli import main
+
+    writes = []
+
+    class Recorder:
+        def write(self, text):
+            writes.append(text)
+            return len(text)
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(sys, "stderr", Recorder())
+    assert main(["run", str(tmp_path / "missing.toml")]) == 2
+    lines = [text for text in writes if text.startswith("primordia: error:")]
+    assert len(lines) == 1 and lines[0].endswith("\n") and lines[0].count("\n") == 1, writes
