@@ -93,12 +93,15 @@ CLONES void primordia_edge_bernoulli(ptrdiff_t n, const double *restrict chi, co
    -w B(Pe_e), the entry (high, low) -w B(-Pe_e), and each end's diagonal entry gains w B(-Pe) of its
    own row (w: the entry's weight, w_ij D).  A position of -1 is an entry another process holds.
    The diagonal sums run in the order of the edges, which is that of the entry matrix's columns:
-   the same numbers as its product. */
+   the same numbers as its product.  A position p >= split is other[p - split]: on several processes the
+   values go straight into PETSc's diagonal block (values) and off-diagonal block (other), whose positions
+   primordia/core/petsc_library.py's BlockRuns numbers; every diagonal entry is in the first.  One array:
+   split past every position, other unused (NULL). */
 void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restrict table,
                             const double *restrict weights, const long long *restrict forward,
                             const long long *restrict backward, const long long *restrict low_diagonal,
                             const long long *restrict high_diagonal, const long long *restrict diagonals,
-                            double *restrict values)
+                            ptrdiff_t split, double *restrict values, double *restrict other)
 {
   for (ptrdiff_t r = 0; r < n_rows; ++r)
     values[diagonals[r]] = 0.0;
@@ -106,11 +109,11 @@ void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restric
     const double toward = table[e], away = table[n + e];
     const long long f = forward[e], b = backward[e];
     if (f >= 0) {
-      values[f] = -(weights[f] * toward);
+      *(f < split ? values + f : other + (f - split)) = -(weights[f] * toward);
       values[low_diagonal[e]] += weights[f] * away;
     }
     if (b >= 0) {
-      values[b] = -(weights[b] * away);
+      *(b < split ? values + b : other + (b - split)) = -(weights[b] * away);
       values[high_diagonal[e]] += weights[b] * toward;
     }
   }
@@ -200,7 +203,8 @@ _SIGNATURES = {
     "primordia_exp": [ctypes.c_ssize_t, ctypes.c_void_p, ctypes.c_void_p],
     "primordia_edge_midpoints": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4],
     "primordia_edge_bernoulli": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 4, ctypes.c_double, ctypes.c_void_p],
-    "primordia_edge_entries": [ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 8],
+    "primordia_edge_entries": [ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 7, ctypes.c_ssize_t,
+                               ctypes.c_void_p, ctypes.c_void_p],
     "primordia_p1_advection": [ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 9],
     "primordia_copy_runs": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 5],
 }

@@ -6,6 +6,7 @@ The library is reached through the petsc4py extension module, which links it.
 from __future__ import annotations
 
 import ctypes
+from contextlib import contextmanager
 
 import numpy as np
 from petsc4py import PETSc
@@ -66,7 +67,9 @@ class BlockRuns:
     other block a run is one copy (``copy_runs``: the compiled ``primordia_copy_runs``, a ``memcpy`` each);
     ``MatUpdateMPIAIJWithArray`` copies each row's three segments by itself: 64 against 30 us for 103k entries
     on 2 ranks (a 172^2 seven-point matrix, the size of example 1a's fitted operator at 171^2, session of
-    2026-12-05).  Made by :meth:`of`, which checks the order on the matrix itself.
+    2026-12-05).  The same order numbers each entry's place in the blocks (:meth:`targets`), so code that
+    computes the values one by one can write them there itself (:meth:`blocks`), with no copy at all.
+    Made by :meth:`of`, which checks the order on the matrix itself.
     """
 
     def __init__(self, matrix, in_diagonal: np.ndarray, copy_runs):
@@ -78,6 +81,8 @@ class BlockRuns:
             raise PETSc.Error(error)
         self._matrix, self._copy_runs = matrix, copy_runs  # the blocks live as long as the matrix
         self._size = len(in_diagonal)
+        self._in_diagonal = in_diagonal
+        self._handles = (diagonal, off_diagonal)
         self._blocks = [(block, _runs(mask)) for block, mask in ((diagonal, in_diagonal),
                                                                  (off_diagonal, ~in_diagonal)) if mask.any()]
 
@@ -120,6 +125,35 @@ class BlockRuns:
             self._copy_runs(count, source.ctypes.data, target.ctypes.data, length.ctypes.data, values.ctypes.data,
                             array.value)
             library.MatSeqAIJRestoreArray(block, ctypes.byref(array))
+
+    def targets(self) -> tuple[np.ndarray, int]:
+        """(place, split): each local entry's place in the blocks, in the rows' order, and the diagonal block's
+        size.  A place below ``split`` is the entry's position in the diagonal block's values, one at or above
+        it ``split`` past its position in the off-diagonal block's."""
+        place = np.empty(self._size, dtype=np.int64)
+        split = int(np.count_nonzero(self._in_diagonal))
+        place[self._in_diagonal] = np.arange(split)
+        place[~self._in_diagonal] = split + np.arange(self._size - split)
+        return place, split
+
+    @contextmanager
+    def blocks(self):
+        """The addresses of the diagonal and the off-diagonal block's values (0 for a block with none), for
+        writes at the places of :meth:`targets`; assembling the matrix afterwards marks it changed."""
+        library = petsc_library()
+        arrays = [ctypes.c_void_p(), ctypes.c_void_p()]
+        taken = []
+        try:
+            for block, array, mask in zip(self._handles, arrays, (self._in_diagonal, ~self._in_diagonal)):
+                if mask.any():
+                    error = library.MatSeqAIJGetArray(block, ctypes.byref(array))
+                    if error:
+                        raise PETSc.Error(error)
+                    taken.append((block, array))
+            yield tuple(array.value or 0 for array in arrays)
+        finally:
+            for block, array in taken:
+                library.MatSeqAIJRestoreArray(block, ctypes.byref(array))
 
 
 def _runs(mask: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:

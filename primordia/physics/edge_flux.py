@@ -88,8 +88,9 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._shifted = False  # whether the values hold the diagonal of shifted(), until the next update
         self._shift = None  # that diagonal (a Vec, made once)
         self._compiled = None  # the compiled loops, False for numpy's (decided at the first update, collectively)
-        self._midpoints = self._addresses = None  # the species at the edge midpoints, and the loops' arrays
-        self._block_runs = None  # on several processes with the compiled loops: the values' copy by runs
+        self._midpoints = None  # the species at the edge midpoints, for the compiled loops
+        self._row_places = self._block_places = None  # their positions (_in_rows, _in_blocks)
+        self._block_runs = None  # on several processes with the compiled loops: the blocks' places of the values
 
     def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
@@ -275,8 +276,11 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             if self._by_rows and self._compiled:  # collective, as the decision above
                 self._block_runs = BlockRuns.of(self._A, self._columns, self._compiled.primordia_copy_runs)
         c, a = self._gather(self.species), self._gather(self.attractant)
-        if self._compiled:
-            self._compiled_values(c, a)
+        if self._compiled and self._block_runs is not None:  # straight into PETSc's blocks
+            with self._block_runs.blocks() as (diagonal, off_diagonal):
+                self._compiled_values(c, a, self._in_blocks(), diagonal, off_diagonal)
+        elif self._compiled:
+            self._compiled_values(c, a, self._in_rows(), compiled.address(self._values), None)
         else:
             if self._entries is None:
                 self._numpy_products()
@@ -290,38 +294,70 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
             self._entries.mult(self._table_vector, self._values_vector)
         self._shifted = False  # every value was just rewritten
-        if self._block_runs is not None:
-            self._block_runs.write(self._values)
-        elif self._by_rows:
-            update_mpiaij_values(self._A, self._values)
-        elif not self._in_place:
-            self._A.setValuesCSR(self._indptr, self._columns, self._values)
+        if self._block_runs is None:  # otherwise the loops wrote into PETSc's blocks
+            if self._by_rows:
+                update_mpiaij_values(self._A, self._values)
+            elif not self._in_place:
+                self._A.setValuesCSR(self._indptr, self._columns, self._values)
         self._A.assemble()  # also marks the matrix changed, for the solver's preconditioner
 
-    def _compiled_values(self, c: np.ndarray, a: np.ndarray) -> None:
+    def _compiled_values(self, c: np.ndarray, a: np.ndarray, places: tuple, values_at: int, other_at) -> None:
         """The operator's values by the compiled loops (:mod:`primordia.core.compiled`): the same operations
         as the numpy branch of :meth:`update`, without its temporaries, with libmvec's exp and expm1 (within
         4 ulps of numpy's), and the entries written edge by edge instead of by a product with the entry
         matrix (the same sums, in the same order): 2.9-3.0 -> 1.3-1.7 ms an update at 171^2 (88k edges, 206k
         entries; the best of 7 x 100 updates, twice each).
+
+        ``places``: the addresses of the entries' weights, the edges' entry positions and the diagonal
+        positions, then the split (:meth:`_in_rows`, :meth:`_in_blocks`); the values go to ``values_at``, and
+        positions at or past the split to ``other_at``.
         """
         library, (low, high) = self._compiled, self._edge_ends
         n_edges = len(low)
-        if self._addresses is None:  # the arrays below live as long as this object
+        if self._midpoints is None:  # the arrays below live as long as this object
             self._midpoints = np.empty(n_edges)
-            self._addresses = (compiled.address(low, np.int64), compiled.address(high, np.int64),
-                               compiled.address(self._midpoints), compiled.address(self._table),
-                               *(compiled.address(positions, np.int64) for positions in self._edge_positions),
-                               compiled.address(self._values))
-        low_at, high_at, midpoints_at, table_at, *positions_at, values_at = self._addresses
+            self._edge_addresses = (compiled.address(low, np.int64), compiled.address(high, np.int64),
+                                    compiled.address(self._midpoints), compiled.address(self._table))
+        low_at, high_at, midpoints_at, table_at = self._edge_addresses
         library.primordia_edge_midpoints(n_edges, compiled.address(c), low_at, high_at, midpoints_at)
         chi = np.asarray(self.sensitivity(self._midpoints), dtype=float)  # at the edge midpoint
         if chi.shape != (n_edges,) or not chi.flags.c_contiguous:
             chi = np.ascontiguousarray(np.broadcast_to(chi, (n_edges,)))
         library.primordia_edge_bernoulli(n_edges, compiled.address(chi), compiled.address(a), low_at, high_at,
                                          1.0 / self.diffusivity, table_at)
-        library.primordia_edge_entries(n_edges, len(self._diag_positions), table_at,
-                                       compiled.address(self._scaled_weights), *positions_at, values_at)
+        weights_at, *positions_at, split = places
+        library.primordia_edge_entries(n_edges, len(self._diag_positions), table_at, weights_at, *positions_at,
+                                       split, values_at, other_at)
+
+    def _in_rows(self) -> tuple:
+        """The compiled loops' places for values in the rows' order (``_values``): the positions as they are."""
+        if self._row_places is None:
+            self._row_places = tuple(compiled.address(positions, np.int64) for positions in self._edge_positions)
+        return (compiled.address(self._scaled_weights), *self._row_places, len(self._values))
+
+    def _in_blocks(self) -> tuple:
+        """The compiled loops' places for values written straight into the parallel matrix's diagonal and
+        off-diagonal blocks (:meth:`~primordia.core.petsc_library.BlockRuns.targets`): every position renumbered
+        once, and the weights into the same numbering whenever they change (a moving mesh's every update).
+
+        Saves copying the values into the blocks after the loops (0.11 ms a step of example 1a at 171^2 on 2
+        ranks, of 7.0)."""
+        if self._block_places is None or self._block_places["runs"] is not self._block_runs:
+            place, split = self._block_runs.targets()
+            renumbered = tuple(np.where(positions >= 0, place[np.maximum(positions, 0)], -1)
+                               for positions in self._edge_positions)
+            if any(np.any(renumbered[k] >= split) for k in (2, 3, 4)):  # low, high and every diagonal entry
+                raise ValueError("a diagonal entry of the fitted operator is outside the diagonal block")
+            weights = np.empty(len(place))
+            self._block_places = {"runs": self._block_runs, "place": place, "weights": weights, "of": None,
+                                  "renumbered": renumbered,  # kept alive: the loops read them by address
+                                  "addresses": (compiled.address(weights), *(compiled.address(positions, np.int64)
+                                                                             for positions in renumbered), split)}
+        places = self._block_places
+        if places["of"] is not self._scaled_weights:  # new weights: into the blocks' numbering
+            places["weights"][places["place"]] = self._scaled_weights
+            places["of"] = self._scaled_weights
+        return places["addresses"]
 
     def matrix(self):
         if self._shifted:  # A again, without the diagonal of shifted()

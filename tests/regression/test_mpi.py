@@ -130,12 +130,24 @@ for shift in (0.0, 0.7, 1.3):
     operator._block_runs = runs
     operator.update()
     runs = operator._block_runs
-    assert runs is not None, "the values were not copied by runs"
+    assert runs is not None, "the values were not written into the blocks"
     indptr, columns, by_runs = operator.matrix().getValuesCSR()
     operator._block_runs = None  # MatUpdateMPIAIJWithArray, as before
     operator.update()
     assert np.array_equal(operator.matrix().getValuesCSR()[2], by_runs)
     assert np.array_equal(by_runs, operator._values) and np.abs(by_runs).max() > 0
+    operator._block_runs = runs  # straight into the blocks again: every value rewritten, _values not read
+    operator._values[:] = np.nan
+    operator.update()
+    assert np.array_equal(operator.matrix().getValuesCSR()[2], by_runs)
+    assert np.isnan(operator._values).all(), "the values went through _values, not straight into the blocks"
+    operator._scaled_weights = operator._scaled_weights * (1.0 + shift)  # new weights, as a moving mesh's
+    operator.update()
+    by_blocks = operator.matrix().getValuesCSR()[2]
+    operator._block_runs = None
+    operator.update()
+    assert np.array_equal(operator.matrix().getValuesCSR()[2], by_blocks)
+    assert shift == 0.0 or not np.allclose(by_blocks, by_runs)
 ranks = MPI.COMM_WORLD.gather(MPI.COMM_WORLD.size)
 if MPI.COMM_WORLD.rank == 0:
     print("ranks", ranks)
@@ -145,9 +157,9 @@ if MPI.COMM_WORLD.rank == 0:
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3])
 def test_the_fitted_operator_s_values_reach_the_parallel_matrix_by_runs(ranks):
-    """On several ranks each update copies the fitted operator's values into PETSc's diagonal and off-diagonal
-    blocks by whole runs (``BlockRuns``): the same matrix as ``MatUpdateMPIAIJWithArray`` gave, update after
-    update."""
+    """On several ranks each update writes the fitted operator's values straight into PETSc's diagonal and
+    off-diagonal blocks, at the places ``BlockRuns`` numbers: the same matrix as ``MatUpdateMPIAIJWithArray``
+    gave, update after update, and after the weights change."""
     done = subprocess.run(["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, "-c", BY_RUNS], env=ENV,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
