@@ -470,7 +470,8 @@ def _solver_defaults(species: Species, ranks: int, *, constant: bool) -> dict:
         # 200 steps 8.6 (8.5 in serial), 12.7 against ASM's 18.0 ms (13.0 iterations with two layers, 12.95
         # with three); four layers no fewer (5.73, 8.54); ILU(0) and ILU(2) slower (2.54 and 2.33 ms at 171).
         # Example 1a's 2-rank speedup 1.52 -> 1.59 (bench_scaling.py --examples ex01a --solves --steps 1000
-        # --repeats 3; AVX-512 EPYC, a later session of 2026-12-05)
+        # --repeats 3; AVX-512 EPYC, a later session of 2026-12-05), and 1.62-1.66 with --repeats 7 once the
+        # fitted operator's values went straight into PETSc's blocks (edge_flux._in_blocks)
         if ranks > 1:
             preconditioner = {"pc_type": "gasm", "pc_gasm_overlap": 3}
         else:
