@@ -217,13 +217,13 @@ def test_nearest_neighbour_distances():
     assert nearest_neighbour_distances(points[:1]).size == 0
 
 
-def write_run(directory, stretch: float, spacing: float = 3.0):
+def write_run(directory, stretch: float, spacing: float = 3.0, times=(10.0, 20.0)):
     """A run directory as ``primordia run`` writes it: spots in m, noise in b, displacement u = (s - 1) X."""
     width = spacing / 6
     spots = gaussian_spots(MESH.points, hexagonal_lattice(spacing, 3 * width), width)
     noise = 0.5 + 0.01 * np.random.default_rng(0).uniform(-1, 1, MESH.num_vertices)
     series = XdmfSeries(directory, MESH)
-    for t, amplitude in ((10.0, 0.5), (20.0, 1.0)):
+    for t, amplitude in zip(times, (0.5, 1.0, 1.0)):
         series.write(t, {"m": amplitude * spots, "b": noise, "u": (stretch - 1.0) * MESH.points})
     write_toml(directory / "config.toml", {"model": {"physics": ["chemotaxis"]},
                                               "parameters": {"m0": 0.75, "D_m": 0.03}})
@@ -588,3 +588,30 @@ def test_the_metrics_picture_titles_say_no_spots_and_why_there_is_no_pattern(tmp
         title = figure.axes[1].title.get_window_extent(FigureCanvasAgg(figure).get_renderer())
         assert title.x0 >= 0 and title.x1 <= figure.bbox.x1
     assert spots.startswith("m, t = 20 (reference): spots\n42 spots, spacing 2.99") and spots.endswith("|psi_6| 1.000")
+
+
+def test_analysing_one_species_keeps_the_others_metrics(tmp_path, primordia_cli, capsys):
+    """``primordia analyse RUN --species m`` after a whole analysis rewrote metrics.nc with m alone: b's metrics
+    were lost.  They stay, unchanged, while the run's outputs are the same; once they are not, they are left out
+    with a warning."""
+    write_run(tmp_path, stretch=1.2)
+    analyse_run(tmp_path, pictures=False)
+    with xr.open_dataset(tmp_path / "metrics.nc") as whole:
+        whole = whole.load()
+    assert list(whole["species"].values) == ["m", "b"]
+    result = primordia_cli("analyse", tmp_path, "--species", "m", "--no-pictures")
+    assert result.returncode == 0, result.stderr
+    assert "t = 20 b" not in result.stdout and "(with b kept from its earlier analysis)" in result.stdout
+    with xr.open_dataset(tmp_path / "metrics.nc") as again:
+        xr.testing.assert_identical(again.load(), whole)
+    analyse_run(tmp_path, species=["b"], pictures=False)  # the other one alone: the same file again
+    with xr.open_dataset(tmp_path / "metrics.nc") as again:
+        xr.testing.assert_identical(again.load(), whole)
+
+    write_run(tmp_path, stretch=1.2, times=(10.0, 20.0, 30.0))  # the run went on: b's old metrics lack t = 30
+    capsys.readouterr()
+    ds = analyse_run(tmp_path, species=["m"], pictures=False)
+    assert "also held b, measured on other output times than the run has now: left out" in capsys.readouterr().err
+    assert ds.attrs["kept_species"] == ""
+    with xr.open_dataset(tmp_path / "metrics.nc") as last:
+        assert list(last["species"].values) == ["m"] and list(last["time"].values) == [10.0, 20.0, 30.0]

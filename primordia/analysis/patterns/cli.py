@@ -42,8 +42,10 @@ def run(args) -> int:
             for species in ds["species"].values:
                 at = {"time": t, "configuration": configuration, "species": species}
                 print("  " + describe(ds.sel(**at), pattern_kind(ds, **at).item()))
-    print(f"  wrote {args.run_dir}/{METRICS_FILE}" + ("" if args.no_pictures else " and metrics_*.png")
-          + f" ({time.perf_counter() - start:.1f} s)")
+    kept = ds.attrs["kept_species"].split()
+    print(f"  wrote {args.run_dir}/{METRICS_FILE}" + (f" (with {', '.join(kept)} kept from its earlier analysis)"
+                                                     if kept else "")
+          + ("" if args.no_pictures else " and metrics_*.png") + f" ({time.perf_counter() - start:.1f} s)")
     return 0
 
 

@@ -33,7 +33,7 @@ from primordia.analysis.patterns.metrics import (
     PatternMetrics,
     pattern_metrics,
 )
-from primordia.core.errors import ConfigError, one_line
+from primordia.core.errors import ConfigError, one_line, warn
 from primordia.core.outputs import ANALYSIS_FILE, SERIES_OWN, run_is_alive
 
 METRICS_FILE = ANALYSIS_FILE
@@ -334,6 +334,49 @@ def _prediction(run: RunFields) -> PredictedMode:
     return predicted_mode(run.config)
 
 
+def _with_earlier_species(ds: xr.Dataset, path: Path) -> tuple[xr.Dataset, list[str]]:
+    """``ds`` with the species an earlier ``metrics.nc`` measured and ``ds`` did not, and their names.
+
+    ``primordia analyse RUN --species m`` after a whole analysis rewrote the file with m alone: the other
+    species' metrics were lost.  They are kept when the earlier file measured the same output times,
+    configurations and wavenumbers (the same outputs); otherwise the run went on since, and they are left
+    out with a warning.  An earlier file that does not read is replaced, as before.
+    """
+    if not path.is_file():
+        return ds, []
+    try:
+        with xr.open_dataset(path, engine="scipy") as opened:
+            earlier = opened.load()
+    except Exception:  # noqa: BLE001  (damaged or another format: replaced by the new measurements)
+        return ds, []
+    if "species" not in earlier.dims:
+        return ds, []
+    measured = [str(name) for name in ds["species"].values]
+    others = [str(name) for name in earlier["species"].values if str(name) not in measured]
+    if not others:
+        return ds, []
+    same_outputs = all(name in earlier.coords and earlier[name].shape == ds[name].shape
+                       and np.array_equal(earlier[name].values, ds[name].values)
+                       for name in ("time", "configuration", "wavenumber"))
+    if not same_outputs:
+        warn(f"{path} also held {', '.join(others)}, measured on other output times than the run has now: left "
+             f"out (`primordia analyse {path.parent}` measures every species)")
+        return ds, []
+    old = earlier.sel(species=others)
+    spots = max(ds.sizes.get("spot", 1), old.sizes.get("spot", 1))
+    padded = [part.pad(spot=(0, spots - part.sizes["spot"])) if part.sizes["spot"] < spots else part
+              for part in (ds, old)]
+    for part in padded:
+        for variable in part.variables.values():
+            variable.encoding = {}
+    merged = xr.concat(padded, dim="species", data_vars="minimal", coords="minimal", compat="override",
+                       join="exact", combine_attrs="override")
+    before = [str(name) for name in earlier["species"].values]
+    merged = merged.sel(species=before + [name for name in measured if name not in before])  # the file's order
+    merged["pattern"] = merged["pattern"].astype(np.int8)
+    return merged, others
+
+
 def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pictures: bool = True) -> xr.Dataset:
     """Measure a run directory, write ``metrics.nc`` and (``pictures``) ``metrics_<species>[_current].png``."""
     from primordia.analysis.patterning import save_dataset
@@ -342,7 +385,9 @@ def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pic
     measurements = measure(run, species)
     predicted = _prediction(run)
     ds = metrics_dataset(run, measurements, predicted)
-    save_dataset(ds, run.directory / METRICS_FILE)
+    written, kept = _with_earlier_species(ds, run.directory / METRICS_FILE)
+    save_dataset(written, run.directory / METRICS_FILE)
+    ds.attrs["kept_species"] = " ".join(kept)  # not in the file: what the command says it kept
     if pictures:
         from primordia.analysis.patterns.figures import metrics_figure
 
