@@ -21,7 +21,8 @@ boundary and predicted wavelength over it.
   PETSc, memory exhaustion) or a hang (``--timeout``) ends that run only, PETSc's option
   database and MPI are fresh for every run (MPI starts as a singleton: the variables of
   an enclosing ``mpirun`` are not passed on), and the worker stays healthy for the next run.
-* A run that fails is recorded (``status`` = "failed" and ``reason`` in the Dataset),
+* A run that fails is recorded (``status`` = "failed" and ``reason`` in the Dataset, and
+  its metrics at the output times it reached, if it wrote any: a time-out's, a divergence's),
   not fatal (when none completes, the command ends in one line, exit status 2, after
   writing them).  Running the same command again skips every run already done (completed,
   with its metrics, from the same configuration and overrides) and retries the others.
@@ -389,7 +390,8 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     start = time.perf_counter()
     log, reason = _resume_or_run(command, directory, timeout, sweep)
     atomic_write_text(directory / "run.log", log)
-    if not reason:
+    measured = False
+    if not reason or (directory / "fields.xdmf").is_file():
         try:
             # dask's own scheduler: in a worker, xarray would lock metrics.nc with a dask.distributed
             # Lock through the cluster's scheduler (and a client it opens for it), and fail, with the
@@ -397,9 +399,12 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
             # its own: no other process writes there.
             with dask.config.set(scheduler="synchronous"):
                 analyse_run(directory, pictures=False)
+            measured = True
         except Exception as error:  # noqa: BLE001 - a failed analysis is recorded like a failed run
-            reason = f"pattern metrics: {type(error).__name__}: {error}"
-    return _record(directory, fingerprint, overrides, reason, start)
+            # a failed run is measured at the output times it reached (a time-out's, a divergence's), when it
+            # wrote any: what it failed of stays its reason
+            reason = reason or f"pattern metrics: {type(error).__name__}: {error}"
+    return _record(directory, fingerprint, overrides, reason, start, measured)
 
 
 def check_runs(config: str, overrides: Sequence[str], directory: str) -> str:
@@ -510,12 +515,14 @@ def _resume_or_run(command: list[str], directory: Path, timeout: float | None,
     return f"{log}\n[the checkpoint could not be continued: the point is run from the start]\n{again}", reason
 
 
-def _record(directory: Path, fingerprint: str, overrides: Sequence[str], reason: str, start: float) -> dict:
-    """``sweep.json`` of a point: status, reason, fingerprint, wall time (written, and returned)."""
+def _record(directory: Path, fingerprint: str, overrides: Sequence[str], reason: str, start: float,
+            measured: bool = False) -> dict:
+    """``sweep.json`` of a point: status, reason, fingerprint, wall time, whether its metrics.nc is this run's
+    (written, and returned)."""
     from primordia.core.json_toml import write_json
 
     record = {"status": "failed" if reason else "completed", "reason": reason, "fingerprint": fingerprint,
-              "wall_time_s": time.perf_counter() - start, "overrides": list(overrides)}
+              "wall_time_s": time.perf_counter() - start, "overrides": list(overrides), "metrics": measured}
     write_json(directory / RECORD_FILE, record)
     return record
 
@@ -882,7 +889,8 @@ def gather(sweep: Sweep, points: Sequence[Point], records: dict):
         mode = predicted_mode(apply_overrides(base, list(point.overrides)))
         for name in predicted:
             predicted[name][point.index] = getattr(mode, name)
-        if status[point.index] == "completed":
+        # a failed run's metrics too, at the output times it reached, when they are its own (execute)
+        if status[point.index] == "completed" or (record.get("metrics") and _has_metrics(point.directory)):
             with xr.open_dataset(point.directory / METRICS_FILE, engine="scipy") as run:
                 metrics[point.index] = run.load()
     ds = xr.Dataset(
@@ -941,10 +949,13 @@ def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | 
     x, y = (axis.name for axis in sweep.axes)
     species = species or ("m" if "m" in ds["species"].values else str(ds["species"].values[0]))
     final = _last_measured(ds.sel(configuration="reference", species=species))
-    kinds = final["pattern"]
-    reduced = final[["spacing_mean", "spot_count", "dominant_wavelength"]]
-    reduced["dominant_wavelength"] = reduced["dominant_wavelength"].where(kinds > 0)  # no pattern: no wavelength
     failed = final["status"] != "completed"
+    # a failed run's metrics (at the times it reached) are in sweep.nc, not on the map of the runs' ends
+    kinds = final["pattern"].where(~failed, -1)
+    reduced = final[["spacing_mean", "spot_count", "dominant_wavelength"]].where(~failed)
+    reduced["dominant_wavelength"] = reduced["dominant_wavelength"].where(kinds > 0)  # no pattern: no wavelength
+    ended = final["time"].where(~failed).values
+    times = np.unique(ended[np.isfinite(ended)] if np.isfinite(ended).any() else final["time"].values)
     if "seed" in ds.dims:
         reduced = reduced.mean("seed", skipna=True)
         failed = failed.all("seed")
@@ -955,7 +966,6 @@ def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | 
     dims = [d for d in kinds.dims if d != "seed"]
     reduced["pattern_name"] = (dims, names)
     reduced["failed"] = failed.transpose(*dims)
-    times = np.unique(final["time"].values)
     when = (f"t = {times[0]:g}" if len(times) == 1
             else f"the last output time of each run (t = {times[0]:g}-{times[-1]:g})")
     reduced.attrs["title"] = (f"{ds.attrs['title']}: {species} at {when} "

@@ -597,6 +597,28 @@ def test_the_map_shows_each_run_at_its_last_output_time(small_config, tmp_path, 
     assert "the last output time of each run (t = 0.6-1)" in drawn["map"].attrs["title"]
 
 
+def test_a_run_that_timed_out_keeps_its_metrics_at_the_times_it_reached(small_config, tmp_path, monkeypatch):
+    """A run stopped at the sweep's --timeout had written output times, but sweep.nc had no metrics for it; they
+    are there now, with its status failed, and the map still shows it as failed, not coloured by an earlier time."""
+    sweep = Sweep(small_config(), (Axis.parse("time.t_final=1:100000:2"), Axis.parse("parameters.alpha=4:4:1")),
+                  fixed=("output.times=[0.4, 0.8]",), out=tmp_path / "sweep")
+    points = sweep.points()
+    records = {point.directory: execute(str(sweep.config), list(point.overrides), str(point.directory),
+                                        point.fingerprint, timeout=None if "time.t_final=1" in point.overrides
+                                        else 15.0) for point in points}
+    ds = gather(sweep, points, records).sel(alpha=4, configuration="reference", species="m")
+    long = ds.sel({"time.t_final": 100000})
+    assert str(long["status"].values) == "failed" and str(long["reason"].values) == "timed out after 15 s"
+    assert np.isfinite(long["spectral_prominence"].sel(time=[0.4, 0.8]).values).all()
+    assert str(ds.sel({"time.t_final": 1})["status"].values) == "completed"
+    drawn = {}
+    monkeypatch.setattr("primordia.analysis.patterns.figures.sweep_figure",
+                        lambda reduced, *args: drawn.setdefault("map", reduced))
+    sweep_picture(gather(sweep, points, records), sweep, tmp_path / "map.png")
+    shown = drawn["map"].sel({"time.t_final": 100000, "alpha": 4})
+    assert bool(shown["failed"]) and np.isnan(float(shown["spot_count"]))
+
+
 def test_a_sweep_without_a_map_leaves_no_earlier_sweeps_map(small_config, tmp_path):
     """A sweep over one key into a folder where a sweep over two had drawn sweep_map.png said "no map" and left that
     map beside its own sweep.nc, which it does not describe."""
