@@ -615,3 +615,19 @@ def test_analysing_one_species_keeps_the_others_metrics(tmp_path, primordia_cli,
     assert ds.attrs["kept_species"] == ""
     with xr.open_dataset(tmp_path / "metrics.nc") as last:
         assert list(last["species"].values) == ["m"] and list(last["time"].values) == [10.0, 20.0, 30.0]
+
+
+def test_values_that_are_not_finite_are_measured_as_holes_with_a_warning(tmp_path, capsys):
+    """NaN in a hand-made or damaged fields.xdmf was measured as a hole in the tissue without a word."""
+    write_run(tmp_path, stretch=1.0)
+    series = XdmfSeries(tmp_path, MESH)  # the same outputs again, with m not finite at three vertices at t = 20
+    spots = gaussian_spots(MESH.points, hexagonal_lattice(3.0, 1.5), 0.5)
+    holed = spots.copy()
+    holed[:3] = [np.nan, np.inf, np.nan]
+    for t, m in ((10.0, 0.5 * spots), (20.0, holed)):
+        series.write(t, {"m": m, "b": np.full(MESH.num_vertices, 0.5), "u": np.zeros_like(MESH.points)})
+    capsys.readouterr()
+    ds = analyse_run(tmp_path, pictures=False)
+    err = capsys.readouterr().err
+    assert "field m has vertex values that are not finite (3 at t = 20): they are measured as holes" in err
+    assert "field b" not in err and int(ds["spot_count"].sel(species="m", time=20.0, configuration="reference")) > 0

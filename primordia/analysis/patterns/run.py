@@ -236,13 +236,24 @@ def measure(run: RunFields, species: Sequence[str] | None = None) -> list[Measur
     names = _chosen_species(run, species)
     found = []
     reference = MeshSampler(run.points, run.triangles)
+    not_finite: dict[str, list[tuple[float, int]]] = {}
     for index, (t, fields) in enumerate(zip(run.times, run.snapshots)):
+        values = {}
+        for name in names:
+            finite = np.isfinite(fields[name])
+            values[name] = fields[name] if finite.all() else np.where(finite, fields[name], np.nan)  # +-inf too
+            if not finite.all():
+                not_finite.setdefault(name, []).append((t, int(np.count_nonzero(~finite))))
         for configuration in run.configurations:
             sampler = (reference if configuration == "reference"
                        else MeshSampler(run.points_in(configuration, index), run.triangles))
             for name in names:
-                grid = sampler(fields[name])
+                grid = sampler(values[name])
                 found.append(Measurement(t, configuration, name, pattern_metrics(grid, sampler.resolution), grid))
+    for name, where in not_finite.items():  # a run never writes them (it rejects the step): a file made or damaged
+        counts = ", ".join(f"{count} at t = {t:g}" for t, count in where)
+        warn(f"{run.directory}: field {name} has vertex values that are not finite ({counts}): they are measured "
+             "as holes in the tissue")
     return found
 
 
