@@ -332,8 +332,10 @@ class _Solver:
         (a system solved on one rank: that rank's KSP read them, its verdict is every rank's)."""
         if self._unchecked:
             self._unchecked = False
+            pc = self.ksp.getPC()
             check_used(self.sub.prefix, self._user_keys, self.where,
-                       comm=self.backend.comm if self._gather else None, root=self.owner)
+                       comm=self.backend.comm if self._gather else None, root=self.owner,
+                       in_use=f"here ksp_type {self.ksp.getType()}, pc_type {pc.getType()}")
 
     @property
     def gathered(self) -> bool:

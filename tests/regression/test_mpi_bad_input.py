@@ -38,7 +38,8 @@ def test_bad_input_under_two_ranks(case, small_config, tmp_path):
         # b's system is solved whole by rank 1 (f's by rank 0): only that rank's solver reads the options, and
         # its verdict is every rank's
         "unused-option-on-one-rank": ([small_config(), "--set", "solver.chemotaxis_b.pc_factor_levels=2"],
-                                      ["solver.chemotaxis_b", "PETSc did not use option 'pc_factor_levels'"]),
+                                      ["solver.chemotaxis_b", "PETSc did not use option 'pc_factor_levels'",
+                                       "(here ksp_type preonly, pc_type lu)"]),
         # f's owner (rank 0) alone meets PETSc's usage error; every rank stops at the first try, not after the
         # dt halvings (which would say "retried down to")
         "usage-error-on-one-rank": ([small_config(), "--set", 'solver.chemotaxis_f.pc_factor_mat_solver_type="mumps"',

@@ -267,6 +267,10 @@ BAD_SOLVER_SETTINGS = [
                  marks=pytest.mark.skipif(_try_type(PETSc.PC, "h2opus"), reason="this PETSc has H2OPUS")),
     (["solver.chemotaxis_m.ksp_rtoll=1e-6"], ["solver.chemotaxis_m", "PETSc did not use option 'ksp_rtoll'",
                                              "-chemotaxis_m_ksp_rtoll"]),
+    # an option of the several-rank default (GASM) in serial, where block Jacobi reads the options: it said
+    # "not read by the chosen solver" without naming the one in use
+    (["solver.chemotaxis_m.pc_gasm_overlap=2"], ["PETSc did not use option 'pc_gasm_overlap'",
+                                                "(here ksp_type gmres, pc_type bjacobi)"]),
     (['solver.chemotaxis_mm.ksp_type="cg"'], ["unknown solver table [solver.chemotaxis_mm]", "chemotaxis_m"]),
     (['solver.chemotaxis_f.pc_factor_mat_solver_type="pardiso"'], ["factor package 'pardiso'"]),
     (['solver.chemotaxis_f.pc_type="fieldsplit"', "solver.chemotaxis_f.solve_on_one_rank=true"],
