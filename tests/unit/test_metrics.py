@@ -631,3 +631,19 @@ def test_values_that_are_not_finite_are_measured_as_holes_with_a_warning(tmp_pat
     err = capsys.readouterr().err
     assert "field m has vertex values that are not finite (3 at t = 20): they are measured as holes" in err
     assert "field b" not in err and int(ds["spot_count"].sel(species="m", time=20.0, configuration="reference")) > 0
+
+
+def test_an_earlier_analysis_by_another_version_is_replaced_with_a_warning(tmp_path, capsys):
+    """An earlier metrics.nc with other metrics (another primordia version) was merged with this one's, its species
+    given NaN for the metrics it lacked, as if measured and empty; they are now left out with a warning."""
+    write_run(tmp_path, stretch=1.0)
+    whole = analyse_run(tmp_path, pictures=False)
+    from primordia.analysis.patterning import save_dataset
+
+    save_dataset(whole.drop_vars("spectral_prominence"), tmp_path / "metrics.nc")  # as an older version wrote it
+    capsys.readouterr()
+    ds = analyse_run(tmp_path, species=["m"], pictures=False)
+    assert "also held b, with other metrics than this version measures: left out" in capsys.readouterr().err
+    assert ds.attrs["kept_species"] == ""
+    with xr.open_dataset(tmp_path / "metrics.nc") as written:
+        assert list(written["species"].values) == ["m"] and "spectral_prominence" in written

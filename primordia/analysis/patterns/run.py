@@ -373,6 +373,10 @@ def _with_earlier_species(ds: xr.Dataset, path: Path) -> tuple[xr.Dataset, list[
         warn(f"{path} also held {', '.join(others)}, measured on other output times than the run has now: left "
              f"out (`primordia analyse {path.parent}` measures every species)")
         return ds, []
+    if set(earlier.data_vars) != set(ds.data_vars):  # another version's metrics
+        warn(f"{path} also held {', '.join(others)}, with other metrics than this version measures: left out "
+             f"(`primordia analyse {path.parent}` measures every species)")
+        return ds, []
     old = earlier.sel(species=others)
     spots = max(ds.sizes.get("spot", 1), old.sizes.get("spot", 1))
     padded = [part.pad(spot=(0, spots - part.sizes["spot"])) if part.sizes["spot"] < spots else part
