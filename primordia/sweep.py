@@ -938,12 +938,14 @@ def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | 
     """The simulated patterning map over the two varied keys with the linear analysis over it (None if not 2).
 
     Without a map (not two keys, or no run completed) a map at ``path`` is removed: an earlier sweep into the
-    same folder drew it, and it stood beside a sweep.nc it does not describe, as this sweep's.
+    same folder drew it, and it stood beside a sweep.nc it does not describe, as this sweep's.  Failed runs'
+    metrics (the times a time-out reached) give ``ds`` a time without any run completing: they drew a map of
+    "failed" alone, titled with a time no run was shown at, where the command said there is none.
     """
     from primordia.analysis.patterns.figures import sweep_figure
     from primordia.analysis.patterns.metrics import PATTERN_KINDS
 
-    if len(sweep.axes) != 2 or "time" not in ds.dims:
+    if len(sweep.axes) != 2 or "time" not in ds.dims or (ds["status"] != "completed").all():
         Path(path).unlink(missing_ok=True)
         return None
     x, y = (axis.name for axis in sweep.axes)

@@ -619,6 +619,25 @@ def test_a_run_that_timed_out_keeps_its_metrics_at_the_times_it_reached(small_co
     assert bool(shown["failed"]) and np.isnan(float(shown["spot_count"]))
 
 
+def test_a_sweep_whose_failed_runs_all_have_metrics_draws_no_map(small_config, tmp_path):
+    """Runs that failed after writing outputs (a --timeout's) keep their metrics, so sweep.nc had a time with no run
+    completed: a map of "failed" alone was drawn, titled "m at t = 0.8", and left beside the line "no run
+    completed"."""
+    stale = tmp_path / "sweep_map.png"
+    stale.write_bytes(b"an earlier sweep's map")
+    sweep = Sweep(small_config(), (Axis.parse("parameters.alpha=4:5:2"), Axis.parse("parameters.D_m=0.03:0.03:1")),
+                  fixed=("output.times=[0.4, 0.8]",), out=tmp_path)
+    points = sweep.points()
+    records = {}
+    for point in points:  # as a time-out's after t = 0.8: the metrics are the run's own, its status failed
+        record = execute(str(sweep.config), list(point.overrides), str(point.directory), point.fingerprint)
+        records[point.directory] = {**record, "status": "failed", "reason": "timed out after 1 s"}
+    ds = gather(sweep, points, records)
+    assert "time" in ds.dims and (ds["status"].values == "failed").all()
+    assert sweep_picture(ds, sweep, stale) is None
+    assert not stale.exists()
+
+
 def test_a_sweep_without_a_map_leaves_no_earlier_sweeps_map(small_config, tmp_path):
     """A sweep over one key into a folder where a sweep over two had drawn sweep_map.png said "no map" and left that
     map beside its own sweep.nc, which it does not describe."""
