@@ -647,3 +647,16 @@ def test_an_earlier_analysis_by_another_version_is_replaced_with_a_warning(tmp_p
     assert ds.attrs["kept_species"] == ""
     with xr.open_dataset(tmp_path / "metrics.nc") as written:
         assert list(written["species"].values) == ["m"] and "spectral_prominence" in written
+
+
+def test_a_species_named_twice_is_measured_and_drawn_once(tmp_path, monkeypatch):
+    """``primordia analyse RUN --species m m`` measured m twice, and metrics_m.png had each time twice over."""
+    from primordia.analysis.patterns import figures
+
+    drawn = []
+    monkeypatch.setattr(figures, "metrics_figure", lambda measurements, predicted, path: drawn.append(
+        [(m.time, m.species) for m in measurements]))
+    write_run(tmp_path, stretch=1.0)
+    ds = analyse_run(tmp_path, species=["m", "m"])
+    assert list(ds["species"].values) == ["m"]
+    assert drawn and all(times == [(10.0, "m"), (20.0, "m")] for times in drawn)  # reference, current

@@ -258,13 +258,15 @@ def measure(run: RunFields, species: Sequence[str] | None = None) -> list[Measur
 
 
 def _chosen_species(run: RunFields, species: Sequence[str] | None) -> list[str]:
+    """The fields to measure, each once: ``--species m m`` measured m twice, and its picture drew every time
+    twice over."""
     available = run.scalar_fields
     if not species:
         return available
     for name in species:
         if name not in available:
             raise ConfigError(f"{run.directory}: no scalar field '{name}' (fields: {', '.join(available)})")
-    return list(species)
+    return list(dict.fromkeys(species))
 
 
 def metrics_dataset(run: RunFields, measurements: Sequence[Measurement], predicted: PredictedMode) -> xr.Dataset:
