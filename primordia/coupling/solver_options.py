@@ -62,7 +62,7 @@ from __future__ import annotations
 import ctypes
 import difflib
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from petsc4py import PETSc
@@ -444,21 +444,23 @@ def unused(prefix: str, keys: Iterable[str]) -> list[str]:
     return names
 
 
-def check_used(prefix: str, keys: Iterable[str], where: str, comm=None, root: int = 0, in_use: str = "") -> None:
+def check_used(prefix: str, keys: Iterable[str], where: str, comm=None, root: int = 0,
+               in_use: Callable[[str], str] | None = None) -> None:
     """After a first solve: an option the user gave that PETSc did not read is one line naming it, and the
-    solver in use (``in_use``: "ksp_type gmres, pc_type bjacobi"): a table written for another preconditioner
-    (``pc_gasm_overlap``, for the cell density's default on several ranks, run in serial where the default is
-    block Jacobi) was refused without saying which one read the options.
+    solver in use (``in_use(option)``, of the option with its prefix: "here ksp_type gmres, pc_type bjacobi"):
+    a table written for another preconditioner (``pc_gasm_overlap``, for the cell density's default on several
+    ranks, run in serial where the default is block Jacobi) was refused without saying which one read the options.
 
     With ``comm``, only rank ``root`` read the options (a system solved on one rank): its verdict
     is every rank's."""
     keys = [key for key in keys if key not in OWN_OPTIONS]
     missing = unused(prefix, keys) if comm is None or comm.rank == root else None
+    solver = in_use(prefix + missing[0]) if missing and in_use is not None else ""
     if comm is not None:
-        missing, in_use = comm.bcast((missing, in_use), root=root)
+        missing, solver = comm.bcast((missing, solver), root=root)
     if missing:
         raise ConfigError(f"{where}: PETSc did not use option '{missing[0]}' (-{prefix}{missing[0]}): unknown, "
-                          f"or not read by the chosen solver" + (f" ({in_use})" if in_use else ""))
+                          f"or not read by the chosen solver" + (f" ({solver})" if solver else ""))
 
 
 def check_table_values(tables: Mapping[str, Any]) -> None:

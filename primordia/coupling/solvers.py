@@ -182,6 +182,25 @@ def field_splits(backend, subproblem, splits, pc, where: str) -> list:
     return keep
 
 
+def solver_reading(ksp, option: str, above: str = "") -> str:
+    """The types of the (inner) solver whose options ``option`` (prefix and all) is one of, named by their options
+    relative to ``ksp``'s: "fieldsplit_u_ksp_type preonly, fieldsplit_u_pc_type gamg" for an option of a
+    fieldsplit's split, which the split's own solver reads or not (the outer "ksp_type gmres, pc_type fieldsplit"
+    sent the user to the wrong one).  A preconditioner that was not set up has no inner solvers to name."""
+    pc = ksp.getPC()
+    inner = {"fieldsplit": pc.getFieldSplitSubKSP, "asm": pc.getASMSubKSP}.get(pc.getType())
+    try:
+        subs = inner() if inner is not None else []
+    except PETSc.Error:
+        subs = []
+    own = ksp.getOptionsPrefix() or ""
+    for sub in subs:
+        prefix = sub.getOptionsPrefix() or ""
+        if prefix.startswith(own) and len(prefix) > len(own) and option.startswith(prefix):
+            return solver_reading(sub, option, above + prefix[len(own):])
+    return f"{above}ksp_type {ksp.getType()}, {above}pc_type {pc.getType()}"
+
+
 def rigid_body_modes(backend, unknown, index: int, index_set) -> PETSc.NullSpace:
     """The rigid-body motions of the displacement field ``index`` of ``unknown``, on its index set (orthonormal).
 
@@ -332,10 +351,9 @@ class _Solver:
         (a system solved on one rank: that rank's KSP read them, its verdict is every rank's)."""
         if self._unchecked:
             self._unchecked = False
-            pc = self.ksp.getPC()
             check_used(self.sub.prefix, self._user_keys, self.where,
                        comm=self.backend.comm if self._gather else None, root=self.owner,
-                       in_use=f"here ksp_type {self.ksp.getType()}, pc_type {pc.getType()}")
+                       in_use=lambda option: "here " + solver_reading(self.ksp, option))
 
     @property
     def gathered(self) -> bool:

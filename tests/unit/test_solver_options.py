@@ -476,3 +476,33 @@ def test_a_table_of_a_subproblem_another_setting_makes_is_one_warning(capsys, sm
     status, stderr = run(capsys, small_config(), tmp_path / "typo", *assignments[:-1],
                          assignments[-1].replace("solver.chemotaxis", "solver.chemotaxsi"))
     assert status == 2 and "unknown solver table [solver.chemotaxsi" in stderr, stderr
+
+
+def test_an_option_of_a_split_that_was_not_read_names_the_splits_solver():
+    """``fieldsplit_u = {pc_factor_levels = 2}`` under the growth's Schur split was refused "(here ksp_type gmres,
+    pc_type fieldsplit)": the outer solver, where the split's own (preonly, gamg) is the one that did not read it."""
+    from primordia.coupling.solvers import solver_reading
+
+    matrix = PETSc.Mat().createAIJ((4, 4), nnz=1, comm=PETSc.COMM_SELF)
+    for row in range(4):
+        matrix.setValue(row, row, 2.0)
+    matrix.assemble()
+    options = PETSc.Options()
+    options.setValue("qa_split_fieldsplit_u_ksp_type", "preonly")
+    options.setValue("qa_split_fieldsplit_u_pc_type", "jacobi")
+    try:
+        ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        ksp.setOptionsPrefix("qa_split_")
+        ksp.setOperators(matrix)
+        pc = ksp.getPC()
+        pc.setType("fieldsplit")
+        for name, rows in (("u", [0, 1]), ("p", [2, 3])):
+            pc.setFieldSplitIS((name, PETSc.IS().createGeneral(rows, comm=PETSc.COMM_SELF)))
+        ksp.setFromOptions()
+        ksp.setUp()
+        assert solver_reading(ksp, "qa_split_fieldsplit_u_pc_factor_levels") == (
+            "fieldsplit_u_ksp_type preonly, fieldsplit_u_pc_type jacobi")
+        assert solver_reading(ksp, "qa_split_pc_factor_levels") == "ksp_type gmres, pc_type fieldsplit"
+    finally:
+        for name in ("qa_split_fieldsplit_u_ksp_type", "qa_split_fieldsplit_u_pc_type"):
+            options.delValue(name)
