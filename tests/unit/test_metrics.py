@@ -660,3 +660,20 @@ def test_a_species_named_twice_is_measured_and_drawn_once(tmp_path, monkeypatch)
     ds = analyse_run(tmp_path, species=["m", "m"])
     assert list(ds["species"].values) == ["m"]
     assert drawn and all(times == [(10.0, "m"), (20.0, "m")] for times in drawn)  # reference, current
+
+
+def test_a_displacement_that_is_not_finite_leaves_holes_in_the_current_configuration(tmp_path, capsys):
+    """A NaN in u of a hand-made or damaged fields.xdmf ended ``primordia analyse`` with a traceback from
+    matplotlib ("Triangulation is invalid"), where a field's NaN is a hole with a warning."""
+    write_run(tmp_path, stretch=1.2)
+    series = XdmfSeries(tmp_path, MESH)
+    spots = gaussian_spots(MESH.points, hexagonal_lattice(3.0, 1.5), 0.5)
+    u = 0.2 * MESH.points
+    u[:2] = [[np.nan, 0.0], [np.inf, np.inf]]
+    for t in (10.0, 20.0):
+        series.write(t, {"m": spots, "b": np.full(MESH.num_vertices, 0.5), "u": u})
+    capsys.readouterr()
+    ds = analyse_run(tmp_path, pictures=False)
+    assert ("field u has vertex values that are not finite (2 at t = 10, 2 at t = 20): they are measured as holes "
+            "in the tissue of the current configuration") in capsys.readouterr().err
+    assert int(ds["spot_count"].sel(species="m", time=20.0, configuration="current")) > 0

@@ -246,15 +246,31 @@ def measure(run: RunFields, species: Sequence[str] | None = None) -> list[Measur
                 not_finite.setdefault(name, []).append((t, int(np.count_nonzero(~finite))))
         for configuration in run.configurations:
             sampler = (reference if configuration == "reference"
-                       else MeshSampler(run.points_in(configuration, index), run.triangles))
+                       else _current_sampler(run, configuration, index, not_finite))
             for name in names:
                 grid = sampler(values[name])
                 found.append(Measurement(t, configuration, name, pattern_metrics(grid, sampler.resolution), grid))
     for name, where in not_finite.items():  # a run never writes them (it rejects the step): a file made or damaged
         counts = ", ".join(f"{count} at t = {t:g}" for t, count in where)
         warn(f"{run.directory}: field {name} has vertex values that are not finite ({counts}): they are measured "
-             "as holes in the tissue")
+             "as holes in the tissue" + (" of the current configuration" if name == "u" else ""))
     return found
+
+
+def _current_sampler(run: RunFields, configuration: str, index: int, not_finite: dict) -> MeshSampler:
+    """The sampler of the current configuration at output ``index``, the triangles around a vertex whose
+    displacement is not finite left out as holes (counted in ``not_finite["u"]``): its position NaN or inf made
+    matplotlib's triangulation invalid, a traceback where the fields' own such values are holes with a warning."""
+    points = run.points_in(configuration, index)
+    placed = np.isfinite(points).all(axis=1)
+    if placed.all():
+        return MeshSampler(points, run.triangles)
+    not_finite.setdefault("u", []).append((run.times[index], int(np.count_nonzero(~placed))))
+    triangles = run.triangles[placed[run.triangles].all(axis=1)]
+    if not triangles.size:
+        raise ConfigError(f"{run.directory}: the displacement u at t = {run.times[index]:g} is not finite at any "
+                          "triangle: the current configuration cannot be measured")
+    return MeshSampler(np.where(placed[:, None], points, run.points), triangles)  # unused: placed anywhere finite
 
 
 def _chosen_species(run: RunFields, species: Sequence[str] | None) -> list[str]:
