@@ -388,10 +388,14 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
     for assignment in overrides:
         command += ["--set", assignment]
     start = time.perf_counter()
+    summary = _file_bytes(directory / "summary.json")
     log, reason = _resume_or_run(command, directory, timeout, sweep)
     atomic_write_text(directory / "run.log", log)
     measured = False
-    if not reason or (directory / "fields.xdmf").is_file():
+    # a failed run's outputs when they are its own: it wrote its summary.json.  One refused at its start (a --set
+    # its checkpoint's restart or its config refuses) left the folder's earlier run, whose fields.xdmf (of another
+    # configuration) was measured and recorded as this point's
+    if not reason or ((directory / "fields.xdmf").is_file() and _file_bytes(directory / "summary.json") != summary):
         try:
             # dask's own scheduler: in a worker, xarray would lock metrics.nc with a dask.distributed
             # Lock through the cluster's scheduler (and a client it opens for it), and fail, with the
@@ -405,6 +409,14 @@ def execute(config: str, overrides: Sequence[str], directory: str, fingerprint: 
             # wrote any: what it failed of stays its reason
             reason = reason or f"pattern metrics: {type(error).__name__}: {error}"
     return _record(directory, fingerprint, overrides, reason, start, measured)
+
+
+def _file_bytes(path: Path) -> bytes | None:
+    """The contents of ``path``, None if it cannot be read."""
+    try:
+        return path.read_bytes()
+    except OSError:
+        return None
 
 
 def check_runs(config: str, overrides: Sequence[str], directory: str) -> str:

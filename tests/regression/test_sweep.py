@@ -619,6 +619,17 @@ def test_a_run_that_timed_out_keeps_its_metrics_at_the_times_it_reached(small_co
     assert bool(shown["failed"]) and np.isnan(float(shown["spot_count"]))
 
 
+def test_a_run_refused_at_its_start_is_not_measured_on_the_folders_earlier_run(small_config, tmp_path):
+    """A point run again with other overrides whose run was refused at its start (here an output time past its
+    t_final) left the earlier run's fields.xdmf in its folder: those metrics, of another configuration, were
+    recorded as the failed run's own and went into sweep.nc."""
+    config, directory = str(small_config()), str(tmp_path / "point")
+    assert execute(config, [], directory, "before")["status"] == "completed"
+    record = execute(config, ["output.times=[1.6]"], directory, "now")
+    assert record["status"] == "failed" and "output time 1.6 lies outside" in record["reason"]
+    assert record["metrics"] is False and not (tmp_path / "point" / "metrics.nc").exists()
+
+
 def test_a_sweep_whose_failed_runs_all_have_metrics_draws_no_map(small_config, tmp_path):
     """Runs that failed after writing outputs (a --timeout's) keep their metrics, so sweep.nc had a time with no run
     completed: a map of "failed" alone was drawn, titled "m at t = 0.8", and left beside the line "no run
