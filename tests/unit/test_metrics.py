@@ -13,6 +13,8 @@ Each field is given at the vertices of a triangle mesh of (0, 20)^2, as a run wr
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -608,6 +610,12 @@ def test_analysing_one_species_keeps_the_others_metrics(tmp_path, primordia_cli,
     with xr.open_dataset(tmp_path / "metrics.nc") as again:
         xr.testing.assert_identical(again.load(), whole)
 
+    time.sleep(0.01)
+    write_run(tmp_path, stretch=1.2)  # a restart from an older checkpoint: the same times written again
+    capsys.readouterr()
+    analyse_run(tmp_path, species=["m"], pictures=False)
+    assert "also held b, measured before the run's outputs were last written: left out" in capsys.readouterr().err
+    analyse_run(tmp_path, pictures=False)
     write_run(tmp_path, stretch=1.2, times=(10.0, 20.0, 30.0))  # the run went on: b's old metrics lack t = 30
     capsys.readouterr()
     ds = analyse_run(tmp_path, species=["m"], pictures=False)

@@ -368,8 +368,9 @@ def _with_earlier_species(ds: xr.Dataset, path: Path) -> tuple[xr.Dataset, list[
 
     ``primordia analyse RUN --species m`` after a whole analysis rewrote the file with m alone: the other
     species' metrics were lost.  They are kept when the earlier file measured the same output times,
-    configurations and wavenumbers (the same outputs); otherwise the run went on since, and they are left
-    out with a warning.  An earlier file that does not read is replaced, as before.
+    configurations and wavenumbers with the same metrics, after the run last wrote its outputs; otherwise (the
+    run went on, or was restarted and wrote them again; another version) they are left out with a warning.
+    An earlier file that does not read is replaced, as before.
     """
     if not path.is_file():
         return ds, []
@@ -384,16 +385,19 @@ def _with_earlier_species(ds: xr.Dataset, path: Path) -> tuple[xr.Dataset, list[
     others = [str(name) for name in earlier["species"].values if str(name) not in measured]
     if not others:
         return ds, []
-    same_outputs = all(name in earlier.coords and earlier[name].shape == ds[name].shape
-                       and np.array_equal(earlier[name].values, ds[name].values)
-                       for name in ("time", "configuration", "wavenumber"))
-    if not same_outputs:
-        warn(f"{path} also held {', '.join(others)}, measured on other output times than the run has now: left "
-             f"out (`primordia analyse {path.parent}` measures every species)")
-        return ds, []
-    if set(earlier.data_vars) != set(ds.data_vars):  # another version's metrics
-        warn(f"{path} also held {', '.join(others)}, with other metrics than this version measures: left out "
-             f"(`primordia analyse {path.parent}` measures every species)")
+    differing = [words for name, words in (("time", "output times"), ("configuration", "configurations"),
+                                           ("wavenumber", "wavenumbers"))
+                 if not (name in earlier.coords and earlier[name].shape == ds[name].shape
+                         and np.array_equal(earlier[name].values, ds[name].values))]
+    fields = path.parent / "fields.xdmf"
+    why = (f"measured on other {' and '.join(differing)} than the run has now" if differing
+           else "with other metrics than this version measures" if set(earlier.data_vars) != set(ds.data_vars)
+           # a restart from an older checkpoint writes the same output times again, with other values
+           else "measured before the run's outputs were last written"
+           if fields.is_file() and fields.stat().st_mtime > path.stat().st_mtime else "")
+    if why:
+        warn(f"{path} also held {', '.join(others)}, {why}: left out (`primordia analyse {path.parent}` measures "
+             "every species)")
         return ds, []
     old = earlier.sel(species=others)
     spots = max(ds.sizes.get("spot", 1), old.sizes.get("spot", 1))
