@@ -620,7 +620,7 @@ def test_analysing_one_species_keeps_the_others_metrics(tmp_path, primordia_cli,
     capsys.readouterr()
     ds = analyse_run(tmp_path, species=["m"], pictures=False)
     assert "also held b, measured on other output times than the run has now: left out" in capsys.readouterr().err
-    assert ds.attrs["kept_species"] == ""
+    assert list(ds["species"].values) == ["m"]
     with xr.open_dataset(tmp_path / "metrics.nc") as last:
         assert list(last["species"].values) == ["m"] and list(last["time"].values) == [10.0, 20.0, 30.0]
 
@@ -652,7 +652,7 @@ def test_an_earlier_analysis_by_another_version_is_replaced_with_a_warning(tmp_p
     capsys.readouterr()
     ds = analyse_run(tmp_path, species=["m"], pictures=False)
     assert "also held b, with other metrics than this version measures: left out" in capsys.readouterr().err
-    assert ds.attrs["kept_species"] == ""
+    assert list(ds["species"].values) == ["m"] and "kept_species" not in ds.attrs
     with xr.open_dataset(tmp_path / "metrics.nc") as written:
         assert list(written["species"].values) == ["m"] and "spectral_prominence" in written
 

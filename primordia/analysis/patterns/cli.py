@@ -28,6 +28,10 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Entry point of ``primordia analyse``; returns the exit code."""
+    from pathlib import Path
+
+    import xarray as xr
+
     from primordia.analysis.patterns.run import METRICS_FILE, analyse_run, pattern_kind
 
     start = time.perf_counter()
@@ -42,7 +46,8 @@ def run(args) -> int:
             for species in ds["species"].values:
                 at = {"time": t, "configuration": configuration, "species": species}
                 print("  " + describe(ds.sel(**at), pattern_kind(ds, **at).item()))
-    kept = ds.attrs["kept_species"].split()
+    with xr.open_dataset(Path(args.run_dir) / METRICS_FILE, engine="scipy") as written:  # what it kept from before
+        kept = [str(name) for name in written["species"].values if name not in ds["species"].values]
     print(f"  wrote {args.run_dir}/{METRICS_FILE}" + (f" (with {', '.join(kept)} kept from its earlier analysis)"
                                                      if kept else "")
           + ("" if args.no_pictures else " and metrics_*.png") + f" ({time.perf_counter() - start:.1f} s)")

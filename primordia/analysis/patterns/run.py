@@ -415,16 +415,17 @@ def _with_earlier_species(ds: xr.Dataset, path: Path) -> tuple[xr.Dataset, list[
 
 
 def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pictures: bool = True) -> xr.Dataset:
-    """Measure a run directory, write ``metrics.nc`` and (``pictures``) ``metrics_<species>[_current].png``."""
+    """Measure a run directory, write ``metrics.nc`` and (``pictures``) ``metrics_<species>[_current].png``; returns
+    the measurements of ``species`` (metrics.nc also keeps other species of an earlier analysis of the same
+    outputs: :func:`_with_earlier_species`)."""
     from primordia.analysis.patterning import save_dataset
 
     run = read_run(directory)
     measurements = measure(run, species)
     predicted = _prediction(run)
     ds = metrics_dataset(run, measurements, predicted)
-    written, kept = _with_earlier_species(ds, run.directory / METRICS_FILE)
+    written, _ = _with_earlier_species(ds, run.directory / METRICS_FILE)
     save_dataset(written, run.directory / METRICS_FILE)
-    ds.attrs["kept_species"] = " ".join(kept)  # not in the file: what the command says it kept
     if pictures:
         from primordia.analysis.patterns.figures import metrics_figure
 
