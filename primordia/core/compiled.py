@@ -95,7 +95,7 @@ CLONES void primordia_edge_bernoulli(ptrdiff_t n, const double *restrict chi, co
    The diagonal sums run in the order of the edges, which is that of the entry matrix's columns:
    the same numbers as its product.  A position p >= split is other[p - split]: on several processes the
    values go straight into PETSc's diagonal block (values) and off-diagonal block (other), whose positions
-   primordia/core/petsc_library.py's BlockRuns numbers; every diagonal entry is in the first.  One array:
+   primordia/core/petsc_library.py's BlockPlaces numbers; every diagonal entry is in the first.  One array:
    split past every position, other unused (NULL). */
 void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restrict table,
                             const double *restrict weights, const long long *restrict forward,
@@ -117,16 +117,6 @@ void primordia_edge_entries(ptrdiff_t n, ptrdiff_t n_rows, const double *restric
       values[high_diagonal[e]] += weights[b] * toward;
     }
   }
-}
-
-/* dst[to[r] : to[r] + length[r]] = src[from[r] : from[r] + length[r]] for each run r: the values of a
-   parallel PETSc matrix written into its diagonal or off-diagonal block by whole runs of entries
-   (primordia/core/petsc_library.py, BlockRuns). */
-void primordia_copy_runs(ptrdiff_t n, const long long *restrict from, const long long *restrict to,
-                         const long long *restrict length, const double *restrict src, double *restrict dst)
-{
-  for (ptrdiff_t r = 0; r < n; ++r)
-    memcpy(dst + to[r], src + from[r], (size_t)length[r] * sizeof(double));
 }
 
 /* The P1 advection load of terms sharing one velocity r: for each term t,
@@ -206,7 +196,6 @@ _SIGNATURES = {
     "primordia_edge_entries": [ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 7, ctypes.c_ssize_t,
                                ctypes.c_void_p, ctypes.c_void_p],
     "primordia_p1_advection": [ctypes.c_ssize_t, ctypes.c_ssize_t, ctypes.c_ssize_t, *[ctypes.c_void_p] * 9],
-    "primordia_copy_runs": [ctypes.c_ssize_t, *[ctypes.c_void_p] * 5],
 }
 
 _loaded: dict = {}  # "library" -> the CDLL or None, once decided in this process

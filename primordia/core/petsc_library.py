@@ -58,41 +58,43 @@ def update_mpiaij_values(matrix, values: np.ndarray) -> None:
         raise PETSc.Error(error)
 
 
-class BlockRuns:
-    """New values of a parallel AIJ matrix, in the order of the local CSR rows it was made from
-    (``createAIJWithArrays``, sorted columns), written into PETSc's diagonal and off-diagonal blocks by whole
-    runs of entries.
+class BlockPlaces:
+    """Where each value of a parallel AIJ matrix, in the order of the local CSR rows it was made from
+    (``createAIJWithArrays``, sorted columns), lies in PETSc's diagonal and off-diagonal blocks.
 
-    Each block keeps the rows' order with the other block's entries left out, so between two entries of the
-    other block a run is one copy (``copy_runs``: the compiled ``primordia_copy_runs``, a ``memcpy`` each);
-    ``MatUpdateMPIAIJWithArray`` copies each row's three segments by itself: 64 against 30 us for 103k entries
-    on 2 ranks (a 172^2 seven-point matrix, the size of example 1a's fitted operator at 171^2, session of
-    2026-12-05).  The same order numbers each entry's place in the blocks (:meth:`targets`), so code that
-    computes the values one by one can write them there itself (:meth:`blocks`), with no copy at all.
-    Made by :meth:`of`, which checks the order on the matrix itself.
+    Each block keeps the rows' order with the other block's entries left out, so an entry's place is its count
+    among the entries of its block before it (:attr:`place`; :attr:`split` past that in the off-diagonal block).
+    Code that computes the values one by one writes them there itself (:meth:`blocks`), with no copy: the cell
+    density's fitted operator, 0.11 ms a step of example 1a at 171^2 on 2 ranks against a copy by runs, 0.12 ms
+    with ``MatUpdateMPIAIJWithArray`` (session of 2026-12-05).  Made by :meth:`of`, which checks the order on
+    the matrix itself.
     """
 
-    def __init__(self, matrix, in_diagonal: np.ndarray, copy_runs):
+    def __init__(self, matrix, in_diagonal: np.ndarray):
         library = petsc_library()
         diagonal, off_diagonal, columns_map = ctypes.c_void_p(), ctypes.c_void_p(), ctypes.c_void_p()
         error = library.MatMPIAIJGetSeqAIJ(matrix.handle, ctypes.byref(diagonal), ctypes.byref(off_diagonal),
                                            ctypes.byref(columns_map))
         if error:
             raise PETSc.Error(error)
-        self._matrix, self._copy_runs = matrix, copy_runs  # the blocks live as long as the matrix
-        self._size = len(in_diagonal)
+        self._matrix = matrix  # the blocks live as long as the matrix
         self._in_diagonal = in_diagonal
         self._handles = (diagonal, off_diagonal)
-        self._blocks = [(block, _runs(mask)) for block, mask in ((diagonal, in_diagonal),
-                                                                 (off_diagonal, ~in_diagonal)) if mask.any()]
+        #: the diagonal block's number of local entries
+        self.split = int(np.count_nonzero(in_diagonal))
+        #: each local entry's place, in the rows' order: its position in the diagonal block's values, or
+        #: ``split`` past its position in the off-diagonal block's
+        self.place = np.empty(len(in_diagonal), dtype=np.int64)
+        self.place[in_diagonal] = np.arange(self.split)
+        self.place[~in_diagonal] = self.split + np.arange(len(in_diagonal) - self.split)
 
     @classmethod
-    def of(cls, matrix, columns: np.ndarray, copy_runs) -> "BlockRuns | None":
-        """The runs of ``matrix`` (``columns``: the global column of each local entry, sorted in each row), or
-        None on every rank if on any rank the matrix does not read back, by rows, what the runs wrote
-        (collective).  Leaves every value zero.
+    def of(cls, matrix, columns: np.ndarray) -> "BlockPlaces | None":
+        """The places of ``matrix``'s values (``columns``: the global column of each local entry, sorted in each
+        row), or None on every rank if on any rank the matrix does not read back, by rows, what was written at
+        them (collective).  Leaves every value zero.
 
-        The runs are copied into PETSc's own arrays: a block holding fewer entries than ``columns`` puts in it
+        The values are written into PETSc's own arrays: a block holding fewer entries than ``columns`` puts in it
         would be written past its end before anything could be read back, so the blocks' sizes are compared
         with ``columns`` first, and a matrix whose sizes differ on any rank is not written at all."""
         start, end = matrix.getOwnershipRangeColumn()
@@ -102,44 +104,31 @@ class BlockRuns:
         fits = diagonal_entries == np.count_nonzero(in_diagonal) and local_entries == len(columns)
         if not all(matrix.getComm().tompi4py().allgather(fits)):
             return None
-        runs = cls(matrix, in_diagonal, copy_runs)
+        places = cls(matrix, in_diagonal)
         numbered = np.arange(1.0, len(columns) + 1.0, dtype=PETSc.ScalarType)
-        runs.write(numbered)
+        places.write(numbered)
         matrix.assemble()
         ordered = bool(np.array_equal(matrix.getValuesCSR()[2], numbered))
-        runs.write(np.zeros(len(columns), dtype=PETSc.ScalarType))
+        places.write(np.zeros(len(columns), dtype=PETSc.ScalarType))
         matrix.assemble()
-        return runs if all(matrix.getComm().tompi4py().allgather(ordered)) else None
+        return places if all(matrix.getComm().tompi4py().allgather(ordered)) else None
 
     def write(self, values: np.ndarray) -> None:
-        """``values`` (contiguous PETSc scalars, in the rows' order) into the blocks; assembling the matrix
-        then marks it changed."""
-        if values.dtype != PETSc.ScalarType or not values.flags.c_contiguous or len(values) != self._size:
-            raise ValueError(f"BlockRuns.write: values must be a contiguous array of {self._size} PETSc scalars")
-        library = petsc_library()
-        for block, (count, source, target, length) in self._blocks:
-            array = ctypes.c_void_p()
-            error = library.MatSeqAIJGetArray(block, ctypes.byref(array))
-            if error:
-                raise PETSc.Error(error)
-            self._copy_runs(count, source.ctypes.data, target.ctypes.data, length.ctypes.data, values.ctypes.data,
-                            array.value)
-            library.MatSeqAIJRestoreArray(block, ctypes.byref(array))
-
-    def targets(self) -> tuple[np.ndarray, int]:
-        """(place, split): each local entry's place in the blocks, in the rows' order, and the diagonal block's
-        size.  A place below ``split`` is the entry's position in the diagonal block's values, one at or above
-        it ``split`` past its position in the off-diagonal block's."""
-        place = np.empty(self._size, dtype=np.int64)
-        split = int(np.count_nonzero(self._in_diagonal))
-        place[self._in_diagonal] = np.arange(split)
-        place[~self._in_diagonal] = split + np.arange(self._size - split)
-        return place, split
+        """``values`` (contiguous PETSc scalars, in the rows' order) into the blocks, at :attr:`place`; assembling
+        the matrix then marks it changed."""
+        if values.dtype != PETSc.ScalarType or not values.flags.c_contiguous or len(values) != len(self.place):
+            raise ValueError(f"BlockPlaces.write: values must be a contiguous array of {len(self.place)} PETSc "
+                             "scalars")
+        with self.blocks() as addresses:
+            for address, mask in zip(addresses, (self._in_diagonal, ~self._in_diagonal)):
+                if address:
+                    block = (ctypes.c_double * int(np.count_nonzero(mask))).from_address(address)
+                    np.ctypeslib.as_array(block)[:] = values[mask]
 
     @contextmanager
     def blocks(self):
         """The addresses of the diagonal and the off-diagonal block's values (0 for a block with none), for
-        writes at the places of :meth:`targets`; assembling the matrix afterwards marks it changed."""
+        writes at :attr:`place`; assembling the matrix afterwards marks it changed."""
         library = petsc_library()
         arrays = [ctypes.c_void_p(), ctypes.c_void_p()]
         taken = []
@@ -155,12 +144,3 @@ class BlockRuns:
             for block, array in taken:
                 library.MatSeqAIJRestoreArray(block, ctypes.byref(array))
 
-
-def _runs(mask: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """(count, sources, targets, lengths) of the maximal runs of consecutive entries where ``mask`` holds: their
-    positions among all entries and among the masked ones."""
-    chosen = np.flatnonzero(mask)
-    breaks = np.flatnonzero(np.diff(chosen) != 1) + 1
-    starts, ends = np.r_[0, breaks], np.r_[breaks, len(chosen)]
-    return (len(starts), chosen[starts].astype(np.int64), starts.astype(np.int64),
-            (ends - starts).astype(np.int64))

@@ -30,7 +30,7 @@ from petsc4py import PETSc
 from scipy.sparse import csr_matrix as _csr
 
 from primordia.core import compiled
-from primordia.core.petsc_library import BlockRuns, update_mpiaij_values
+from primordia.core.petsc_library import BlockPlaces, update_mpiaij_values
 from primordia.core.reductions import largest, smallest
 from primordia.physics.base import AlgebraicOperator
 from primordia.physics.discretisation import Discretisation
@@ -90,7 +90,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
         self._compiled = None  # the compiled loops, False for numpy's (decided at the first update, collectively)
         self._midpoints = None  # the species at the edge midpoints, for the compiled loops
         self._row_places = self._block_places = None  # their positions (_in_rows, _in_blocks)
-        self._block_runs = None  # on several processes with the compiled loops: the blocks' places of the values
+        self._blocks = None  # on several processes with the compiled loops: the blocks' places of the values
 
     def _prepare_edges(self, stiffness):
         indptr, columns, values = stiffness.getValuesCSR()
@@ -273,11 +273,11 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             self._set_weights(self._stiffness.getValuesCSR()[2])
         if self._compiled is None:
             self._compiled = compiled.kernels(self.disc.comm) or False
-            if self._by_rows and self._compiled:  # collective, as the decision above
-                self._block_runs = BlockRuns.of(self._A, self._columns, self._compiled.primordia_copy_runs)
+            if self._by_rows and self._compiled:  # collective, as the decision above; the loops write there
+                self._blocks = BlockPlaces.of(self._A, self._columns)
         c, a = self._gather(self.species), self._gather(self.attractant)
-        if self._compiled and self._block_runs is not None:  # straight into PETSc's blocks
-            with self._block_runs.blocks() as (diagonal, off_diagonal):
+        if self._compiled and self._blocks is not None:  # straight into PETSc's blocks
+            with self._blocks.blocks() as (diagonal, off_diagonal):
                 self._compiled_values(c, a, self._in_blocks(), diagonal, off_diagonal)
         elif self._compiled:
             self._compiled_values(c, a, self._in_rows(), compiled.address(self._values), None)
@@ -294,7 +294,7 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
             # A_ij = -w_ij D B(Pe_ij), A_ii = sum_j w_ij D B(-Pe_ij)
             self._entries.mult(self._table_vector, self._values_vector)
         self._shifted = False  # every value was just rewritten
-        if self._block_runs is None:  # otherwise the loops wrote into PETSc's blocks
+        if self._blocks is None:  # otherwise the loops wrote into PETSc's blocks
             if self._by_rows:
                 update_mpiaij_values(self._A, self._values)
             elif not self._in_place:
@@ -337,19 +337,19 @@ class ExponentiallyFittedFlux(AlgebraicOperator):
 
     def _in_blocks(self) -> tuple:
         """The compiled loops' places for values written straight into the parallel matrix's diagonal and
-        off-diagonal blocks (:meth:`~primordia.core.petsc_library.BlockRuns.targets`): every position renumbered
+        off-diagonal blocks (:class:`~primordia.core.petsc_library.BlockPlaces`): every position renumbered
         once, and the weights into the same numbering whenever they change (a moving mesh's every update).
 
         Saves copying the values into the blocks after the loops (0.11 ms a step of example 1a at 171^2 on 2
         ranks, of 7.0)."""
-        if self._block_places is None or self._block_places["runs"] is not self._block_runs:
-            place, split = self._block_runs.targets()
+        if self._block_places is None or self._block_places["blocks"] is not self._blocks:
+            place, split = self._blocks.place, self._blocks.split
             renumbered = tuple(np.where(positions >= 0, place[np.maximum(positions, 0)], -1)
                                for positions in self._edge_positions)
             if any(np.any(renumbered[k] >= split) for k in (2, 3, 4)):  # low, high and every diagonal entry
                 raise ValueError("a diagonal entry of the fitted operator is outside the diagonal block")
             weights = np.empty(len(place))
-            self._block_places = {"runs": self._block_runs, "place": place, "weights": weights, "of": None,
+            self._block_places = {"blocks": self._blocks, "place": place, "weights": weights, "of": None,
                                   "renumbered": renumbered,  # kept alive: the loops read them by address
                                   "addresses": (compiled.address(weights), *(compiled.address(positions, np.int64)
                                                                              for positions in renumbered), split)}

@@ -127,16 +127,16 @@ runs = None
 for shift in (0.0, 0.7, 1.3):
     disc.backend.interpolate(disc.previous("m"), lambda x: 2.0 + np.sin(3.0 * x[0] + shift) * np.cos(2.0 * x[1]))
     disc.backend.interpolate(disc.previous("f"), lambda x: 1.5 + np.cos(5.0 * x[0] + x[1] - shift))
-    operator._block_runs = runs
+    operator._blocks = runs
     operator.update()
-    runs = operator._block_runs
+    runs = operator._blocks
     assert runs is not None, "the values were not written into the blocks"
     indptr, columns, by_runs = operator.matrix().getValuesCSR()
-    operator._block_runs = None  # MatUpdateMPIAIJWithArray, as before
+    operator._blocks = None  # MatUpdateMPIAIJWithArray, as before
     operator.update()
     assert np.array_equal(operator.matrix().getValuesCSR()[2], by_runs)
     assert np.array_equal(by_runs, operator._values) and np.abs(by_runs).max() > 0
-    operator._block_runs = runs  # straight into the blocks again: every value rewritten, _values not read
+    operator._blocks = runs  # straight into the blocks again: every value rewritten, _values not read
     operator._values[:] = np.nan
     operator.update()
     assert np.array_equal(operator.matrix().getValuesCSR()[2], by_runs)
@@ -144,7 +144,7 @@ for shift in (0.0, 0.7, 1.3):
     operator._scaled_weights = operator._scaled_weights * (1.0 + shift)  # new weights, as a moving mesh's
     operator.update()
     by_blocks = operator.matrix().getValuesCSR()[2]
-    operator._block_runs = None
+    operator._blocks = None
     operator.update()
     assert np.array_equal(operator.matrix().getValuesCSR()[2], by_blocks)
     assert shift == 0.0 or not np.allclose(by_blocks, by_runs)
@@ -156,9 +156,9 @@ if MPI.COMM_WORLD.rank == 0:
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3])
-def test_the_fitted_operator_s_values_reach_the_parallel_matrix_by_runs(ranks):
+def test_the_fitted_operator_s_values_reach_the_parallel_matrix_s_blocks(ranks):
     """On several ranks each update writes the fitted operator's values straight into PETSc's diagonal and
-    off-diagonal blocks, at the places ``BlockRuns`` numbers: the same matrix as ``MatUpdateMPIAIJWithArray``
+    off-diagonal blocks, at the places ``BlockPlaces`` numbers: the same matrix as ``MatUpdateMPIAIJWithArray``
     gave, update after update, and after the weights change."""
     done = subprocess.run(["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, "-c", BY_RUNS], env=ENV,
                           capture_output=True, text=True, timeout=300)

@@ -75,8 +75,8 @@ config = apply_overrides(load_config({str(ROOT / "examples/ex01a.toml")!r}),
 sim = Model.from_config(config).run(backend="fenicsx", out={str(tmp_path / "out")!r})
 (operator,) = sim.model.physics_objects[0]._fitted_operators.values()
 assert operator._by_rows, "2 ranks: the operator is a matrix made from its rows"
-in_blocks = operator._block_runs  # the compiled loops' writes straight into the blocks (test_mpi.py)
-operator._block_runs = None  # the values computed into _values, then copied in by rows
+in_blocks = operator._blocks  # the compiled loops' writes straight into the blocks (test_mpi.py)
+operator._blocks = None  # the values computed into _values, then copied in by rows
 operator.update()
 indptr, columns, values = operator.matrix().getValuesCSR()
 np.testing.assert_array_equal(indptr, operator._indptr)
@@ -84,7 +84,7 @@ np.testing.assert_array_equal(columns, operator._columns)
 np.testing.assert_array_equal(values, operator._values)
 assert np.abs(values).max() > 0
 if in_blocks is not None:
-    operator._block_runs = in_blocks
+    operator._blocks = in_blocks
     operator.update()
     np.testing.assert_array_equal(operator.matrix().getValuesCSR()[2], values)
 from mpi4py import MPI

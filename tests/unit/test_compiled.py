@@ -6,7 +6,6 @@ fall-back there would be a silent slow-down, so it is a failure, not a skip.
 
 from __future__ import annotations
 
-import ctypes
 import os
 import platform
 import shutil
@@ -194,26 +193,18 @@ def test_addresses_are_checked():
         compiled.address(np.zeros(8)[::2])
 
 
-def test_runs_of_a_mask_and_their_copy():
-    """The runs a parallel matrix's blocks are written by (``petsc_library.BlockRuns``): each maximal run of
-    chosen entries is one copy, to its place among the chosen ones."""
-    from primordia.core.petsc_library import _runs
+def test_the_places_of_a_parallel_matrix_s_values_in_its_blocks():
+    """Each local entry's place in a parallel matrix's blocks (``petsc_library.BlockPlaces``): its count among its
+    block's entries before it, the off-diagonal block's after ``split``."""
+    from primordia.core.petsc_library import BlockPlaces
 
-    mask = np.array([True, True, False, True, False, False, True, True, True])
-    count, sources, targets, lengths = _runs(mask)
-    assert (count, sources.tolist(), targets.tolist(), lengths.tolist()) == (3, [0, 3, 6], [0, 2, 3], [2, 1, 3])
-    count, sources, targets, lengths = _runs(~mask)
-    assert (count, sources.tolist(), targets.tolist(), lengths.tolist()) == (2, [2, 4], [0, 1], [1, 2])
-    library = compiled.kernels()
-    assert library is not None, compiled.status()
-    values = np.arange(10.0, 19.0)
-    for chosen in (mask, ~mask):
-        count, sources, targets, lengths = _runs(chosen)
-        block = np.full(int(chosen.sum()), -1.0)
-        library.primordia_copy_runs(count, compiled.address(sources, np.int64), compiled.address(targets, np.int64),
-                                    compiled.address(lengths, np.int64), compiled.address(values),
-                                    compiled.address(block))
-        assert block.tolist() == values[chosen].tolist()
+    n = 6
+    tridiagonal = [[c for c in (i - 1, i, i + 1) if 0 <= c < n] for i in range(n)]
+    in_diagonal = np.array([c % 2 == 0 for c in np.concatenate(tridiagonal)])  # any mask: the places are counts
+    places = BlockPlaces(_one_rank_mpiaij(tridiagonal), in_diagonal)
+    assert places.split == int(in_diagonal.sum())
+    assert places.place[in_diagonal].tolist() == list(range(places.split))
+    assert places.place[~in_diagonal].tolist() == list(range(places.split, len(in_diagonal)))
 
 
 def _one_rank_mpiaij(rows_columns: list[list[int]]):
@@ -230,31 +221,26 @@ def _one_rank_mpiaij(rows_columns: list[list[int]]):
     return matrix
 
 
-def test_block_runs_never_write_past_a_block_smaller_than_the_columns_given():
-    """``BlockRuns.of`` writes into PETSc's own arrays before it reads the matrix back: given the columns of a
+def test_block_places_never_write_past_a_block_smaller_than_the_columns_given(monkeypatch):
+    """``BlockPlaces.of`` writes into PETSc's own arrays before it reads the matrix back: given the columns of a
     tridiagonal matrix and a diagonal one, it wrote 16 entries into a block of 6 (on a larger matrix, a heap
     corrupted and an abort at exit).  A matrix whose blocks hold other counts than the columns is not written."""
-    from primordia.core.petsc_library import BlockRuns
+    from primordia.core.petsc_library import BlockPlaces
 
     n = 6
     tridiagonal = [[c for c in (i - 1, i, i + 1) if 0 <= c < n] for i in range(n)]
     columns = np.concatenate(tridiagonal).astype(np.int64)
     written = []
-
-    def copy_runs(count, sources, targets, lengths, values, array):
-        ends = [np.ctypeslib.as_array(ctypes.cast(pointer, ctypes.POINTER(ctypes.c_int64)), (count,))
-                for pointer in (targets, lengths)]
-        written.append(int((ends[0] + ends[1]).max()))
-
-    assert BlockRuns.of(_one_rank_mpiaij([[i] for i in range(n)]), columns, copy_runs) is None
+    write = BlockPlaces.write
+    monkeypatch.setattr(BlockPlaces, "write", lambda self, values: written.append(len(values)))
+    assert BlockPlaces.of(_one_rank_mpiaij([[i] for i in range(n)]), columns) is None
     assert written == []
-    library = compiled.kernels()
-    assert library is not None, compiled.status()
+    monkeypatch.setattr(BlockPlaces, "write", write)
     matrix = _one_rank_mpiaij(tridiagonal)
-    runs = BlockRuns.of(matrix, columns, library.primordia_copy_runs)
-    assert runs is not None
-    runs.write(np.arange(1.0, len(columns) + 1.0))
+    places = BlockPlaces.of(matrix, columns)
+    assert places is not None
+    places.write(np.arange(1.0, len(columns) + 1.0))
     matrix.assemble()
     assert matrix.getValuesCSR()[2].tolist() == list(range(1, len(columns) + 1))
     with pytest.raises(ValueError, match="contiguous array of 16 PETSc scalars"):
-        runs.write(np.zeros(len(columns) - 1))
+        places.write(np.zeros(len(columns) - 1))
