@@ -968,8 +968,8 @@ def sweep_picture(ds, sweep: Sweep, path, species: str | None = None) -> Path | 
     kinds = final["pattern"].where(~failed, -1)
     reduced = final[["spacing_mean", "spot_count", "dominant_wavelength"]].where(~failed)
     reduced["dominant_wavelength"] = reduced["dominant_wavelength"].where(kinds > 0)  # no pattern: no wavelength
-    ended = final["time"].where(~failed).values
-    times = np.unique(ended[np.isfinite(ended)] if np.isfinite(ended).any() else final["time"].values)
+    ended = final["time"].where(~failed).values  # some run completed (above): its end is finite
+    times = np.unique(ended[np.isfinite(ended)])
     if "seed" in ds.dims:
         reduced = reduced.mean("seed", skipna=True)
         failed = failed.all("seed")

@@ -28,14 +28,10 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Entry point of ``primordia analyse``; returns the exit code."""
-    from pathlib import Path
-
-    import xarray as xr
-
-    from primordia.analysis.patterns.run import METRICS_FILE, analyse_run, pattern_kind
+    from primordia.analysis.patterns.run import METRICS_FILE, analyse_run_keeping, pattern_kind
 
     start = time.perf_counter()
-    ds = analyse_run(args.run_dir, species=args.species, pictures=not args.no_pictures)
+    ds, kept = analyse_run_keeping(args.run_dir, species=args.species, pictures=not args.no_pictures)
     predicted = ds["predicted_wavelength"].item()
     surface = "" if ds.attrs["surface"] == "the mesh" else f", measured on {ds.attrs['surface']}"
     print(f"primordia analyse: {args.run_dir} (run {ds.attrs['run_status']}{surface}); linear analysis, "
@@ -46,8 +42,6 @@ def run(args) -> int:
             for species in ds["species"].values:
                 at = {"time": t, "configuration": configuration, "species": species}
                 print("  " + describe(ds.sel(**at), pattern_kind(ds, **at).item()))
-    with xr.open_dataset(Path(args.run_dir) / METRICS_FILE, engine="scipy") as written:  # what it kept from before
-        kept = [str(name) for name in written["species"].values if name not in ds["species"].values]
     print(f"  wrote {args.run_dir}/{METRICS_FILE}" + (f" (with {', '.join(kept)} kept from its earlier analysis)"
                                                      if kept else "")
           + ("" if args.no_pictures else " and metrics_*.png") + f" ({time.perf_counter() - start:.1f} s)")

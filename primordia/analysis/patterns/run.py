@@ -238,11 +238,11 @@ def measure(run: RunFields, species: Sequence[str] | None = None) -> list[Measur
     reference = MeshSampler(run.points, run.triangles)
     not_finite: dict[str, list[tuple[float, int]]] = {}
     for index, (t, fields) in enumerate(zip(run.times, run.snapshots)):
-        values = {}
+        values = dict(fields)
         for name in names:
             finite = np.isfinite(fields[name])
-            values[name] = fields[name] if finite.all() else np.where(finite, fields[name], np.nan)  # +-inf too
             if not finite.all():
+                values[name] = np.where(finite, fields[name], np.nan)  # +-inf too
                 not_finite.setdefault(name, []).append((t, int(np.count_nonzero(~finite))))
         for configuration in run.configurations:
             sampler = (reference if configuration == "reference"
@@ -417,14 +417,21 @@ def _with_earlier_species(ds: xr.Dataset, path: Path) -> tuple[xr.Dataset, list[
 def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pictures: bool = True) -> xr.Dataset:
     """Measure a run directory, write ``metrics.nc`` and (``pictures``) ``metrics_<species>[_current].png``; returns
     the measurements of ``species`` (metrics.nc also keeps other species of an earlier analysis of the same
-    outputs: :func:`_with_earlier_species`)."""
+    outputs: :func:`analyse_run_keeping`)."""
+    return analyse_run_keeping(directory, species, pictures)[0]
+
+
+def analyse_run_keeping(directory: str | Path, species: Sequence[str] | None = None,
+                        pictures: bool = True) -> tuple[xr.Dataset, list[str]]:
+    """:func:`analyse_run`, and the species metrics.nc kept from an earlier analysis (:func:`_with_earlier_species`),
+    which ``primordia analyse`` names."""
     from primordia.analysis.patterning import save_dataset
 
     run = read_run(directory)
     measurements = measure(run, species)
     predicted = _prediction(run)
     ds = metrics_dataset(run, measurements, predicted)
-    written, _ = _with_earlier_species(ds, run.directory / METRICS_FILE)
+    written, kept = _with_earlier_species(ds, run.directory / METRICS_FILE)
     save_dataset(written, run.directory / METRICS_FILE)
     if pictures:
         from primordia.analysis.patterns.figures import metrics_figure
@@ -434,4 +441,4 @@ def analyse_run(directory: str | Path, species: Sequence[str] | None = None, pic
                 chosen = [m for m in measurements if m.species == name and m.configuration == configuration]
                 suffix = "" if configuration == "reference" else f"_{configuration}"
                 metrics_figure(chosen, predicted, run.directory / f"metrics_{name}{suffix}.png")
-    return ds
+    return ds, kept
